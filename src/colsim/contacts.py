@@ -1,0 +1,221 @@
+"""Contact detection: potential contacts between spheres, the floor and the cylinder.
+
+A potential contact k joins particle i to body j (another particle, or a wall, j = -1). Its unit
+normal points from i to j, its gap is the surface distance along that normal at the start of the
+step (negative when overlapping), and (t1, t2, n) is a right-handed orthonormal frame. A pair is
+listed when its predicted relative motion within the step brings it within a margin of contact
+(:func:`swept_pairs`); the stepper checks afterwards with :func:`overlaps` that nothing was missed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, ParticleState, Walls
+
+WALL = -1  # index of the other body for a particle-wall contact
+
+
+@dataclass
+class Contacts:
+    """Potential contacts, m of them.
+
+    i, j: (m,) int, particle indices (j = -1 for a wall)
+    family: (m,) int, PARTICLE, FLOOR or CYLINDER
+    normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
+    gap: (m,) float, length, surface distance at the start of the step
+    radius_i, radius_j: (m,) float, length (radius_j = 0 for walls)
+    rolling_radius: (m,) float, length, R_i R_j/(R_i + R_j), or R_i for a wall
+    mu, mu_r: (m,) float, sliding and rolling coefficients
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    family: np.ndarray
+    normal: np.ndarray
+    tangent1: np.ndarray
+    tangent2: np.ndarray
+    gap: np.ndarray
+    radius_i: np.ndarray
+    radius_j: np.ndarray
+    rolling_radius: np.ndarray
+    mu: np.ndarray
+    mu_r: np.ndarray
+
+    @property
+    def m(self) -> int:
+        return len(self.i)
+
+    def pair_keys(self, n_particles: int) -> np.ndarray:
+        """(m,) int64 key unique to each (i, j, family), to match contacts across steps."""
+        j = np.where(self.j < 0, n_particles + self.family, self.j)
+        return self.i.astype(np.int64) * (n_particles + 3) + j
+
+
+def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents (m, 3) with (t1, t2, n) right-handed, for unit normals (m, 3)."""
+    helper = np.zeros_like(normal)
+    use_x = np.abs(normal[:, 0]) < 0.9
+    helper[use_x, 0] = 1.0
+    helper[~use_x, 1] = 1.0
+    t1 = np.cross(helper, normal)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    return t1, t2
+
+
+def particle_pairs(state: ParticleState, distance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs (i < j) with surface gap below `distance` now: (i, j, centre-to-centre vector (m, 3))."""
+    if state.n < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros((0, 3))
+    reach = 2.0 * state.radius.max() + max(distance, 0.0)
+    pairs = cKDTree(state.position).query_pairs(reach, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = state.position[j] - state.position[i]
+    gap = np.linalg.norm(d, axis=1) - state.radius[i] - state.radius[j]
+    close = gap < distance
+    return i[close], j[close], d[close]
+
+
+def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slack: float):
+    """Pairs (i < j) that may touch within a step in which particle i is predicted to move predicted[i].
+
+    Each particle sweeps a segment from x to x + u; a pair is kept when the relative segment comes
+    within margin + slack |u_j - u_i| of contact (length). Candidates come from a k-d tree on the
+    segments' midpoints with the swept spheres' radii R + |u|/2.
+    """
+    if state.n < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    half = 0.5 * np.linalg.norm(predicted, axis=1)
+    reach = 2.0 * float(np.max(state.radius + half * (1.0 + slack))) + margin
+    pairs = cKDTree(state.position + 0.5 * predicted).query_pairs(reach, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    d0 = state.position[j] - state.position[i]
+    du = predicted[j] - predicted[i]
+    du2 = np.einsum("ij,ij->i", du, du)
+    tau = np.clip(-np.einsum("ij,ij->i", d0, du) / np.maximum(du2, 1e-300), 0.0, 1.0)
+    closest = np.linalg.norm(d0 + tau[:, None] * du, axis=1) - state.radius[i] - state.radius[j]
+    keep = closest < margin + slack * np.sqrt(du2)
+    return i[keep], j[keep]
+
+
+def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0):
+    """(i, family, normal (m,3), gap) for particle-wall contacts with gap below reach (n,) (length).
+
+    cylinder_margin: (n,) or scalar length subtracted from the cylinder gaps (see :func:`detect`).
+    """
+    parts = []
+    if walls.floor:
+        gap = state.position[:, 2] - state.radius
+        idx = np.flatnonzero(gap < reach)
+        normal = np.tile([0.0, 0.0, -1.0], (len(idx), 1))
+        parts.append((idx, np.full(len(idx), FLOOR), normal, gap[idx]))
+    if walls.cylinder_radius is not None:
+        rho = np.hypot(state.position[:, 0], state.position[:, 1])
+        gap = walls.cylinder_radius - rho - state.radius - cylinder_margin
+        idx = np.flatnonzero(gap < reach)
+        normal = np.zeros((len(idx), 3))
+        on_axis = rho[idx] < 1e-12
+        safe_rho = np.where(on_axis, 1.0, rho[idx])
+        normal[:, 0] = np.where(on_axis, 1.0, state.position[idx, 0] / safe_rho)
+        normal[:, 1] = np.where(on_axis, 0.0, state.position[idx, 1] / safe_rho)
+        parts.append((idx, np.full(len(idx), CYLINDER), normal, gap[idx]))
+    if not parts:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros(0)
+    return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
+def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
+           margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None) -> Contacts:
+    """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
+
+    margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
+    particle's, for walls) predicted displacement added to it, for the velocity changes of the step.
+    The cylinder is concave: a particle sliding a distance s along it moves out by about s^2/(2 r0),
+    which the linearised constraint does not see; `cylinder_margin` ((n,) or scalar, length)
+    tightens those gaps and the stepper sets it from the overlap of a first attempt.
+    renormal: optional (i, j, normal (k, 3)) particle pairs to include with a given normal. Any unit
+    normal n gives a conservative linear constraint n.(x_j - x_i) - R_i - R_j + n.du >= 0, since
+    |d| >= n.d; the stepper passes the end-of-attempt normals of pairs that a first attempt missed.
+    """
+    pi, pj = swept_pairs(state, predicted, margin, slack)
+    d = state.position[pj] - state.position[pi]
+    pair_normal = d / np.linalg.norm(d, axis=1)[:, None]
+    if renormal is not None:
+        ri, rj, rnormal = renormal
+        n = state.n
+        keys = pi.astype(np.int64) * n + pj
+        drop = np.isin(keys, ri.astype(np.int64) * n + rj)
+        pi = np.concatenate([pi[~drop], ri])
+        pj = np.concatenate([pj[~drop], rj])
+        pair_normal = np.concatenate([pair_normal[~drop], rnormal])
+        d = state.position[pj] - state.position[pi]
+    pair_gap = np.einsum("ij,ij->i", pair_normal, d) - state.radius[pi] - state.radius[pj]
+    speed = np.linalg.norm(predicted, axis=1)
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, margin + (1.0 + slack) * speed,
+                                                cylinder_margin)
+
+    i = np.concatenate([pi, wi]).astype(np.int64)
+    j = np.concatenate([pj, np.full(len(wi), WALL)]).astype(np.int64)
+    family = np.concatenate([np.full(len(pi), PARTICLE), wfamily]).astype(np.int64)
+    normal = np.concatenate([pair_normal, wnormal]).reshape(-1, 3)
+    gap = np.concatenate([pair_gap, wgap])
+    radius_i = state.radius[i]
+    radius_j = np.where(j >= 0, state.radius[np.maximum(j, 0)], 0.0)
+    rolling_radius = np.where(j >= 0, radius_i * radius_j / (radius_i + radius_j), radius_i)
+    t1, t2 = tangent_basis(normal)
+    return Contacts(
+        i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
+        radius_i=radius_i, radius_j=radius_j, rolling_radius=rolling_radius,
+        mu=np.asarray(law.mu)[family], mu_r=np.asarray(law.mu_r)[family],
+    )
+
+
+@dataclass
+class Overlaps:
+    """Overlaps (length, >= 0) after a step.
+
+    pairs: (i, j, normal (k, 3)) particle pairs that overlap by more than `tolerance`
+    largest_pair, largest_floor: largest particle-particle and particle-floor overlap
+    cylinder: (n,) overlap of each particle with the cylinder
+    """
+
+    pairs: tuple
+    largest_pair: float
+    largest_floor: float
+    cylinder: np.ndarray
+
+    @property
+    def largest(self) -> float:
+        return max(self.largest_pair, self.largest_floor, float(self.cylinder.max(initial=0.0)))
+
+
+def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Overlaps:
+    """Measure every overlap of `state` (see :class:`Overlaps`)."""
+    pi, pj, d = particle_pairs(state, 0.0)
+    dist = np.linalg.norm(d, axis=1)
+    overlap = state.radius[pi] + state.radius[pj] - dist
+    bad = overlap > tolerance
+    pairs = (pi[bad], pj[bad], d[bad] / dist[bad, None])
+    largest_floor = 0.0
+    if walls.floor and state.n:
+        largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))
+    cylinder = np.zeros(state.n)
+    if walls.cylinder_radius is not None and state.n:
+        rho = np.hypot(state.position[:, 0], state.position[:, 1])
+        cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
+    return Overlaps(pairs, max(0.0, float(overlap.max(initial=0.0))), largest_floor, cylinder)
+
+
+def largest_overlap(state: ParticleState, walls: Walls) -> float:
+    """Largest overlap (length, >= 0) between any two particles or a particle and a wall."""
+    return overlaps(state, walls).largest
+
+def touching_pairs(state: ParticleState, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Particle pairs (i, j) whose gap is below tolerance (length): the contact graph's edges."""
+    pi, pj, _ = particle_pairs(state, tolerance)
+    return pi, pj

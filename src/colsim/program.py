@@ -1,0 +1,156 @@
+"""The cone program of one time step (SPEC section 2; the paper's Eq. 6).
+
+Unknowns: u = [dx (3n, particle-major); dth (3n)], the displacement and rotation increments.
+Displacement (primal) form:
+
+    minimise   1/2 u' Mbar u - fbar' u
+    subject to g_k + du_n,k >= mu_k ||du_t,k|| + mu_r,k ||dphi_k||     for every contact k
+
+with Mbar = diag(M, J)/dt^2 and fbar = [f_ext + M v/dt; J w/dt]. The local relative displacement of
+contact k is B_k u = (du_n, du_t1, du_t2, dphi_1, dphi_2), B is the (5m, 6n) contact Jacobian.
+Its Lagrange dual (force form) is
+
+    minimise   1/2 lam' W lam + c' lam,   W = B Mbar^-1 B',   c = B Mbar^-1 fbar + g e_n
+    subject to lam_k = (p, q1, q2, r1, r2) with ||q|| <= mu p, ||r|| <= mu_r p
+
+and u = Mbar^-1 (fbar + B' lam). The multipliers are the contact forces: normal p, sliding q and
+rolling r; the rolling moment is R_eff r. This is the associated friction law of the paper: a
+sliding contact opens by mu ||du_t|| per step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .contacts import Contacts
+from .state import ParticleState
+
+ROWS_PER_CONTACT = 5  # normal, two sliding, two rolling
+
+
+@dataclass
+class ConeProgram:
+    """One step's program in the notation of the module docstring.
+
+    mass: (6n,) diagonal of Mbar = diag(m, m, m, ..., I, I, I, ...)/dt^2, mass/time^2
+    fbar: (6n,) fbar, force (and moment) units
+    jacobian: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns)
+    gap: (m,) length; mu, mu_r: (m,) coefficients
+    """
+
+    mass: np.ndarray
+    fbar: np.ndarray
+    jacobian: sp.csr_matrix
+    gap: np.ndarray
+    mu: np.ndarray
+    mu_r: np.ndarray
+
+    @property
+    def n_unknowns(self) -> int:
+        return len(self.mass)
+
+    @property
+    def m(self) -> int:
+        return len(self.gap)
+
+    def free_motion(self) -> np.ndarray:
+        """(6n,) the increments without any contact force: Mbar^-1 fbar."""
+        return self.fbar / self.mass
+
+    def increments(self, forces: np.ndarray) -> np.ndarray:
+        """(6n,) u = Mbar^-1 (fbar + B' lam) for contact forces lam (m, 5)."""
+        return (self.fbar + self.jacobian.T @ forces.reshape(-1)) / self.mass
+
+    def local_displacement(self, u: np.ndarray) -> np.ndarray:
+        """(m, 5) B u: (du_n, du_t1, du_t2, dphi_1, dphi_2) of every contact."""
+        return (self.jacobian @ u).reshape(-1, ROWS_PER_CONTACT)
+
+
+def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
+    """The (5m, 6n) matrix B mapping u = [dx; dth] to each contact's local relative displacement."""
+    m, n = contacts.m, n_particles
+    n_, t1, t2 = contacts.normal, contacts.tangent1, contacts.tangent2
+    ri = contacts.radius_i[:, None]
+    rj = contacts.radius_j[:, None]
+    reff = contacts.rolling_radius[:, None]
+    k = np.arange(m)
+
+    rows, cols, vals = [], [], []
+
+    def block(local_row, column_start, values, bodies):
+        """Add values (m, 3) at rows 5k + local_row, columns column_start + 3 body + (0, 1, 2)."""
+        on = bodies >= 0
+        rows.append(np.repeat(ROWS_PER_CONTACT * k[on] + local_row, 3))
+        cols.append((column_start + 3 * bodies[on][:, None] + np.arange(3)).ravel())
+        vals.append(values[on].ravel())
+
+    i, j = contacts.i, contacts.j
+    dx, dth = 0, 3 * n
+    # particle i: du = ... - (dx_i + R_i dth_i x n)
+    block(0, dx, -n_, i)
+    block(1, dx, -t1, i)
+    block(1, dth, -ri * t2, i)
+    block(2, dx, -t2, i)
+    block(2, dth, ri * t1, i)
+    block(3, dth, -reff * t1, i)
+    block(4, dth, -reff * t2, i)
+    # body j (particles only; walls do not move): du = (dx_j - R_j dth_j x n) - ...
+    block(0, dx, n_, j)
+    block(1, dx, t1, j)
+    block(1, dth, -rj * t2, j)
+    block(2, dx, t2, j)
+    block(2, dth, rj * t1, j)
+    block(3, dth, reff * t1, j)
+    block(4, dth, reff * t2, j)
+
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+        shape=(ROWS_PER_CONTACT * m, 6 * n),
+    )
+
+
+def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> ConeProgram:
+    """The cone program of one step of length dt (time) from `state` with `contacts`."""
+    m_i, inertia = state.mass, state.inertia
+    mass = np.concatenate([np.repeat(m_i, 3), np.repeat(inertia, 3)]) / dt**2
+    f_ext = m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]
+    fbar = np.concatenate([
+        (f_ext + m_i[:, None] * state.velocity / dt).ravel(),
+        (inertia[:, None] * state.angular_velocity / dt).ravel(),
+    ])
+    return ConeProgram(
+        mass=mass, fbar=fbar, jacobian=contact_jacobian(contacts, state.n),
+        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(),
+    )
+
+
+def objective(program: ConeProgram, u: np.ndarray) -> float:
+    """Primal objective 1/2 u' Mbar u - fbar' u."""
+    return float(0.5 * u @ (program.mass * u) - program.fbar @ u)
+
+
+def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> dict[str, float]:
+    """How far a solution is from the cones, in length (primal) and force (dual) units.
+
+    primal: largest mu||du_t|| + mu_r||dphi|| - (g + du_n) over contacts (<= 0 when feasible)
+    dual: largest ||q|| - mu p, ||r|| - mu_r p and -p over contacts (<= 0 when feasible)
+    complementarity: largest |p (g + du_n - mu||du_t|| - mu_r||dphi||)| ... per contact, force length
+    """
+    if program.m == 0:
+        return {"primal": 0.0, "dual": 0.0, "complementarity": 0.0}
+    local = program.local_displacement(u)
+    slack = (program.gap + local[:, 0] - program.mu * np.linalg.norm(local[:, 1:3], axis=1)
+             - program.mu_r * np.linalg.norm(local[:, 3:5], axis=1))
+    p = forces[:, 0]
+    dual = np.maximum.reduce([
+        np.linalg.norm(forces[:, 1:3], axis=1) - program.mu * p,
+        np.linalg.norm(forces[:, 3:5], axis=1) - program.mu_r * p,
+        -p,
+    ])
+    return {
+        "primal": float(np.max(-slack)),
+        "dual": float(np.max(dual)),
+        "complementarity": float(np.max(np.abs(p * slack))),
+    }

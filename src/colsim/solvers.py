@@ -1,0 +1,219 @@
+"""Solver back-ends for the step's cone program, behind one interface.
+
+A back-end takes a :class:`~colsim.program.ConeProgram` and returns a :class:`ConeSolution`: the
+increments u (6n,) and the contact forces (m, 5) = (p, q1, q2, r1, r2). A back-end that does not
+reach its tolerance raises :class:`SolverError`; it never returns an unconverged result.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .program import ROWS_PER_CONTACT, ConeProgram
+
+log = logging.getLogger(__name__)
+
+
+class SolverError(RuntimeError):
+    """A cone program that was not solved to tolerance."""
+
+    def __init__(self, message: str, status: str = "", step: int | None = None, residuals=None):
+        self.status = status
+        self.step = step
+        self.residuals = residuals or {}
+        super().__init__(message)
+
+
+@dataclass
+class ConeSolution:
+    """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units."""
+
+    increments: np.ndarray
+    forces: np.ndarray
+    status: str
+    iterations: int
+    setup_time: float
+    solve_time: float
+    info: dict = field(default_factory=dict)
+
+
+class Solver:
+    """Base class: `solve(program, warm_start=None, step=None) -> ConeSolution`."""
+
+    name = "base"
+
+    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
+              step: int | None = None) -> ConeSolution:
+        raise NotImplementedError
+
+    def _no_contacts(self, program: ConeProgram) -> ConeSolution:
+        return ConeSolution(program.free_motion(), np.zeros((0, ROWS_PER_CONTACT)), "Solved", 0, 0.0, 0.0)
+
+
+def _rows(matrix: sp.csr_matrix, index: np.ndarray) -> sp.coo_matrix:
+    return matrix[index].tocoo()
+
+
+class ClarabelSolver(Solver):
+    """Clarabel's interior-point method on the displacement form (default) or the force form.
+
+    direct_solve_method: 'qdldl' or 'faer' (Clarabel's KKT factorisation); threads: faer threads (0 = all).
+    accept_almost_solved: take AlmostSolved as a result (it is recorded in the status).
+    """
+
+    name = "clarabel"
+
+    def __init__(self, form: str = "displacement", direct_solve_method: str = "qdldl",
+                 threads: int = 1, tolerance: float = 1e-8, max_iter: int = 200,
+                 accept_almost_solved: bool = True, verbose: bool = False):
+        if form not in ("displacement", "force"):
+            raise ValueError(f"Clarabel form must be 'displacement' or 'force', got {form!r}")
+        if direct_solve_method not in ("qdldl", "faer", "auto"):
+            raise ValueError(f"direct_solve_method must be qdldl, faer or auto, got {direct_solve_method!r}")
+        self.form = form
+        self.direct_solve_method = direct_solve_method
+        self.threads = threads
+        self.tolerance = tolerance
+        self.max_iter = max_iter
+        self.accept_almost_solved = accept_almost_solved
+        self.verbose = verbose
+
+    def _settings(self):
+        import clarabel
+
+        settings = clarabel.DefaultSettings()
+        settings.verbose = self.verbose
+        settings.direct_solve_method = self.direct_solve_method
+        settings.max_threads = self.threads
+        settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = self.tolerance
+        settings.max_iter = self.max_iter
+        return settings
+
+    def solve(self, program, warm_start=None, step=None):
+        import clarabel
+
+        if program.m == 0:
+            return self._no_contacts(program)
+        start = time.perf_counter()
+        build = self._displacement_form if self.form == "displacement" else self._force_form
+        P, q, A, b, cones, unpack = build(program)
+        solver = clarabel.DefaultSolver(P, q, A, b, cones, self._settings())
+        setup_time = time.perf_counter() - start
+        result = solver.solve()
+        solve_time = time.perf_counter() - start - setup_time
+        status = str(result.status)
+        residuals = {"primal": result.r_prim, "dual": result.r_dual}
+        ok = status == "Solved" or (status == "AlmostSolved" and self.accept_almost_solved)
+        if not ok:
+            where = f" at step {step}" if step is not None else ""
+            raise SolverError(
+                f"Clarabel ended {status}{where} after {result.iterations} iterations "
+                f"(primal residual {result.r_prim:.2e}, dual residual {result.r_dual:.2e}, "
+                f"{program.m} contacts)", status=status, step=step, residuals=residuals)
+        if status != "Solved":
+            log.warning("Clarabel ended %s at step %s (primal residual %.2e, dual %.2e)",
+                        status, step, result.r_prim, result.r_dual)
+        u, forces = unpack(np.asarray(result.x), np.asarray(result.z))
+        return ConeSolution(u, forces, status, result.iterations, setup_time, solve_time, residuals)
+
+    @staticmethod
+    def _displacement_form(program: ConeProgram):
+        """Variables [u (6n); a (ms); b (mr)]; cones: g + du_n - a - b >= 0, (a, mu du_t), (b, mu_r dphi)."""
+        import clarabel
+
+        nu, m = program.n_unknowns, program.m
+        B = program.jacobian
+        sliding = np.flatnonzero(program.mu > 0)
+        rolling = np.flatnonzero(program.mu_r > 0)
+        ms, mr = len(sliding), len(rolling)
+        a_col = nu + np.arange(ms)
+        b_col = nu + ms + np.arange(mr)
+
+        normal = _rows(B, ROWS_PER_CONTACT * np.arange(m))
+        rows = [normal.row, sliding, rolling]
+        cols = [normal.col, a_col, b_col]
+        vals = [-normal.data, np.ones(ms), np.ones(mr)]
+        row0 = m
+        for members, aux_col, coefficient, first in ((sliding, a_col, program.mu, 1),
+                                                     (rolling, b_col, program.mu_r, 3)):
+            picked = np.stack([ROWS_PER_CONTACT * members + first,
+                               ROWS_PER_CONTACT * members + first + 1], axis=1).ravel()
+            tangential = _rows(B, picked)
+            cone = tangential.row // 2
+            rows += [row0 + 3 * np.arange(len(members)), row0 + 3 * cone + 1 + tangential.row % 2]
+            cols += [aux_col, tangential.col]
+            vals += [-np.ones(len(members)), -coefficient[members][cone] * tangential.data]
+            row0 += 3 * len(members)
+
+        n_var = nu + ms + mr
+        A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(row0, n_var))
+        P = sp.diags(np.concatenate([program.mass, np.zeros(ms + mr)]), format="csc")
+        q = np.concatenate([-program.fbar, np.zeros(ms + mr)])
+        b = np.concatenate([program.gap, np.zeros(row0 - m)])
+        cones = [clarabel.NonnegativeConeT(m)] + [clarabel.SecondOrderConeT(3)] * (ms + mr)
+
+        def unpack(x, z):
+            forces = np.zeros((m, ROWS_PER_CONTACT))
+            forces[:, 0] = z[:m]
+            slide = z[m:m + 3 * ms].reshape(ms, 3)
+            roll = z[m + 3 * ms:].reshape(mr, 3)
+            forces[sliding, 1:3] = program.mu[sliding, None] * slide[:, 1:]
+            forces[rolling, 3:5] = program.mu_r[rolling, None] * roll[:, 1:]
+            return x[:nu], forces
+
+        return P, q, A, b, cones, unpack
+
+    @staticmethod
+    def _force_form(program: ConeProgram):
+        """Variables lam (5m); p >= 0, (mu p, q) and (mu_r p, r) in second-order cones (zero cones if mu = 0)."""
+        import clarabel
+
+        m = program.m
+        B = program.jacobian
+        scaled = sp.diags(1.0 / program.mass) @ B.T
+        P = sp.triu(B @ scaled, format="csc")
+        c = B @ (program.fbar / program.mass)
+        c[::ROWS_PER_CONTACT] += program.gap
+        k = np.arange(m)
+        col = ROWS_PER_CONTACT * k
+        rows, cols, vals, cones = [k], [col], [-np.ones(m)], [clarabel.NonnegativeConeT(m)]
+        row0 = m
+        for coefficient, first in ((program.mu, 1), (program.mu_r, 3)):
+            zero = np.flatnonzero(coefficient == 0)
+            rows.append(row0 + np.arange(2 * len(zero)))
+            cols.append((col[zero][:, None] + first + np.arange(2)).ravel())
+            vals.append(np.ones(2 * len(zero)))
+            if len(zero):
+                cones.append(clarabel.ZeroConeT(2 * len(zero)))
+            row0 += 2 * len(zero)
+        for coefficient, first in ((program.mu, 1), (program.mu_r, 3)):
+            members = np.flatnonzero(coefficient > 0)
+            base = row0 + 3 * np.arange(len(members))
+            rows += [base, base + 1, base + 2]
+            cols += [col[members], col[members] + first, col[members] + first + 1]
+            vals += [-coefficient[members], -np.ones(len(members)), -np.ones(len(members))]
+            cones += [clarabel.SecondOrderConeT(3)] * len(members)
+            row0 += 3 * len(members)
+        A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(row0, ROWS_PER_CONTACT * m))
+        b = np.zeros(row0)
+
+        def unpack(x, z):
+            forces = x.reshape(m, ROWS_PER_CONTACT)
+            return program.increments(forces), forces
+
+        return P, c, A, b, cones, unpack
+
+
+def make_solver(name: str = "clarabel", **options) -> Solver:
+    """A back-end by name: 'clarabel' (displacement form) or 'clarabel-force'."""
+    if name == "clarabel":
+        return ClarabelSolver(**options)
+    if name == "clarabel-force":
+        return ClarabelSolver(form="force", **options)
+    raise ValueError(f"unknown solver {name!r}: choose clarabel or clarabel-force")

@@ -1,0 +1,153 @@
+"""Particle state, walls and contact laws: the data every other module reads.
+
+Units are those of the input: lengths in the particles' length unit (the paper's diameters are
+0.25-0.5), density 1 by default, gravity in length/time^2. Nothing here depends on a unit system.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+#: Contact families, used to pick friction coefficients per contact.
+PARTICLE, FLOOR, CYLINDER = 0, 1, 2
+FAMILY_NAMES = ("particle-particle", "particle-floor", "particle-cylinder")
+
+
+@dataclass
+class ParticleState:
+    """Spheres and their motion.
+
+    position: (n, 3) float, length
+    velocity: (n, 3) float, length/time
+    angular_velocity: (n, 3) float, rad/time
+    radius: (n,) float, length
+    density: float, mass/length^3 (the paper: 1)
+    time: float, time elapsed since the start of the run
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    angular_velocity: np.ndarray
+    radius: np.ndarray
+    density: float = 1.0
+    time: float = 0.0
+
+    def __post_init__(self):
+        self.position = np.ascontiguousarray(self.position, dtype=float).reshape(-1, 3)
+        n = len(self.position)
+        self.velocity = np.ascontiguousarray(self.velocity, dtype=float).reshape(n, 3)
+        self.angular_velocity = np.ascontiguousarray(self.angular_velocity, dtype=float).reshape(n, 3)
+        self.radius = np.ascontiguousarray(self.radius, dtype=float).reshape(n)
+        if n and np.any(self.radius <= 0):
+            raise ValueError("every particle radius must be positive")
+        if self.density <= 0:
+            raise ValueError(f"density must be positive, got {self.density}")
+
+    @classmethod
+    def at_rest(cls, position, radius, density=1.0) -> "ParticleState":
+        """Spheres at the given places with zero velocities."""
+        position = np.asarray(position, dtype=float).reshape(-1, 3)
+        zeros = np.zeros_like(position)
+        return cls(position, zeros, zeros.copy(), radius, density)
+
+    @property
+    def n(self) -> int:
+        return len(self.radius)
+
+    @property
+    def mass(self) -> np.ndarray:
+        """(n,) mass = density 4/3 pi R^3."""
+        return self.density * 4.0 / 3.0 * np.pi * self.radius**3
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """(n,) moment of inertia of a solid sphere, 2/5 m R^2."""
+        return 0.4 * self.mass * self.radius**2
+
+    def kinetic_energy(self) -> tuple[float, float]:
+        """(translational, rotational) kinetic energy, mass length^2/time^2."""
+        trans = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.velocity, self.velocity)))
+        w = self.angular_velocity
+        rot = 0.5 * float(np.sum(self.inertia * np.einsum("ij,ij->i", w, w)))
+        return trans, rot
+
+    def subset(self, keep: np.ndarray) -> "ParticleState":
+        """A new state with the particles selected by a boolean mask or index array."""
+        return replace(
+            self,
+            position=self.position[keep].copy(),
+            velocity=self.velocity[keep].copy(),
+            angular_velocity=self.angular_velocity[keep].copy(),
+            radius=self.radius[keep].copy(),
+        )
+
+    def copy(self) -> "ParticleState":
+        return self.subset(np.arange(self.n))
+
+
+@dataclass(frozen=True)
+class Walls:
+    """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder.
+
+    cylinder_radius: radius r0 of the cylinder about the z axis (length), or None when it is removed.
+    """
+
+    floor: bool = True
+    cylinder_radius: float | None = None
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Sliding (mu) and rolling (mu_r) coefficients for each contact family.
+
+    Each tuple is (particle-particle, particle-floor, particle-cylinder). The paper uses
+    mu = mu_r = 0 while filling and mu = 0.577, mu_r = 0.12 for the collapse; its cylinder is frictionless.
+    """
+
+    mu: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mu_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        for name in ("mu", "mu_r"):
+            values = tuple(float(v) for v in getattr(self, name))
+            if len(values) != 3:
+                raise ValueError(f"{name} needs 3 values (particle, floor, cylinder), got {values}")
+            if any(v < 0 or not np.isfinite(v) for v in values):
+                raise ValueError(f"friction coefficient {name} must be finite and >= 0, got {values}")
+            object.__setattr__(self, name, values)
+
+    @classmethod
+    def uniform(cls, mu: float, mu_r: float, cylinder_mu: float = 0.0) -> "ContactLaw":
+        """The same mu, mu_r on particles and floor; a frictionless cylinder (as in the paper)."""
+        return cls(mu=(mu, mu, cylinder_mu), mu_r=(mu_r, mu_r, 0.0))
+
+
+@dataclass(frozen=True)
+class StepSettings:
+    """Everything one time step needs besides the state.
+
+    dt: time step (time). gravity: (3,) acceleration (length/time^2), -z by default.
+    overlap_tolerance: largest overlap accepted after a step, as a fraction of the smallest diameter.
+    detection_margin: gap beyond the predicted motion within which a pair is a potential contact,
+    as a fraction of the smallest diameter. detection_slack: fraction of a pair's predicted relative
+    displacement added to that margin (see :func:`colsim.contacts.detect`).
+    max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.stepper`).
+    """
+
+    dt: float
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    walls: Walls = field(default_factory=Walls)
+    law: ContactLaw = field(default_factory=ContactLaw)
+    overlap_tolerance: float = 0.01
+    detection_margin: float = 0.05
+    detection_slack: float = 0.5
+    max_redo: int = 3
+
+    def __post_init__(self):
+        if not (self.dt > 0 and np.isfinite(self.dt)):
+            raise ValueError(f"time step dt must be positive, got {self.dt}")
+        if self.overlap_tolerance <= 0 or self.detection_margin < 0 or self.detection_slack < 0:
+            raise ValueError("overlap_tolerance must be > 0, detection_margin and detection_slack >= 0")
+        if self.walls.cylinder_radius is not None and self.walls.cylinder_radius <= 0:
+            raise ValueError(f"cylinder radius must be positive, got {self.walls.cylinder_radius}")
