@@ -45,6 +45,8 @@ class Solver:
     """Base class: `solve(program, warm_start=None, step=None) -> ConeSolution`."""
 
     name = "base"
+    #: whether solve() uses `warm_start` (the stepper then passes the previous step's forces)
+    uses_warm_start = False
 
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None) -> ConeSolution:
@@ -211,9 +213,14 @@ class ClarabelSolver(Solver):
 
 
 def make_solver(name: str = "clarabel", **options) -> Solver:
-    """A back-end by name: 'clarabel' (displacement form) or 'clarabel-force'."""
+    """A back-end by name: 'clarabel' (displacement form), 'clarabel-force', 'apgd' (first-order,
+    :mod:`colsim.apgd`) or 'auto' (Clarabel for small programs, APGD for large ones)."""
     if name == "clarabel":
         return ClarabelSolver(**options)
     if name == "clarabel-force":
         return ClarabelSolver(form="force", **options)
-    raise ValueError(f"unknown solver {name!r}: choose clarabel or clarabel-force")
+    if name in ("apgd", "auto"):
+        from .apgd import ApgdSolver, AutoSolver
+
+        return ApgdSolver(**options) if name == "apgd" else AutoSolver(**options)
+    raise ValueError(f"unknown solver {name!r}: choose clarabel, clarabel-force, apgd or auto")

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import contacts as contact_detection
 from .program import assemble
+from .apgd import WarmStart
 from .solvers import ClarabelSolver, ConeSolution, Solver
 from .state import ParticleState, StepSettings
 
@@ -66,7 +67,10 @@ def predicted_displacement(state: ParticleState, settings: StepSettings) -> np.n
 
 def step(state: ParticleState, settings: StepSettings, solver: Solver | None = None,
          step_number: int = 0, warm_start=None) -> StepResult:
-    """Advance `state` by one step of settings.dt; see the module docstring for the checks."""
+    """Advance `state` by one step of settings.dt; see the module docstring for the checks.
+
+    warm_start: None, forces (m, 5) for the solver, or a :class:`colsim.apgd.WarmStart` (forces by
+    contact pair key, matched to each attempt's contacts)."""
     solver = solver or ClarabelSolver()
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     tolerance = settings.overlap_tolerance * smallest_diameter
@@ -81,12 +85,13 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver | None = N
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
-        solution = solver.solve(program, warm_start=warm_start, step=step_number)
+        guess = warm_start.match(found, state.n) if hasattr(warm_start, "match") else warm_start
+        solution = solver.solve(program, warm_start=guess, step=step_number)
         new_state = _advance(state, solution.increments, settings.dt)
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance)
         if overlap.largest <= tolerance:
             break
-        log.info("step %d: overlap %.3g exceeds %.3g (%d pairs); redoing",
+        log.debug("step %d: overlap %.3g exceeds %.3g (%d pairs); redoing",
                  step_number, overlap.largest, tolerance, len(overlap.pairs[0]))
         margin *= 4.0
         cylinder_margin += 1.5 * overlap.cylinder
@@ -135,7 +140,10 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
         first_step: int = 0) -> Iterator[StepResult]:
     """Yield the result of each of n_steps steps from `state` (step numbers from first_step + 1)."""
     solver = solver or ClarabelSolver()
+    warm = None
     for k in range(first_step + 1, first_step + n_steps + 1):
-        result = step(state, settings, solver, step_number=k)
+        result = step(state, settings, solver, step_number=k, warm_start=warm)
+        if solver.uses_warm_start:  # the step's forces by contact pair, for the next step
+            warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
         state = result.state
         yield result

@@ -1,0 +1,368 @@
+"""A first-order back-end: accelerated projected gradient (APGD) on the contact forces.
+
+It solves the force form of the step's cone program (:mod:`colsim.program`),
+
+    minimise   1/2 lam' W lam + c' lam      subject to lam_k in K_k,
+    K_k = {(p, q, r): ||q|| <= mu_k p, ||r|| <= mu_r,k p},
+
+the same convex program as Clarabel (same cones, same associated law), by Nesterov's accelerated
+projected gradient with adaptive (gradient) restart and backtracking on the step length, as in
+Chrono's APGD (Mazhar et al. 2015). W is never formed: the gradient is
+
+    W lam + c = B u(lam) + g e_n,   u(lam) = Mbar^-1 (fbar + B' lam),
+
+i.e. each contact's gap at the end of the step, so one iteration costs one product with B' and one
+with B (work linear in the number of contacts) plus the exact Euclidean projection onto K_k
+(:func:`project_coupled_cone`).
+
+Preconditioning: each contact's normal, sliding and rolling rows are scaled separately, lam = S z
+with S = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(W)^-1/2 (averaged over the two rows
+of a pair). The scaled cone is again a coupled cone with mu' = mu s_n/s_t, mu_r' = mu_r s_n/s_r, so
+the projection stays exact.
+
+Stopping (checked every `check_every` iterations, at the current iterate lam):
+  - dual feasibility: lam_k in K_k, exact by construction (the iterate is a projection);
+  - primal feasibility: y_k = g_k + B_k u in K_k^* = {y_n >= mu ||y_t|| + mu_r ||y_r||}:
+    max_k (mu ||y_t|| + mu_r ||y_r|| - y_n)_+ / L;
+  - complementarity: sum_k |lam_k . y_k| / (sum_k p_k L);
+where L is a length that does not depend on N: the larger of the root-mean-square free-flight
+displacement (v dt + g dt^2) and |g| dt^2, but at least 1e-6 of the mean radius. Both must fall
+below `tolerance`. Not reaching it within `max_iter` iterations raises :class:`SolverError`.
+
+Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
+contacts). :class:`WarmStart` carries a step's forces by contact pair key, in the global frame,
+and re-expresses them in the next step's contact frames (:meth:`WarmStart.match`).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .program import ROWS_PER_CONTACT, ConeProgram
+from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError
+
+log = logging.getLogger(__name__)
+
+
+# --------------------------------------------------------------------------------------------
+# The exact projection onto the coupled cone
+# --------------------------------------------------------------------------------------------
+
+def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
+    """Euclidean projection of points lam (m, 5) = (p, q1, q2, r1, r2) onto
+    {||q|| <= mu p, ||r|| <= mu_r p} (mu, mu_r (m,) >= 0; 0 forces q or r to zero).
+
+    For a fixed p the nearest q and r are radial clips of q0, r0 to radii mu p and mu_r p, so the
+    squared distance is phi(p) = (p - p0)^2 + (||q0|| - mu p)_+^2 + (||r0|| - mu_r p)_+^2, a convex
+    piecewise quadratic on p >= 0 with breakpoints ||q0||/mu and ||r0||/mu_r. Its minimiser is found
+    exactly: the minimiser of each piece clipped to its interval, the best of the three.
+    """
+    lam = np.asarray(lam, dtype=float)
+    p0 = lam[:, 0]
+    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
+    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
+    a = np.asarray(mu, dtype=float)
+    b = np.asarray(mu_r, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bq = np.where(a > 0, nq / np.where(a > 0, a, 1.0), np.inf)  # q clipped iff p < bq
+        br = np.where(b > 0, nr / np.where(b > 0, b, 1.0), np.inf)
+    t1 = np.minimum(bq, br)
+    t2 = np.maximum(bq, br)
+    q_first = bq <= br  # on (t1, t2) only the larger breakpoint's term is still active
+    a2, b2 = a * a, b * b
+    # piece [0, t1]: both active
+    p_both = (p0 + a * nq + b * nr) / (1.0 + a2 + b2)
+    # piece [t1, t2]: only the term whose breakpoint is t2 is active
+    p_mid = np.where(q_first, (p0 + b * nr) / (1.0 + b2), (p0 + a * nq) / (1.0 + a2))
+    # piece [t2, inf): none active
+    cands = (np.clip(p_both, 0.0, t1),
+             np.clip(p_mid, np.minimum(t1, t2), t2),
+             np.maximum(p0, np.where(np.isfinite(t2), t2, np.inf)))
+    best = None
+    best_phi = None
+    for p in cands:
+        pf = np.where(np.isfinite(p), p, 0.0)
+        phi = ((pf - p0) ** 2 + np.maximum(nq - a * pf, 0.0) ** 2
+               + np.maximum(nr - b * pf, 0.0) ** 2)
+        phi = np.where(np.isfinite(p), phi, np.inf)
+        if best is None:
+            best, best_phi = pf, phi
+        else:
+            better = phi < best_phi
+            best = np.where(better, pf, best)
+            best_phi = np.where(better, phi, best_phi)
+    p = np.maximum(best, 0.0)
+    out = np.empty_like(lam)
+    out[:, 0] = p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fq = np.where(nq > a * p, a * p / np.where(nq > 0, nq, 1.0), 1.0)
+        fr = np.where(nr > b * p, b * p / np.where(nr > 0, nr, 1.0), 1.0)
+    out[:, 1:3] = lam[:, 1:3] * fq[:, None]
+    out[:, 3:5] = lam[:, 3:5] * fr[:, None]
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Warm start by contact pair
+# --------------------------------------------------------------------------------------------
+
+@dataclass
+class WarmStart:
+    """A step's contact forces by pair key, in the global frame.
+
+    keys: (m,) int64 (:meth:`colsim.contacts.Contacts.pair_keys`), sorted
+    force: (m, 3) p n + q1 t1 + q2 t2; rolling: (m, 3) r1 t1 + r2 t2 (force units)
+    """
+
+    keys: np.ndarray
+    force: np.ndarray
+    rolling: np.ndarray
+
+    @classmethod
+    def from_step(cls, contacts, forces: np.ndarray, n_particles: int) -> "WarmStart":
+        keys = contacts.pair_keys(n_particles)
+        order = np.argsort(keys, kind="stable")
+        f = (forces[:, :1] * contacts.normal + forces[:, 1:2] * contacts.tangent1
+             + forces[:, 2:3] * contacts.tangent2)
+        r = forces[:, 3:4] * contacts.tangent1 + forces[:, 4:5] * contacts.tangent2
+        return cls(keys[order], f[order], r[order])
+
+    def match(self, contacts, n_particles: int) -> np.ndarray:
+        """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
+        keys = contacts.pair_keys(n_particles)
+        out = np.zeros((contacts.m, ROWS_PER_CONTACT))
+        if len(self.keys) == 0 or contacts.m == 0:
+            return out
+        pos = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
+        found = self.keys[pos] == keys
+        f, r = self.force[pos[found]], self.rolling[pos[found]]
+        n, t1, t2 = contacts.normal[found], contacts.tangent1[found], contacts.tangent2[found]
+        out[found, 0] = np.einsum("ij,ij->i", f, n)
+        out[found, 1] = np.einsum("ij,ij->i", f, t1)
+        out[found, 2] = np.einsum("ij,ij->i", f, t2)
+        out[found, 3] = np.einsum("ij,ij->i", r, t1)
+        out[found, 4] = np.einsum("ij,ij->i", r, t2)
+        return project_coupled_cone(out, contacts.mu, contacts.mu_r)
+
+
+# --------------------------------------------------------------------------------------------
+# The solver
+# --------------------------------------------------------------------------------------------
+
+def length_scale(program: ConeProgram) -> float:
+    """The length L that makes the residuals dimensionless (see the module docstring)."""
+    n = program.n_unknowns // 6
+    mass = program.mass
+    trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
+    rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
+    # R_i from I = 2/5 m R^2; |g| dt^2 from f_ext: the free-flight part of fbar at zero velocity is
+    # not separable, so use the rms only, bounded below by a small fraction of the mean radius.
+    radius = np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3])) if n else np.ones(1)
+    return max(rms, 1e-6 * float(np.mean(radius)))
+
+
+class ApgdSolver(Solver):
+    """Accelerated projected gradient on the contact forces (see the module docstring).
+
+    tolerance: on the relative primal infeasibility and complementarity (dimensionless).
+    max_iter: iterations before :class:`SolverError`. check_every: iterations between residual
+    checks. precondition: scale each contact's normal, sliding and rolling rows separately.
+    """
+
+    name = "apgd"
+    uses_warm_start = True
+
+    def __init__(self, tolerance: float = 1e-5, max_iter: int = 20000, check_every: int = 10,
+                 precondition: bool = True, verbose: bool = False):
+        if not tolerance > 0:
+            raise ValueError(f"APGD tolerance must be positive, got {tolerance}")
+        if max_iter < 1 or check_every < 1:
+            raise ValueError("max_iter and check_every must be >= 1")
+        self.tolerance = float(tolerance)
+        self.max_iter = int(max_iter)
+        self.check_every = int(check_every)
+        self.precondition = precondition
+        self.verbose = verbose
+
+    # -- pieces ----------------------------------------------------------------------------
+    @staticmethod
+    def _scaling(program: ConeProgram, B: sp.csr_matrix, inv_mass: np.ndarray) -> np.ndarray:
+        """(m, 5) per-row scales s = diag(W)^-1/2, shared by the two rows of a tangent pair."""
+        m = program.m
+        diag = (B.multiply(B) @ inv_mass).reshape(m, ROWS_PER_CONTACT)
+        s = np.empty_like(diag)
+        s[:, 0] = diag[:, 0]
+        s[:, 1:3] = 0.5 * (diag[:, 1] + diag[:, 2])[:, None]
+        s[:, 3:5] = 0.5 * (diag[:, 3] + diag[:, 4])[:, None]
+        positive = s > 0
+        s[positive] = 1.0 / np.sqrt(s[positive])
+        s[~positive] = 1.0
+        return s
+
+    def residuals(self, program: ConeProgram, forces: np.ndarray, u: np.ndarray | None = None,
+                  scale: float | None = None) -> dict[str, float]:
+        """Relative primal infeasibility, dual infeasibility and complementarity of `forces`."""
+        if u is None:
+            u = program.increments(forces)
+        scale = scale or length_scale(program)
+        y = program.local_displacement(u)
+        y[:, 0] += program.gap
+        return _residuals(y, forces, program.mu, program.mu_r, scale)
+
+    # -- the iteration ---------------------------------------------------------------------
+    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
+              step: int | None = None) -> ConeSolution:
+        if program.m == 0:
+            return self._no_contacts(program)
+        start = time.perf_counter()
+        m = program.m
+        B = program.jacobian.tocsr()
+        inv_mass = 1.0 / program.mass
+        BT = B.T.tocsr()
+        s = self._scaling(program, B, inv_mass) if self.precondition else np.ones((m, 5))
+        s_flat = s.ravel()
+        a = program.mu * s[:, 0] / s[:, 1]
+        b = program.mu_r * s[:, 0] / s[:, 3]
+        u_free = program.fbar * inv_mass
+        # gradient in z (lam = s z): s * (B u(lam) + g e_n); c_z = s * (B u_free + g e_n)
+        c = B @ u_free
+        c[::ROWS_PER_CONTACT] += program.gap
+        c_z = s_flat * c
+        scale = length_scale(program)
+
+        def h_of(z):  # B' lam, (6n,)
+            return BT @ (s_flat * z)
+
+        def grad_of(h):  # s * (W lam + c) from h = B' lam
+            return s_flat * (B @ (inv_mass * h)) + c_z
+
+        def f_of(z, h):  # 1/2 lam' W lam + c' lam
+            return 0.5 * float(h @ (inv_mass * h)) + float(c_z @ z)
+
+        def project(z):
+            return project_coupled_cone(z.reshape(m, 5), a, b).ravel()
+
+        if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
+            x = project(np.asarray(warm_start, dtype=float).ravel() / s_flat)
+            started = "warm"
+        else:
+            x = np.zeros(5 * m)
+            started = "cold"
+        hx = h_of(x)
+
+        # Lipschitz constant of S W S: a few power iterations, then backtracking keeps it safe.
+        rng = np.random.default_rng(0)
+        v = rng.standard_normal(5 * m)
+        lip = 1.0
+        for _ in range(12):
+            v /= np.linalg.norm(v)
+            wv = s_flat * (B @ (inv_mass * (BT @ (s_flat * v))))
+            lip = float(v @ wv)
+            v = wv
+        lip = max(lip, 1e-12)
+        setup_time = time.perf_counter() - start
+
+        y, hy = x.copy(), hx.copy()
+        theta = 1.0
+        res = {"primal": np.inf, "dual": 0.0, "complementarity": np.inf}
+        k = 0
+        backtracks = restarts = 0
+        converged = False
+        while k < self.max_iter:
+            k += 1
+            g = grad_of(hy)
+            fy = f_of(y, hy)
+            while True:
+                x_new = project(y - g / lip)
+                h_new = h_of(x_new)
+                d = x_new - y
+                if f_of(x_new, h_new) <= fy + float(g @ d) + 0.5 * lip * float(d @ d) + 1e-14 * abs(fy):
+                    break
+                lip *= 2.0
+                backtracks += 1
+            theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+            beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+            step_x = x_new - x
+            if float(g @ step_x) > 0.0:  # adaptive restart: momentum points uphill
+                theta_new, beta = 1.0, 0.0
+                restarts += 1
+            theta = theta_new
+            y = x_new + beta * step_x
+            hy = h_new + beta * (h_new - hx)
+            x, hx = x_new, h_new
+            if k % self.check_every == 0 or k == self.max_iter:
+                u = (program.fbar + hx) * inv_mass
+                yloc = (B @ u).reshape(m, 5)
+                yloc[:, 0] += program.gap
+                res = _residuals(yloc, (s_flat * x).reshape(m, 5), program.mu, program.mu_r, scale)
+                if self.verbose:
+                    log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
+                             res["complementarity"], lip)
+                if res["primal"] <= self.tolerance and res["complementarity"] <= self.tolerance:
+                    converged = True
+                    break
+        solve_time = time.perf_counter() - start - setup_time
+        forces = (s_flat * x).reshape(m, 5)
+        info = dict(res, start=started, backtracks=backtracks, restarts=restarts,
+                    lipschitz=lip, length_scale=scale)
+        if not converged:
+            where = f" at step {step}" if step is not None else ""
+            raise SolverError(
+                f"APGD did not converge{where} within {self.max_iter} iterations "
+                f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
+                f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
+                status="MaxIterations", step=step, residuals=res)
+        u = (program.fbar + hx) * inv_mass
+        return ConeSolution(u, forces, "Solved", k, setup_time, solve_time, info)
+
+
+def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float) -> dict[str, float]:
+    """Relative residuals from end-of-step gaps y (m, 5) and forces lam (m, 5); see the docstring."""
+    nyt = np.sqrt(y[:, 1] ** 2 + y[:, 2] ** 2)
+    nyr = np.sqrt(y[:, 3] ** 2 + y[:, 4] ** 2)
+    primal = float(np.max(np.maximum(mu * nyt + mu_r * nyr - y[:, 0], 0.0), initial=0.0)) / scale
+    p = lam[:, 0]
+    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
+    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
+    dual_abs = np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p])
+    total = float(np.sum(np.maximum(p, 0.0)))
+    force_scale = total / max(len(p), 1) if total > 0 else 1.0
+    dual = float(np.max(dual_abs, initial=0.0)) / force_scale
+    comp = float(np.sum(np.abs(np.einsum("ij,ij->i", lam, y))))
+    comp = comp / (total * scale) if total > 0 else 0.0
+    return {"primal": primal, "dual": max(dual, 0.0), "complementarity": comp}
+
+
+class AutoSolver(Solver):
+    """Clarabel for programs with fewer than `threshold` contacts, APGD from there on.
+
+    fallback: if APGD does not converge, log a warning and solve the step with Clarabel (the step
+    is then exact but slow); with fallback=False the :class:`SolverError` propagates.
+    """
+
+    name = "auto"
+    uses_warm_start = True
+
+    def __init__(self, threshold: int = 1500, fallback: bool = True, clarabel: dict | None = None,
+                 apgd: dict | None = None):
+        self.threshold = int(threshold)
+        self.fallback = fallback
+        self.clarabel = ClarabelSolver(**(clarabel or {}))
+        self.apgd = ApgdSolver(**(apgd or {}))
+
+    def solve(self, program, warm_start=None, step=None):
+        if program.m < self.threshold:
+            return self.clarabel.solve(program, warm_start=warm_start, step=step)
+        try:
+            return self.apgd.solve(program, warm_start=warm_start, step=step)
+        except SolverError as error:
+            if not self.fallback:
+                raise
+            log.warning("%s; solving this step with Clarabel instead", error)
+            solution = self.clarabel.solve(program, step=step)
+            solution.status = f"{solution.status} (APGD fallback)"
+            return solution

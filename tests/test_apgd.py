@@ -1,0 +1,190 @@
+"""The first-order back-end (colsim.apgd): exact cone projection, agreement with Clarabel, errors."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.optimize import minimize_scalar
+
+from colsim.apgd import ApgdSolver, AutoSolver, WarmStart, project_coupled_cone
+from colsim.contacts import detect
+from colsim.program import assemble, cone_violation
+from colsim.solvers import ClarabelSolver, SolverError, make_solver
+from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.stepper import predicted_displacement, run, step
+
+clarabel = pytest.importorskip("clarabel")
+
+
+def _reference_projection(x, a, b):
+    """Projection of x (5,) onto {||q|| <= a p, ||r|| <= b p} by Clarabel (a or b = 0: zero cone)."""
+    rows, cones = [[-1, 0, 0, 0, 0]], [clarabel.NonnegativeConeT(1)]
+    for coef, first in ((a, 1), (b, 3)):
+        if coef > 0:
+            rows += [[-coef, 0, 0, 0, 0], [0] * 5, [0] * 5]
+            rows[-2][first], rows[-1][first + 1] = -1, -1
+            cones.append(clarabel.SecondOrderConeT(3))
+        else:
+            rows += [[0] * 5, [0] * 5]
+            rows[-2][first], rows[-1][first + 1] = 1, 1
+            cones.append(clarabel.ZeroConeT(2))
+    A = sp.csc_matrix(np.array(rows, dtype=float))
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-12
+    scale = max(np.linalg.norm(x), 1e-300)  # Clarabel's tolerances are absolute: solve at unit scale
+    result = clarabel.DefaultSolver(sp.identity(5, format="csc"), -x / scale, A, np.zeros(A.shape[0]),
+                                    cones, settings).solve()
+    return scale * np.asarray(result.x)
+
+
+def test_projection_is_exact():
+    rng = np.random.default_rng(3)
+    m = 240
+    x = rng.standard_normal((m, 5)) * rng.choice([1e-3, 1.0, 1e3], (m, 1))
+    a = rng.choice([0.0, 0.3, 0.577, 2.0], m)
+    b = rng.choice([0.0, 0.12, 0.5], m)
+    x[:40, 0] = -10 * np.abs(x[:40, 0])               # deep in the polar cone or near it
+    x[40:70, 1:] *= 1e-4                              # inside the cone: unchanged
+    # on the edges: ||q|| = a p exactly, r inside, and the reverse
+    edge = slice(70, 100)
+    a[70:130] = np.maximum(a[70:130], 0.1)
+    b[70:130] = np.maximum(b[70:130], 0.05)
+    x[edge, 0] = np.abs(x[edge, 0])
+    x[edge, 1:3] *= (a[edge] * x[edge, 0] / np.maximum(np.linalg.norm(x[edge, 1:3], axis=1), 1e-300))[:, None]
+    x[edge, 3:5] *= 1e-3
+    # just outside an edge: the sliding part pushed out by 1e-3, the rolling part on its boundary
+    out = slice(100, 130)
+    x[out, 0] = np.abs(x[out, 0])
+    for coef, first, factor in ((a, 1, 1.001), (b, 3, 1.0)):
+        norm = np.maximum(np.linalg.norm(x[out, first:first + 2], axis=1), 1e-300)
+        x[out, first:first + 2] *= (factor * coef[out] * x[out, 0] / norm)[:, None]
+    z = project_coupled_cone(x, a, b)
+    scale = np.maximum(1.0, np.linalg.norm(x, axis=1))
+    # feasible ...
+    assert np.all(np.linalg.norm(z[:, 1:3], axis=1) <= a * z[:, 0] + 1e-12 * scale)
+    assert np.all(np.linalg.norm(z[:, 3:5], axis=1) <= b * z[:, 0] + 1e-12 * scale)
+    assert np.all(z[:, 0] >= 0)
+    for k in range(m):
+        # ... the brute-force minimiser of the distance over p (radial clips of q and r for each p)
+        def phi(p, k=k):
+            return ((p - x[k, 0]) ** 2 + np.maximum(np.hypot(*x[k, 1:3]) - a[k] * p, 0.0) ** 2
+                    + np.maximum(np.hypot(*x[k, 3:5]) - b[k] * p, 0.0) ** 2)
+        grid = np.linspace(0.0, 2 * scale[k], 4001)
+        p0 = grid[np.argmin(phi(grid))]
+        brute = minimize_scalar(phi, bounds=(max(p0 - scale[k] / 1000, 0), p0 + scale[k] / 1000),
+                                method="bounded", options={"xatol": 1e-13 * scale[k]}).x
+        assert abs(z[k, 0] - brute) <= 1e-7 * scale[k], (k, x[k], a[k], b[k])
+        # ... and never farther from x than Clarabel's projection (which is imprecise on edges)
+        ref = _reference_projection(x[k], a[k], b[k])
+        assert np.sum((z[k] - x[k]) ** 2) <= np.sum((ref - x[k]) ** 2) + 1e-9 * scale[k] ** 2
+        if not 70 <= k < 130:
+            assert np.linalg.norm(z[k] - ref) <= 1e-7 * scale[k], (k, x[k], a[k], b[k])
+    np.testing.assert_allclose(z[edge], x[edge], rtol=1e-12, atol=1e-12 * np.abs(x[edge]).max())
+    inside = slice(40, 70)
+    ok = (np.linalg.norm(x[inside, 1:3], axis=1) <= a[inside] * x[inside, 0]) & \
+         (np.linalg.norm(x[inside, 3:5], axis=1) <= b[inside] * x[inside, 0])
+    np.testing.assert_array_equal(z[inside][ok], x[inside][ok])
+
+
+def test_projection_polar_cone_goes_to_zero():
+    x = np.array([[-1.0, 0.1, 0.0, 0.0, 0.05], [-2.0, 0.0, 0.0, 0.0, 0.0]])
+    z = project_coupled_cone(x, np.array([0.5, 0.5]), np.array([0.1, 0.1]))
+    np.testing.assert_allclose(z, 0.0, atol=1e-15)
+
+
+def _cloud(n, r0, rng, d_max=0.5):
+    spacing = 1.04 * d_max
+    ticks = np.arange(-r0 + spacing / 2, r0, spacing)
+    gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
+    inside = np.hypot(gx, gy) + spacing / np.sqrt(2) <= r0
+    layer = np.c_[gx[inside], gy[inside]]
+    layers = int(np.ceil(n / len(layer)))
+    sites = np.c_[np.tile(layer, (layers, 1)), np.repeat(spacing / 2 + spacing * np.arange(layers), len(layer))][:n]
+    radius = 0.5 * rng.uniform(0.25, d_max, len(sites))
+    return ParticleState.at_rest(sites + rng.uniform(-1, 1, sites.shape) * (0.5 * (spacing - 2 * radius))[:, None],
+                                 radius)
+
+
+@pytest.fixture(scope="module")
+def pile():
+    """About 90 spheres poured into a cylinder (mu = mu_r = 0) and left to settle."""
+    state = _cloud(90, 1.2, np.random.default_rng(7))
+    settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=1.2))
+    for result in run(state, settings, 100, ClarabelSolver()):
+        state = result.state
+    state.velocity[:] = 0.0
+    state.angular_velocity[:] = 0.0
+    return state
+
+
+COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
+
+
+def _program(state, settings=COLLAPSE):
+    margin = settings.detection_margin * 2 * state.radius.min()
+    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
+                   margin, settings.detection_slack)
+    return assemble(state, found, settings.dt, settings.gravity), found
+
+
+def _mid_collapse(pile, steps=6):
+    state = pile
+    for k in range(steps):
+        state = step(state, COLLAPSE, ClarabelSolver(), k).state
+    return state
+
+
+@pytest.mark.parametrize("stage", ["release", "mid-collapse"])
+def test_agrees_with_clarabel(pile, stage):
+    state = pile if stage == "release" else _mid_collapse(pile)
+    program, _ = _program(state)
+    assert program.m > 100 and np.all(program.mu > 0) and np.any(program.mu_r > 0)
+    ref = ClarabelSolver(tolerance=1e-10).solve(program)
+    sol = ApgdSolver().solve(program)
+    du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
+    assert du <= 1e-3, du
+    # forces inside their cones (exactly: they are projections) and the residuals reached
+    violation = cone_violation(program, sol.increments, sol.forces)
+    assert violation["dual"] <= 1e-12 * np.abs(sol.forces).max()
+    assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
+    # forces are not unique in a hyperstatic packing, but the net contact force on each particle is
+    net = program.jacobian.T @ sol.forces.ravel()
+    net_ref = program.jacobian.T @ ref.forces.ravel()
+    assert np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref)
+
+
+def test_non_convergence_is_an_error(pile):
+    program, _ = _program(pile)
+    with pytest.raises(SolverError, match="step 17"):
+        ApgdSolver(max_iter=5).solve(program, step=17)
+
+
+def test_warm_start_by_pair(pile):
+    program, found = _program(pile)
+    cold = ApgdSolver().solve(program)
+    warm = WarmStart.from_step(found, cold.forces, pile.n)
+    # the stored forces come back in the same frames, and a restart from them is immediate
+    np.testing.assert_allclose(warm.match(found, pile.n), cold.forces, atol=1e-12 * np.abs(cold.forces).max())
+    again = ApgdSolver().solve(program, warm_start=warm.match(found, pile.n))
+    assert again.info["start"] == "warm" and again.iterations < cold.iterations / 3
+    # contacts that were not there before start from zero
+    shuffled = WarmStart(warm.keys[:-5], warm.force[:-5], warm.rolling[:-5])
+    guess = shuffled.match(found, pile.n)
+    assert np.count_nonzero(np.all(guess == 0, axis=1)) >= 5
+
+
+def test_stepper_warm_starts_and_auto_delegates(pile):
+    solver = make_solver("apgd")
+    results = list(run(pile, COLLAPSE, 3, solver))
+    assert [r.solution.info["start"] for r in results] == ["cold", "warm", "warm"]
+    program, _ = _program(pile)
+    assert make_solver("auto", threshold=program.m + 1).solve(program).info.get("start") is None
+    assert make_solver("auto", threshold=program.m).solve(program).info["start"] == "cold"
+    assert isinstance(make_solver("auto"), AutoSolver)
+
+
+def test_auto_falls_back_to_clarabel(pile):
+    program, _ = _program(pile)
+    solver = AutoSolver(threshold=1, apgd={"max_iter": 3})
+    assert "APGD fallback" in solver.solve(program, step=2).status
+    with pytest.raises(SolverError):
+        AutoSolver(threshold=1, fallback=False, apgd={"max_iter": 3}).solve(program)
