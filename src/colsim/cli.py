@@ -1,0 +1,147 @@
+"""The `colsim` command: one subcommand per stage of the study.
+
+    colsim pack       fill a cylinder by free fall until the packing is taller than --height
+    colsim trim       cut a packing at h0 = a r0
+    colsim collapse   remove the cylinder and integrate the collapse (checkpointed, resumable)
+    colsim analyse    final height, run-out, deposit profile and front of a collapse
+    colsim collect    gather analyses into one dataset over (aspect_ratio, mu_r, seed)
+    colsim plot       the study's figures from the collected dataset and the analyses
+    colsim export-vtk a ParaView time series of a collapse
+    colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
+
+Arguments are parsed before the heavy imports; bad input ends with a one-line error naming the
+value and exit status 2, a failed computation with exit status 1, and never leaves an output file.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+log = logging.getLogger("colsim")
+
+LENGTH = "length units of the particles (the paper: diameters 0.25-0.5)"
+
+
+def _positive(text):
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return value
+
+
+def _non_negative(text):
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+def _positive_int(text):
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
+    return value
+
+
+def _solver_arguments(parser):
+    parser.add_argument("--solver", default="clarabel",
+                        help="cone-program back-end: clarabel, clarabel-force, apgd or auto (default: %(default)s)")
+    parser.add_argument("--solver-tolerance", type=_positive, default=None,
+                        help="solver tolerance (default: the back-end's own)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="colsim", description=__doc__.split("\n\n")[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log every detail")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("pack", help="fill a cylinder by free fall (mu = mu_r = 0) and let it settle")
+    p.add_argument("--r0", type=_positive, default=2.0, help=f"cylinder radius, {LENGTH} (default: %(default)s)")
+    p.add_argument("--height", type=_positive, required=True,
+                   help="the settled packing must be taller than this (length); use the tallest h0 = a r0 needed")
+    p.add_argument("--seed", type=int, default=0, help="run seed (default: %(default)s)")
+    p.add_argument("--root-seed", type=int, default=0,
+                   help="study seed; the stream is numpy default_rng([seed, root_seed]) (default: %(default)s)")
+    p.add_argument("--diameter-min", type=_positive, default=0.25, help="smallest diameter, length (default: %(default)s)")
+    p.add_argument("--diameter-max", type=_positive, default=0.5, help="largest diameter, length (default: %(default)s)")
+    p.add_argument("--density", type=_positive, default=1.0, help="particle density, mass/length^3 (default: %(default)s)")
+    p.add_argument("--gravity", type=_positive, default=9.81, help="gravity, length/time^2 (default: %(default)s)")
+    p.add_argument("--dt", type=_positive, default=0.02, help="time step of the filling, time (default: %(default)s)")
+    p.add_argument("--rest-energy", type=_positive, default=1e-4,
+                   help="at rest when 99%% of the particles have kinetic energy < this times m g d (default: %(default)s)")
+    p.add_argument("--max-steps", type=_positive_int, default=5000, help="give up after this many steps (default: %(default)s)")
+    _solver_arguments(p)
+    p.add_argument("--output", required=True, help="packing file to write (netCDF)")
+
+    p = sub.add_parser("trim", help="remove the spheres that reach above h0 = a r0 (z + R > h0)")
+    p.add_argument("--input", required=True, help="packing file from `colsim pack`")
+    p.add_argument("--aspect-ratio", type=_positive, required=True, help="a = h0 / r0, dimensionless")
+    p.add_argument("--output", required=True, help="column file to write (netCDF)")
+
+    p = sub.add_parser("collapse", help="remove the cylinder and integrate the collapse")
+    p.add_argument("--input", required=True, help="column file from `colsim trim`")
+    p.add_argument("--mu", type=_non_negative, default=0.577, help="sliding friction coefficient (default: %(default)s)")
+    p.add_argument("--mu-r", type=_non_negative, default=0.12, help="rolling resistance coefficient (default: %(default)s)")
+    p.add_argument("--floor-mu", type=_non_negative, default=None, help="floor's mu (default: same as --mu)")
+    p.add_argument("--floor-mu-r", type=_non_negative, default=None, help="floor's mu_r (default: same as --mu-r)")
+    p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
+    p.add_argument("--steps", type=_positive_int, default=100, help="number of equal steps (default: %(default)s)")
+    p.add_argument("--frame-every", type=_positive_int, default=5, help="keep a frame every k steps (default: %(default)s)")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=10, help="checkpoint every k steps (default: %(default)s)")
+    p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")
+    _solver_arguments(p)
+    p.add_argument("--output", required=True, help="trajectory file to write (netCDF)")
+
+    p = sub.add_parser("analyse", help="final height, run-out, deposit profile and front position")
+    p.add_argument("--input", required=True, help="trajectory file from `colsim collapse`")
+    p.add_argument("--contact-tolerance", type=_non_negative, default=0.01,
+                   help="particles touch when their gap <= this fraction of the smallest diameter (default: %(default)s)")
+    p.add_argument("--bin-width", type=_positive, default=None, help="radial bin of the deposit profile, length (default: largest diameter)")
+    p.add_argument("--output", required=True, help="analysis file to write (netCDF)")
+
+    p = sub.add_parser("collect", help="gather analyses into one dataset over (aspect_ratio, mu_r, seed)")
+    p.add_argument("inputs", nargs="+", help="analysis files from `colsim analyse`")
+    p.add_argument("--output", required=True, help="summary file to write (netCDF)")
+    p.add_argument("--csv", default=None, help="also write the table as CSV here")
+
+    p = sub.add_parser("plot", help="the study's figures")
+    p.add_argument("--summary", required=True, help="summary file from `colsim collect`")
+    p.add_argument("--analyses", nargs="*", default=[], help="analysis files (profiles and fronts)")
+    p.add_argument("--trajectories", nargs="*", default=[], help="trajectory files (side views)")
+    p.add_argument("--output-dir", required=True, help="directory for the PNG figures")
+
+    p = sub.add_parser("export-vtk", help="ParaView time series (.vtu per frame + .pvd) of a collapse")
+    p.add_argument("--input", required=True, help="trajectory file from `colsim collapse`")
+    p.add_argument("--output-dir", required=True, help="directory to write into")
+
+    p = sub.add_parser("mu-r", help="rolling coefficient of a regular polygon (the paper's Eqs. 7-10)")
+    p.add_argument("--polygon", type=int, required=True, help="number of sides N >= 3")
+    p.add_argument("--method", choices=["paper", "exact"], default="paper",
+                   help="paper: linear fall of the resisting moment (pi/(4N)); exact: true lever arm (default: %(default)s)")
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
+    from . import commands
+    from .io import InputError
+    from .solvers import SolverError
+    from .stepper import OverlapError
+
+    try:
+        getattr(commands, args.command.replace("-", "_"))(args)
+    except (InputError, ValueError) as error:
+        print(f"colsim {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except (SolverError, OverlapError, RuntimeError) as error:
+        print(f"colsim {args.command}: failed: {error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""Stage 3: remove the cylinder and let the column collapse (SPEC section 3).
+
+The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
+mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
+Frames (state every `frame_every` steps, and the first and last) and per-step diagnostics are kept.
+A checkpoint is written every `checkpoint_every` steps (atomically); a run started again with the
+same inputs resumes from it and ends with the same result as an uninterrupted run.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import pickle
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io import atomic_path
+from .solvers import Solver, make_solver
+from .state import ContactLaw, ParticleState, StepSettings, Walls
+from .stepper import StepDiagnostics, step
+
+log = logging.getLogger(__name__)
+
+DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f != "solver_status"]
+
+
+@dataclass
+class CollapseSettings:
+    """The collapse's physics and numerics. Times are dimensionless (t / sqrt(h0/g))."""
+
+    mu: float = 0.577
+    mu_r: float = 0.12
+    floor_mu: float | None = None       # None: same as mu
+    floor_mu_r: float | None = None     # None: same as mu_r
+    duration: float = 4.0
+    n_steps: int = 100
+    frame_every: int = 5
+    gravity: float = 9.81
+    solver: str = "clarabel"
+    solver_options: dict = field(default_factory=dict)
+    checkpoint_every: int = 10
+
+    def __post_init__(self):
+        for name in ("mu", "mu_r"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"friction coefficient {name} must be >= 0, got {getattr(self, name)}")
+        if self.duration <= 0 or self.n_steps < 1 or self.frame_every < 1:
+            raise ValueError(f"need duration > 0, n_steps >= 1, frame_every >= 1; got "
+                             f"{self.duration}, {self.n_steps}, {self.frame_every}")
+        if self.gravity <= 0:
+            raise ValueError(f"gravity must be positive, got {self.gravity}")
+
+    def law(self) -> ContactLaw:
+        floor_mu = self.mu if self.floor_mu is None else self.floor_mu
+        floor_mu_r = self.mu_r if self.floor_mu_r is None else self.floor_mu_r
+        return ContactLaw(mu=(self.mu, floor_mu, 0.0), mu_r=(self.mu_r, floor_mu_r, 0.0))
+
+    def time_step(self, h0: float) -> float:
+        return self.duration / self.n_steps * np.sqrt(h0 / self.gravity)
+
+
+@dataclass
+class CollapseRun:
+    """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step)."""
+
+    initial: ParticleState
+    frames: list
+    diagnostics: list
+    wall_time: float
+    resumed_from: int = 0
+
+
+def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float) -> str:
+    digest = hashlib.sha256()
+    for array in (column.position, column.velocity, column.angular_velocity, column.radius):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(json.dumps([asdict(settings), h0], sort_keys=True, default=str).encode())
+    return digest.hexdigest()
+
+
+def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
+             checkpoint: str | Path | None = None, solver: Solver | None = None,
+             progress=None, stop_after: int | None = None) -> CollapseRun:
+    """Release `column` (height h0) and integrate it; see the module docstring.
+
+    progress: optional callable(diagnostics) after each step.
+    stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
+    """
+    solver = solver or make_solver(settings.solver, **settings.solver_options)
+    dt = settings.time_step(h0)
+    step_settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -settings.gravity),
+                                 walls=Walls(floor=True, cylinder_radius=None), law=settings.law())
+    fingerprint = _fingerprint(column, settings, h0)
+    saved = _load_checkpoint(checkpoint, fingerprint)
+    if saved:
+        state, frames, diagnostics, warm, elapsed = (saved[k] for k in
+                                                     ("state", "frames", "diagnostics", "warm", "elapsed"))
+        log.info("resuming from the checkpoint at step %d", len(diagnostics))
+    else:
+        state, frames, diagnostics, warm, elapsed = column.copy(), [(0, column.copy())], [], None, 0.0
+    resumed_from = len(diagnostics)
+    start = time.perf_counter() - elapsed
+    for k in range(resumed_from + 1, settings.n_steps + 1):
+        result = step(state, step_settings, solver, step_number=k, warm_start=warm)
+        state, warm = result.state, _warm_data(result)
+        diagnostics.append(result.diagnostics)
+        if k % settings.frame_every == 0 or k == settings.n_steps:
+            frames.append((k, state.copy()))
+        if progress is not None:
+            progress(result.diagnostics)
+        if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < settings.n_steps:
+            _save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, warm,
+                             time.perf_counter() - start)
+        if stop_after is not None and k - resumed_from >= stop_after:
+            return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
+    return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
+
+
+def _warm_data(result):
+    """What the next step's solver may start from: contact keys and forces of this step."""
+    return {"keys": result.contacts.pair_keys(result.state.n), "forces": result.solution.forces,
+            "normals": result.contacts.normal}
+
+
+def _save_checkpoint(path, fingerprint, state, frames, diagnostics, warm, elapsed):
+    payload = {"fingerprint": fingerprint, "state": state, "frames": frames,
+               "diagnostics": diagnostics, "warm": warm, "elapsed": elapsed}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            pickle.dump(payload, handle, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def _load_checkpoint(path, fingerprint):
+    if path is None or not Path(path).is_file():
+        return None
+    try:
+        with open(path, "rb") as handle:
+            payload = pickle.load(handle)
+    except Exception as error:  # a checkpoint from another version or a damaged file
+        log.warning("ignoring unreadable checkpoint %s (%s)", path, error)
+        return None
+    if payload.get("fingerprint") != fingerprint:
+        log.warning("ignoring checkpoint %s: it belongs to other inputs or settings", path)
+        return None
+    return payload
+
+
+def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
+    """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
+    import xarray as xr
+
+    steps = np.array([k for k, _ in run.frames])
+    frames = [s for _, s in run.frames]
+    t_scale = np.sqrt(h0 / settings.gravity)
+    data = {
+        "position": (("time", "particle", "xyz"), np.stack([s.position for s in frames]),
+                     {"units": "length", "long_name": "particle centre position"}),
+        "velocity": (("time", "particle", "xyz"), np.stack([s.velocity for s in frames]),
+                     {"units": "length/time", "long_name": "particle velocity"}),
+        "angular_velocity": (("time", "particle", "xyz"), np.stack([s.angular_velocity for s in frames]),
+                             {"units": "rad/time", "long_name": "particle angular velocity"}),
+        "radius": ("particle", run.initial.radius, {"units": "length", "long_name": "particle radius"}),
+        "initial_height": ("particle", run.initial.position[:, 2],
+                           {"units": "length", "long_name": "height of the particle centre at release"}),
+        "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
+        "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
+                        {"units": "1", "long_name": "time over sqrt(h0/g)"}),
+    }
+    units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
+             "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
+             "setup_time": "s", "solve_time": "s"}
+    for name in DIAGNOSTIC_FIELDS:
+        if name == "step":
+            continue
+        values = np.array([getattr(d, name) for d in run.diagnostics])
+        data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
+                                                  "long_name": name.replace("_", " ") + " per step"})
+    data["step_solver_status"] = ("step", np.array([d.solver_status for d in run.diagnostics], dtype=object),
+                                  {"long_name": "solver status per step"})
+    coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
+              "step": ("step", np.array([d.step for d in run.diagnostics]),
+                       {"units": "1", "long_name": "step number"}),
+              "xyz": ["x", "y", "z"]}
+    dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
+    dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
+                          "mu_r": settings.mu_r, "dt": settings.time_step(h0),
+                          "wall_time": run.wall_time, "density": float(run.initial.density)})
+    return dataset

@@ -1,0 +1,185 @@
+"""What each `colsim` subcommand does (argument parsing lives in :mod:`colsim.cli`)."""
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import analysis, io
+from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
+from .packing import pack as run_pack, solid_fraction, trim as run_trim
+from .solvers import make_solver
+
+log = logging.getLogger("colsim")
+
+
+def _settings(args) -> dict:
+    """The command's arguments as a configuration to store with its output."""
+    return {k: v for k, v in vars(args).items() if k not in ("verbose",)}
+
+
+def _solver(args):
+    options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
+    return make_solver(args.solver, **options)
+
+
+def _progress_bar(total: int, description: str):
+    """A tqdm bar on a terminal (off otherwise) and a log line every 10 % of the steps."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=description, disable=None, unit="step")
+    every = max(1, total // 10)
+    counter = {"n": 0}
+
+    def update(diagnostics, *_):
+        counter["n"] += 1
+        bar.update(1)
+        bar.set_postfix(contacts=diagnostics.n_contacts, iters=diagnostics.solver_iterations)
+        if counter["n"] % every == 0:
+            log.info("%s step %d: %d contacts, kinetic energy %.3g, overlap %.2g, solve %.2f s",
+                     description, diagnostics.step, diagnostics.n_contacts,
+                     diagnostics.kinetic_energy + diagnostics.rotational_energy,
+                     diagnostics.largest_overlap, diagnostics.solve_time)
+    update.close = bar.close
+    return update
+
+
+def pack(args):
+    if args.diameter_min > args.diameter_max:
+        raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
+    rng = np.random.default_rng([args.seed, args.root_seed])
+    result = run_pack(args.r0, args.height, rng, (args.diameter_min, args.diameter_max), args.density,
+                      args.gravity, args.dt, args.rest_energy, args.max_steps, _solver(args))
+    attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
+    attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
+                  "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})
+    io.write_state(args.output, result.state, attrs)
+    log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s",
+             result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time)
+
+
+def trim(args):
+    state, source = io.read_state(args.input)
+    r0 = float(source.attrs["r0"])
+    h0 = args.aspect_ratio * r0
+    column = run_trim(state, h0)
+    attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
+                                 {**_settings(args), "input_config": io.config_of(source)},
+                                 source.attrs.get("seed"))
+    fraction = solid_fraction(column, r0, h0)
+    attrs.update({"r0": r0, "h0": h0, "aspect_ratio": args.aspect_ratio, "solid_fraction": fraction,
+                  "gravity": float(source.attrs.get("gravity", 9.81)),
+                  "packing_wall_time": float(source.attrs.get("wall_time", np.nan))})
+    io.write_state(args.output, column, attrs)
+    log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
+
+
+def collapse(args):
+    column, source = io.read_state(args.input)
+    if "h0" not in source.attrs:
+        raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
+    h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
+    settings = CollapseSettings(
+        mu=args.mu, mu_r=args.mu_r, floor_mu=args.floor_mu, floor_mu_r=args.floor_mu_r,
+        duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
+        gravity=float(source.attrs.get("gravity", 9.81)), solver=args.solver,
+        checkpoint_every=args.checkpoint_every,
+        solver_options={} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance})
+    checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
+    progress = _progress_bar(args.steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
+    try:
+        run = run_collapse(column, h0, settings, checkpoint=checkpoint, progress=progress)
+    finally:
+        progress.close()
+    attrs = io.global_attributes(io.TRAJECTORY_KIND, "colsim collapse",
+                                 {**_settings(args), "input_config": io.config_of(source)},
+                                 source.attrs.get("seed"))
+    attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
+                  "n_particles": column.n, "resumed_from_step": run.resumed_from})
+    io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
+    checkpoint.unlink(missing_ok=True)
+    log.info("collapse done: %d steps in %.1f s", len(run.diagnostics), run.wall_time)
+
+
+def analyse(args):
+    import xarray as xr
+
+    trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
+    r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
+    initial = io.state_from_dataset(trajectory, 0)
+    final = io.state_from_dataset(trajectory, -1)
+    tolerance = analysis.contact_tolerance(final, args.contact_tolerance)
+    deposit = analysis.measure_deposit(final, tolerance)
+    fronts = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance).r_inf
+              for k in range(trajectory.sizes["time"])]
+    bin_width = args.bin_width or 2.0 * float(final.radius.max())
+    centres, height = analysis.deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
+    energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
+    top_radius = analysis.undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
+    scalar = lambda value, units, name: ((), value, {"units": units, "long_name": name})  # noqa: E731
+    data = {
+        "h_inf": scalar(deposit.h_inf, "length", "final height of the main mass"),
+        "r_inf": scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
+        "h_inf_over_r0": scalar(deposit.h_inf / r0, "1", "final height over initial radius"),
+        "runout_over_r0": scalar((deposit.r_inf - r0) / r0, "1", "run-out (r_inf - r0) over initial radius"),
+        "n_particles": scalar(final.n, "1", "number of particles"),
+        "n_main_mass": scalar(int(deposit.main_mass.sum()), "1", "number of particles in the main mass"),
+        "solid_fraction": scalar(float(trajectory.attrs["column_solid_fraction"]), "1",
+                                 "solid fraction of the column before release"),
+        "final_to_peak_kinetic_energy": scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
+                                               "kinetic energy at the end over its peak"),
+        "wall_time": scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
+        "undisturbed_top_radius": scalar(top_radius / r0, "1",
+                                         "radius of the top disc that did not move, over r0"),
+        "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
+        "front_position": ("time", (np.array(fronts) - r0) / r0,
+                           {"units": "1", "long_name": "front (r_front - r0) over r0"}),
+        "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
+        "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
+    }
+    coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
+              "step": trajectory["step"]}
+    attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
+                                 {**_settings(args), "input_config": io.config_of(trajectory)},
+                                 trajectory.attrs.get("seed"))
+    for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0"):
+        attrs[key] = float(trajectory.attrs[key])
+    io.write_dataset(xr.Dataset(data, coords=coords, attrs=attrs), args.output)
+    log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f",
+             attrs["aspect_ratio"], attrs["mu_r"], deposit.h_inf / r0, (deposit.r_inf - r0) / r0)
+
+
+def collect(args):
+    from .summary import collect_analyses
+
+    summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
+    summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
+    io.write_dataset(summary, args.output)
+    if args.csv:
+        with io.atomic_path(args.csv) as tmp:
+            summary.to_dataframe().to_csv(tmp)
+
+
+def plot(args):
+    from . import plots
+
+    summary = io.open_dataset(args.summary, "collapse-summary")
+    analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in args.analyses]
+    trajectories = [io.open_dataset(p, io.TRAJECTORY_KIND) for p in args.trajectories]
+    plots.all_figures(summary, analyses, trajectories, Path(args.output_dir))
+
+
+def export_vtk(args):
+    from .vtk import export_trajectory
+
+    trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
+    path = export_trajectory(trajectory, args.output_dir)
+    log.info("wrote %s (%d frames)", path, trajectory.sizes["time"])
+
+
+def mu_r(args):
+    from .calibration import polygon_rolling_coefficient
+
+    print(f"{polygon_rolling_coefficient(args.polygon, args.method):.6f}")

@@ -1,0 +1,39 @@
+"""Stage 5: one xarray Dataset over (aspect_ratio, mu_r, seed) from many collapse analyses."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
+                     "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
+                     "undisturbed_top_radius", "n_main_mass")
+
+
+def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
+    """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
+    import xarray as xr
+
+    if not analyses:
+        raise ValueError("no analysis files to collect")
+    keys = [(float(a.attrs["aspect_ratio"]), float(a.attrs["mu_r"]), int(a.attrs.get("seed", 0)))
+            for a in analyses]
+    if len(set(keys)) != len(keys):
+        raise ValueError("two analyses share the same (aspect_ratio, mu_r, seed)")
+    ratios, mu_rs, seeds = (sorted(set(values)) for values in zip(*keys))
+    shape = (len(ratios), len(mu_rs), len(seeds))
+    data = {}
+    for name in SUMMARY_VARIABLES:
+        values = np.full(shape, np.nan)
+        for (a, m, s), analysis in zip(keys, analyses):
+            values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = float(analysis[name].values)
+        data[name] = (("aspect_ratio", "mu_r", "seed"), values, dict(analyses[0][name].attrs))
+    coords = {
+        "aspect_ratio": ("aspect_ratio", ratios, {"units": "1", "long_name": "aspect ratio h0/r0"}),
+        "mu_r": ("mu_r", mu_rs, {"units": "1", "long_name": "rolling resistance coefficient"}),
+        "seed": ("seed", seeds, {"units": "1", "long_name": "packing seed"}),
+    }
+    first = analyses[0].attrs
+    attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
+             "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
+    return xr.Dataset(data, coords=coords, attrs=attrs)
