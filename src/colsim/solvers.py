@@ -117,7 +117,7 @@ class ClarabelSolver(Solver):
                 f"(primal residual {result.r_prim:.2e}, dual residual {result.r_dual:.2e}, "
                 f"{program.m} contacts)", status=status, step=step, residuals=residuals)
         if status != "Solved":
-            log.warning("Clarabel ended %s at step %s (primal residual %.2e, dual %.2e)",
+            log.info("Clarabel ended %s at step %s (primal residual %.2e, dual %.2e)",
                         status, step, result.r_prim, result.r_dual)
         u, forces = unpack(np.asarray(result.x), np.asarray(result.z))
         return ConeSolution(u, forces, status, result.iterations, setup_time, solve_time, residuals)
