@@ -1,0 +1,267 @@
+"""The study's comparison figures (PNG), from the collected summary, analyses and trajectories.
+
+:func:`all_figures` writes the files named in :data:`FIGURES` into one directory:
+
+- final_height.png: h_inf/r0 against a, one marker per mu_r (mean over seeds, bars from the lowest
+  to the highest seed), with the laws of Lube et al. and Lajeunesse et al. (the paper's Fig. 6);
+- runout.png: (r_inf - r0)/r0 against a, the same way (the paper's Fig. 7);
+- mu_r_effect.png: both quantities against mu_r, one line per a;
+- deposit_profiles.png: deposit height against distance from the axis, one panel per a, one line
+  per mu_r (the lowest seed);
+- side_views.png: the particles in a slab |y| < d_max seen from the side before release and at the
+  end, coloured by their initial height over h0 (the paper's Figs. 3-5), one row per trajectory;
+- front_position.png: (r_front - r0)/r0 against t/sqrt(h0/g), one panel per mu_r, one colour per a.
+
+matplotlib is imported inside the functions (Agg back-end), so colsim imports without it. Every
+function takes xarray Datasets as colsim writes them and tolerates missing runs (NaN in the summary)
+and sweeps of a single value.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK
+
+log = logging.getLogger(__name__)
+
+FIGURES = ("final_height.png", "runout.png", "mu_r_effect.png", "deposit_profiles.png",
+           "side_views.png", "front_position.png")
+"""File names that :func:`all_figures` writes, in order."""
+
+MARKERS = "osD^vP*X<>"
+BREAKPOINTS = (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK)
+LAW_STYLES = ("-", "--", ":", "-.")
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _label(variable, fallback: str) -> str:
+    """An axis label from a variable's long_name and units (units "1" are left out)."""
+    name = variable.attrs.get("long_name", fallback) if variable is not None else fallback
+    units = variable.attrs.get("units", "1") if variable is not None else "1"
+    return name if units in ("1", "") else f"{name} [{units}]"
+
+
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    _pyplot().close(fig)
+    log.info("wrote %s", path)
+    return path
+
+
+def _seed_spread(values):
+    """(mean, lower error, upper error) over the last axis, ignoring NaN (missing seeds)."""
+    import warnings
+
+    values = np.asarray(values, dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: a run that is missing
+        mean = np.nanmean(values, axis=-1)
+        low = mean - np.nanmin(values, axis=-1)
+        high = np.nanmax(values, axis=-1) - mean
+    return mean, np.nan_to_num(low), np.nan_to_num(high)
+
+
+def _law_abscissa(end: float):
+    """Values of a from 0 to `end`, with NaN at the laws' breakpoints so the jumps are not drawn as lines."""
+    edges = sorted({0.0, end, *(b for b in BREAKPOINTS if b < end)})
+    pieces = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        pieces += [np.linspace(lo, hi - 1e-9 * (hi < end), 100), [np.nan]]
+    return np.concatenate(pieces[:-1])
+
+
+def law_figure(summary, variable: str, path: Path) -> Path:
+    """`variable` (h_inf_over_r0 or runout_over_r0) against a: markers per mu_r, laws as curves."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    ratios = summary["aspect_ratio"].values
+    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0))
+    for (name, law), style in zip(LAWS[variable].items(), LAW_STYLES):
+        ax.plot(span, law(span), style, color="0.35", lw=1.2, label=name)
+    data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
+    for k, mu_r in enumerate(summary["mu_r"].values):
+        mean, low, high = _seed_spread(data.isel(mu_r=k).values)
+        ax.errorbar(ratios, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
+                    label=f"colsim, $\\mu_r$ = {mu_r:g}")
+    ax.set_xlabel("aspect ratio a = h0/r0")
+    ax.set_ylabel(_label(summary[variable], variable))
+    ax.set_xlim(0, span[-1])
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"r0 = {summary.attrs.get('r0', float('nan')):g}, mu = {summary.attrs.get('mu', float('nan')):g}, "
+                 f"{summary.sizes['seed']} seed(s)", fontsize=9)
+    return _save(fig, path)
+
+
+def mu_r_figure(summary, path: Path) -> Path:
+    """h_inf/r0 and run-out against mu_r, one line per aspect ratio (seed spread as bars)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    mu_r = summary["mu_r"].values
+    colours = plt.cm.viridis(np.linspace(0, 0.9, summary.sizes["aspect_ratio"]))
+    for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
+        data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
+        for k, a in enumerate(summary["aspect_ratio"].values):
+            mean, low, high = _seed_spread(data.isel(aspect_ratio=k).values)
+            ax.errorbar(mu_r, mean, yerr=[low, high], fmt="o-", color=colours[k], capsize=3, label=f"a = {a:g}")
+        ax.set_xlabel("rolling resistance coefficient $\\mu_r$")
+        ax.set_ylabel(_label(summary[variable], variable))
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return _save(fig, path)
+
+
+def _by_key(datasets):
+    """{(aspect_ratio, mu_r, seed): dataset}."""
+    return {(float(d.attrs["aspect_ratio"]), float(d.attrs["mu_r"]), int(d.attrs.get("seed", 0))): d
+            for d in datasets}
+
+
+def _empty(ax, text: str):
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes)
+    ax.set_axis_off()
+
+
+def _grid(plt, n: int, width: float, height: float):
+    columns = min(n, 3)
+    rows = max(1, int(np.ceil(n / columns)))
+    fig, axes = plt.subplots(rows, columns, figsize=(width * columns, height * rows), squeeze=False,
+                             layout="constrained")
+    for ax in axes.flat[n:]:
+        ax.set_axis_off()
+    return fig, axes.flat
+
+
+def deposit_profile_figure(analyses, path: Path) -> Path:
+    """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed."""
+    plt = _pyplot()
+    runs = _by_key(analyses)
+    ratios = sorted({a for a, _, _ in runs}) or [np.nan]
+    mu_rs = sorted({m for _, m, _ in runs})
+    fig, axes = _grid(plt, len(ratios), 4.2, 3.2)
+    for ax, a in zip(axes, ratios):
+        chosen = {m: runs[min(k for k in runs if k[:2] == (a, m))] for m in mu_rs if any(k[:2] == (a, m) for k in runs)}
+        if not chosen:
+            _empty(ax, "no analyses")
+            continue
+        for m, run in chosen.items():
+            r0 = float(run.attrs["r0"])
+            ax.step(run["radial_bin"].values / r0, run["deposit_height"].values / r0, where="mid",
+                    label=f"$\\mu_r$ = {m:g}")
+        ax.axhline(a, color="0.6", lw=0.8, ls=":")
+        ax.axvline(1.0, color="0.6", lw=0.8, ls=":")
+        ax.set_title(f"a = {a:g}", fontsize=9)
+        ax.set_xlabel("r / r0")
+        ax.set_ylabel("deposit height / r0")
+        ax.set_xlim(left=0)
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=7)
+    return _save(fig, path)
+
+
+def _slab(run, frame):
+    """(x/r0, z/r0, R/r0, initial height/h0) of the particles with |y| < d_max in one frame."""
+    r0, h0 = float(run.attrs["r0"]), float(run.attrs["h0"])
+    radius = run["radius"].values
+    position = run["position"].isel(time=frame).values
+    inside = np.abs(position[:, 1]) < 2.0 * float(radius.max())
+    return (position[inside, 0] / r0, position[inside, 2] / r0, radius[inside] / r0,
+            run["initial_height"].values[inside] / h0)
+
+
+def side_view_figure(trajectories, path: Path) -> Path:
+    """Slab |y| < d_max seen from the side, before release and at the end, coloured by initial height / h0.
+
+    Discs are drawn at the particles' true size (a cut through the middle of a sphere), so the
+    packing looks as in the paper's Figs. 3-5.
+    """
+    plt = _pyplot()
+    from matplotlib.collections import EllipseCollection
+
+    runs = sorted(_by_key(trajectories).items())
+    if not runs:
+        fig, ax = plt.subplots(figsize=(6, 2))
+        _empty(ax, "no trajectories")
+        return _save(fig, path)
+    views = [[_slab(run, 0), _slab(run, -1)] for _, run in runs]
+    limits = [max(1.0, *(float(np.max(np.abs(x) + r, initial=0.0)) for x, _, r, _ in row)) * 1.05 for row in views]
+    tops = [max(0.5, float(np.max(z + r, initial=0.0))) * 1.1 for row in views for (_, z, r, _) in row[:1]]
+    ratios = [top / (2 * limit) for top, limit in zip(tops, limits)]
+    fig, axes = plt.subplots(len(runs), 2, figsize=(11, 0.9 + 5.0 * sum(ratios) + 0.35 * len(runs)),
+                             squeeze=False, gridspec_kw={"height_ratios": ratios})
+    collection = None
+    for row, ((a, m, seed), run), view, limit, top in zip(axes, runs, views, limits, tops):
+        for ax, frame, (x, z, r, colour), when in zip(row, (0, -1), view, ("before release", "deposit")):
+            collection = EllipseCollection(2 * r, 2 * r, np.zeros_like(r), units="xy", offsets=np.c_[x, z],
+                                           offset_transform=ax.transData, cmap="viridis", linewidths=0)
+            collection.set_array(colour)
+            collection.set_clim(0, 1)
+            ax.add_collection(collection)
+            ax.set_xlim(-limit, limit)
+            ax.set_ylim(0, top)
+            ax.set_aspect("equal")
+            time = float(run["scaled_time"].values[frame])
+            ax.set_title(f"a = {a:g}, $\\mu_r$ = {m:g}, seed {seed}: {when}, t/$\\sqrt{{h_0/g}}$ = {time:.2f}",
+                         fontsize=8)
+            ax.set_ylabel("z / r0")
+    for ax in axes[-1]:
+        ax.set_xlabel("x / r0")
+    fig.colorbar(collection, ax=axes, shrink=0.8, label="initial height / h0")
+    return _save(fig, path)
+
+
+def front_figure(analyses, path: Path) -> Path:
+    """(r_front - r0)/r0 against t/sqrt(h0/g): one panel per mu_r, one colour per a, one line per seed."""
+    plt = _pyplot()
+    runs = _by_key(analyses)
+    mu_rs = sorted({m for _, m, _ in runs}) or [np.nan]
+    ratios = sorted({a for a, _, _ in runs})
+    colours = dict(zip(ratios, plt.cm.viridis(np.linspace(0, 0.9, max(1, len(ratios))))))
+    fig, axes = _grid(plt, len(mu_rs), 4.2, 3.2)
+    for ax, m in zip(axes, mu_rs):
+        keys = sorted(k for k in runs if k[1] == m)
+        if not keys:
+            _empty(ax, "no analyses")
+            continue
+        labelled = set()
+        for a, _, seed in keys:
+            run = runs[(a, m, seed)]
+            ax.plot(run["scaled_time"].values, run["front_position"].values, color=colours[a], lw=1.2,
+                    label=None if a in labelled else f"a = {a:g}")
+            labelled.add(a)
+        ax.set_title(f"$\\mu_r$ = {m:g}", fontsize=9)
+        ax.set_xlabel("t / sqrt(h0/g)")
+        ax.set_ylabel("front (r_front - r0) / r0")
+        ax.grid(alpha=0.3)
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=7)
+    return _save(fig, path)
+
+
+def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
+    """Write every figure of :data:`FIGURES` into `output_dir` (created); return their paths."""
+    output_dir = Path(output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    analyses, trajectories = list(analyses), list(trajectories)
+    return [
+        law_figure(summary, "h_inf_over_r0", output_dir / FIGURES[0]),
+        law_figure(summary, "runout_over_r0", output_dir / FIGURES[1]),
+        mu_r_figure(summary, output_dir / FIGURES[2]),
+        deposit_profile_figure(analyses, output_dir / FIGURES[3]),
+        side_view_figure(trajectories, output_dir / FIGURES[4]),
+        front_figure(analyses, output_dir / FIGURES[5]),
+    ]
