@@ -188,3 +188,12 @@ def test_auto_falls_back_to_clarabel(pile):
     assert "APGD fallback" in solver.solve(program, step=2).status
     with pytest.raises(SolverError):
         AutoSolver(threshold=1, fallback=False, apgd={"max_iter": 3}).solve(program)
+
+
+def test_numba_and_numpy_kernels_agree(pile):
+    pytest.importorskip("numba")
+    program, _ = _program(pile)
+    fast = ApgdSolver(kernel="numba").solve(program)
+    plain = ApgdSolver(kernel="numpy").solve(program)
+    assert fast.iterations == plain.iterations
+    np.testing.assert_allclose(fast.increments, plain.increments, rtol=0, atol=1e-9 * np.abs(plain.increments).max())

@@ -165,27 +165,226 @@ def length_scale(program: ConeProgram) -> float:
     return max(rms, 1e-6 * float(np.mean(radius)))
 
 
+# --------------------------------------------------------------------------------------------
+# The iterations: fused numba kernels, or the same steps in numpy
+# --------------------------------------------------------------------------------------------
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - numba is a dependency; numpy is the fallback
+    numba = None
+_NUMBA = numba is not None
+
+
+def _project_point(p0, q1, q2, r1, r2, a, b):
+    """The projection of project_coupled_cone for one point (scalar code, compiled by numba)."""
+    nq = np.sqrt(q1 * q1 + q2 * q2)
+    nr = np.sqrt(r1 * r1 + r2 * r2)
+    if nq <= a * p0 and nr <= b * p0:
+        return p0, q1, q2, r1, r2
+    bq = nq / a if a > 0 else np.inf
+    br = nr / b if b > 0 else np.inf
+    t1 = min(bq, br)
+    t2 = max(bq, br)
+    # the three pieces' minimisers, clipped to their intervals; phi is convex so the best wins
+    best = -1.0
+    best_phi = np.inf
+    for piece in range(3):
+        if piece == 0:
+            p = (p0 + a * nq + b * nr) / (1.0 + a * a + b * b)
+            p = min(max(p, 0.0), t1)
+        elif piece == 1:
+            if not t1 < np.inf:
+                continue
+            if bq <= br:
+                p = (p0 + b * nr) / (1.0 + b * b)
+            else:
+                p = (p0 + a * nq) / (1.0 + a * a)
+            p = min(max(p, t1), t2)
+        else:
+            if not t2 < np.inf:
+                continue
+            p = max(p0, t2)
+        if not p < np.inf:
+            continue
+        dq = max(nq - a * p, 0.0)
+        dr = max(nr - b * p, 0.0)
+        phi = (p - p0) * (p - p0) + dq * dq + dr * dr
+        if phi < best_phi:
+            best_phi = phi
+            best = p
+    p = max(best, 0.0)
+    fq = a * p / nq if nq > a * p else 1.0
+    fr = b * p / nr if nr > b * p else 1.0
+    return p, q1 * fq, q2 * fq, r1 * fr, r2 * fr
+
+
+def _csr_matvec(indptr, indices, data, x, out):
+    for row in range(len(indptr) - 1):
+        acc = 0.0
+        for k in range(indptr[row], indptr[row + 1]):
+            acc += data[k] * x[indices[k]]
+        out[row] = acc
+
+
+def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
+             Gp, Gi, Gd, Tp, Ti, Td, c, a, b, inv_mass):
+    """n_iter APGD iterations in place; returns (theta, lip, backtracks, restarts).
+
+    x, hx = T x: the iterate; y, hy: the extrapolated point; g = G hy + c: the gradient at y.
+    The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
+    descent test of a quadratic), else lip doubles. Restart when g . (x_new - x) > 0.
+    """
+    m = len(a)
+    nb = len(hx)
+    backtracks = 0
+    restarts = 0
+    for _ in range(n_iter):
+        while True:
+            step = 1.0 / lip
+            dd = 0.0
+            for k in range(m):
+                o = 5 * k
+                pp, q1, q2, r1, r2 = _project_point(
+                    y[o] - step * g[o], y[o + 1] - step * g[o + 1], y[o + 2] - step * g[o + 2],
+                    y[o + 3] - step * g[o + 3], y[o + 4] - step * g[o + 4], a[k], b[k])
+                x_new[o] = pp
+                x_new[o + 1] = q1
+                x_new[o + 2] = q2
+                x_new[o + 3] = r1
+                x_new[o + 4] = r2
+                for l in range(5):
+                    d = x_new[o + l] - y[o + l]
+                    dd += d * d
+            _csr_matvec(Tp, Ti, Td, x_new, h_new)
+            wdd = 0.0
+            for i in range(nb):
+                dh = h_new[i] - hy[i]
+                wdd += dh * dh * inv_mass[i]
+            if wdd <= lip * dd * (1.0 + 1e-12):
+                break
+            lip *= 2.0
+            backtracks += 1
+        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+        uphill = 0.0
+        for i in range(5 * m):
+            uphill += g[i] * (x_new[i] - x[i])
+        if uphill > 0.0:
+            theta_new = 1.0
+            beta = 0.0
+            restarts += 1
+        theta = theta_new
+        for i in range(5 * m):
+            y[i] = x_new[i] + beta * (x_new[i] - x[i])
+            x[i] = x_new[i]
+        for i in range(nb):
+            hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
+            hx[i] = h_new[i]
+        _csr_matvec(Gp, Gi, Gd, hy, g)
+        for i in range(5 * m):
+            g[i] += c[i]
+    return theta, lip, backtracks, restarts
+
+
+if _NUMBA:
+    _project_point = numba.njit(cache=True, inline="always")(_project_point)
+    _csr_matvec = numba.njit(cache=True)(_csr_matvec)
+    _iterate_compiled = numba.njit(cache=True)(_iterate)
+
+
+class _Iteration:
+    """The APGD state between residual checks; iterate(n) runs n iterations (compiled or numpy)."""
+
+    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, compiled=True):
+        self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
+        self.x, self.hx = x.copy(), hx.copy()
+        self.y, self.hy = x.copy(), hx.copy()
+        self.g = G @ self.hy + c
+        self.x_new, self.h_new = np.empty_like(x), np.empty_like(hx)
+        self.theta, self.lip = 1.0, float(lip)
+        self.backtracks = self.restarts = 0
+        self.compiled = compiled
+
+    def gradient_at_x(self) -> np.ndarray:
+        """G hx + c: the scaled end-of-step gaps S (B u + g e_n) at the iterate."""
+        return self.G @ self.hx + self.c
+
+    def iterate(self, n: int):
+        if self.compiled:
+            G, T = self.G, self.T
+            theta, lip, bt, rs = _iterate_compiled(
+                n, self.x, self.hx, self.y, self.hy, self.g, self.x_new, self.h_new,
+                self.theta, self.lip, G.indptr, G.indices, G.data, T.indptr, T.indices, T.data,
+                self.c, self.a, self.b, self.inv_mass)
+        else:
+            theta, lip, bt, rs = self._iterate_numpy(n)
+        self.theta, self.lip = theta, lip
+        self.backtracks += bt
+        self.restarts += rs
+
+    def _iterate_numpy(self, n):
+        m = len(self.a)
+        theta, lip, bt, rs = self.theta, self.lip, 0, 0
+        x, hx, y, hy, g = self.x, self.hx, self.y, self.hy, self.g
+        for _ in range(n):
+            while True:
+                x_new = project_coupled_cone((y - g / lip).reshape(m, 5), self.a, self.b).ravel()
+                h_new = self.T @ x_new
+                d = x_new - y
+                dh = h_new - hy
+                if _dot(dh * self.inv_mass, dh) <= lip * _dot(d, d) * (1.0 + 1e-12):
+                    break
+                lip *= 2.0
+                bt += 1
+            theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+            beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+            if _dot(g, x_new - x) > 0.0:
+                theta_new, beta = 1.0, 0.0
+                rs += 1
+            theta = theta_new
+            y = x_new + beta * (x_new - x)
+            hy = h_new + beta * (h_new - hx)
+            x, hx = x_new, h_new
+            g = self.G @ hy + self.c
+        self.x, self.hx, self.y, self.hy, self.g = x, hx, y, hy, g
+        return theta, lip, bt, rs
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """a . b without BLAS (a threaded BLAS dot oversubscribes a busy machine badly)."""
+    return float(np.einsum("i,i->", a, b))
+
+
 class ApgdSolver(Solver):
     """Accelerated projected gradient on the contact forces (see the module docstring).
 
     tolerance: on the relative primal infeasibility and complementarity (dimensionless).
     max_iter: iterations before :class:`SolverError`. check_every: iterations between residual
     checks. precondition: scale each contact's normal, sliding and rolling rows separately.
+    kernel: 'numba' (fused compiled iterations, the default when numba is installed) or 'numpy'.
     """
 
     name = "apgd"
     uses_warm_start = True
 
     def __init__(self, tolerance: float = 1e-5, max_iter: int = 20000, check_every: int = 10,
-                 precondition: bool = True, verbose: bool = False):
+                 precondition: bool = True, kernel: str | None = None, verbose: bool = False):
         if not tolerance > 0:
             raise ValueError(f"APGD tolerance must be positive, got {tolerance}")
         if max_iter < 1 or check_every < 1:
             raise ValueError("max_iter and check_every must be >= 1")
+        if kernel is None:
+            kernel = "numba" if _NUMBA else "numpy"
+        if kernel not in ("numba", "numpy"):
+            raise ValueError(f"APGD kernel must be 'numba' or 'numpy', got {kernel!r}")
+        if kernel == "numba" and not _NUMBA:
+            raise ValueError("APGD kernel 'numba' needs numba installed")
         self.tolerance = float(tolerance)
         self.max_iter = int(max_iter)
         self.check_every = int(check_every)
         self.precondition = precondition
+        self.kernel = kernel
         self.verbose = verbose
 
     # -- pieces ----------------------------------------------------------------------------
@@ -222,93 +421,60 @@ class ApgdSolver(Solver):
         m = program.m
         B = program.jacobian.tocsr()
         inv_mass = 1.0 / program.mass
-        BT = B.T.tocsr()
         s = self._scaling(program, B, inv_mass) if self.precondition else np.ones((m, 5))
         s_flat = s.ravel()
         a = program.mu * s[:, 0] / s[:, 1]
         b = program.mu_r * s[:, 0] / s[:, 3]
-        u_free = program.fbar * inv_mass
-        # gradient in z (lam = s z): s * (B u(lam) + g e_n); c_z = s * (B u_free + g e_n)
-        c = B @ u_free
+        # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
+        # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic).
+        SB = sp.diags(s_flat) @ B
+        T = SB.T.tocsr()
+        G = (SB @ sp.diags(inv_mass)).tocsr()
+        c = B @ (program.fbar * inv_mass)
         c[::ROWS_PER_CONTACT] += program.gap
-        c_z = s_flat * c
+        c *= s_flat
         scale = length_scale(program)
 
-        def h_of(z):  # B' lam, (6n,)
-            return BT @ (s_flat * z)
-
-        def grad_of(h):  # s * (W lam + c) from h = B' lam
-            return s_flat * (B @ (inv_mass * h)) + c_z
-
-        def f_of(z, h):  # 1/2 lam' W lam + c' lam
-            return 0.5 * float(h @ (inv_mass * h)) + float(c_z @ z)
-
-        def project(z):
-            return project_coupled_cone(z.reshape(m, 5), a, b).ravel()
-
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
-            x = project(np.asarray(warm_start, dtype=float).ravel() / s_flat)
+            x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
             started = "warm"
         else:
             x = np.zeros(5 * m)
             started = "cold"
-        hx = h_of(x)
+        hx = T @ x
 
-        # Lipschitz constant of S W S: a few power iterations, then backtracking keeps it safe.
-        rng = np.random.default_rng(0)
-        v = rng.standard_normal(5 * m)
+        # Lipschitz constant of S W S: a few power iterations; backtracking keeps the step safe.
+        v = np.random.default_rng(0).standard_normal(5 * m)
         lip = 1.0
         for _ in range(12):
-            v /= np.linalg.norm(v)
-            wv = s_flat * (B @ (inv_mass * (BT @ (s_flat * v))))
-            lip = float(v @ wv)
+            v /= np.sqrt(_dot(v, v))
+            wv = G @ (T @ v)
+            lip = _dot(v, wv)
             v = wv
         lip = max(lip, 1e-12)
+        run = _Iteration(G, T, c, a, b, inv_mass, x, hx, lip,
+                                 compiled=self.kernel == "numba")
         setup_time = time.perf_counter() - start
 
-        y, hy = x.copy(), hx.copy()
-        theta = 1.0
         res = {"primal": np.inf, "dual": 0.0, "complementarity": np.inf}
         k = 0
-        backtracks = restarts = 0
         converged = False
         while k < self.max_iter:
-            k += 1
-            g = grad_of(hy)
-            fy = f_of(y, hy)
-            while True:
-                x_new = project(y - g / lip)
-                h_new = h_of(x_new)
-                d = x_new - y
-                if f_of(x_new, h_new) <= fy + float(g @ d) + 0.5 * lip * float(d @ d) + 1e-14 * abs(fy):
-                    break
-                lip *= 2.0
-                backtracks += 1
-            theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
-            beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-            step_x = x_new - x
-            if float(g @ step_x) > 0.0:  # adaptive restart: momentum points uphill
-                theta_new, beta = 1.0, 0.0
-                restarts += 1
-            theta = theta_new
-            y = x_new + beta * step_x
-            hy = h_new + beta * (h_new - hx)
-            x, hx = x_new, h_new
-            if k % self.check_every == 0 or k == self.max_iter:
-                u = (program.fbar + hx) * inv_mass
-                yloc = (B @ u).reshape(m, 5)
-                yloc[:, 0] += program.gap
-                res = _residuals(yloc, (s_flat * x).reshape(m, 5), program.mu, program.mu_r, scale)
-                if self.verbose:
-                    log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
-                             res["complementarity"], lip)
-                if res["primal"] <= self.tolerance and res["complementarity"] <= self.tolerance:
-                    converged = True
-                    break
+            n = min(self.check_every, self.max_iter - k)
+            run.iterate(n)
+            k += n
+            yloc = (run.gradient_at_x() / s_flat).reshape(m, 5)
+            res = _residuals(yloc, (s_flat * run.x).reshape(m, 5), program.mu, program.mu_r, scale)
+            if self.verbose:
+                log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
+                         res["complementarity"], run.lip)
+            if res["primal"] <= self.tolerance and res["complementarity"] <= self.tolerance:
+                converged = True
+                break
         solve_time = time.perf_counter() - start - setup_time
-        forces = (s_flat * x).reshape(m, 5)
-        info = dict(res, start=started, backtracks=backtracks, restarts=restarts,
-                    lipschitz=lip, length_scale=scale)
+        forces = (s_flat * run.x).reshape(m, 5)
+        info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
+                    lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:
             where = f" at step {step}" if step is not None else ""
             raise SolverError(
@@ -316,7 +482,7 @@ class ApgdSolver(Solver):
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        u = (program.fbar + hx) * inv_mass
+        u = (program.fbar + program.jacobian.T @ forces.ravel()) * inv_mass
         return ConeSolution(u, forces, "Solved", k, setup_time, solve_time, info)
 
 
