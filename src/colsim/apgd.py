@@ -24,10 +24,11 @@ Stopping (checked every `check_every` iterations, at the current iterate lam):
   - dual feasibility: lam_k in K_k, exact by construction (the iterate is a projection);
   - primal feasibility: y_k = g_k + B_k u in K_k^* = {y_n >= mu ||y_t|| + mu_r ||y_r||}:
     max_k (mu ||y_t|| + mu_r ||y_r|| - y_n)_+ / L;
-  - complementarity: sum_k |lam_k . y_k| / (sum_k p_k L);
-where L is a length that does not depend on N: the larger of the root-mean-square free-flight
-displacement (v dt + g dt^2) and |g| dt^2, but at least 1e-6 of the mean radius. Both must fall
-below `tolerance`. Not reaching it within `max_iter` iterations raises :class:`SolverError`.
+  - complementarity: sum_k |lam_k . y_k| / ((sum_k p_k + m F0) L);
+where L is a length that does not depend on N: the root-mean-square free-flight displacement
+(v dt + g dt^2), but at least 1e-6 of the mean radius, and F0 = mean(m_i) L / dt^2 is a force
+floor (about the weight of a mean particle at rest), so that a step whose contacts all open
+(p -> 0) still converges in this measure. Both must fall below `tolerance`. Not reaching it within `max_iter` iterations raises :class:`SolverError`.
 
 Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
 contacts). :class:`WarmStart` carries a step's forces by contact pair key, in the global frame,
@@ -159,8 +160,8 @@ def length_scale(program: ConeProgram) -> float:
     mass = program.mass
     trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
     rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
-    # R_i from I = 2/5 m R^2; |g| dt^2 from f_ext: the free-flight part of fbar at zero velocity is
-    # not separable, so use the rms only, bounded below by a small fraction of the mean radius.
+    # the free-flight displacement v dt + g dt^2 (its gravity part cannot be told apart from v in
+    # fbar), bounded below by a small fraction of the mean radius (R from I = 2/5 m R^2)
     radius = np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3])) if n else np.ones(1)
     return max(rms, 1e-6 * float(np.mean(radius)))
 
@@ -180,7 +181,7 @@ def _project_point(p0, q1, q2, r1, r2, a, b):
     """The projection of project_coupled_cone for one point (scalar code, compiled by numba)."""
     nq = np.sqrt(q1 * q1 + q2 * q2)
     nr = np.sqrt(r1 * r1 + r2 * r2)
-    if nq <= a * p0 and nr <= b * p0:
+    if p0 >= 0.0 and nq <= a * p0 and nr <= b * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
         return p0, q1, q2, r1, r2
     bq = nq / a if a > 0 else np.inf
     br = nr / b if b > 0 else np.inf
@@ -287,8 +288,19 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
     return theta, lip, backtracks, restarts
 
 
+def _project_all(lam, a, b):
+    """project_coupled_cone by the scalar kernel (compiled with numba; for tests)."""
+    out = np.empty_like(lam)
+    for k in range(lam.shape[0]):
+        p, q1, q2, r1, r2 = _project_point(lam[k, 0], lam[k, 1], lam[k, 2], lam[k, 3], lam[k, 4],
+                                           a[k], b[k])
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4] = p, q1, q2, r1, r2
+    return out
+
+
 if _NUMBA:
     _project_point = numba.njit(cache=True, inline="always")(_project_point)
+    _project_all = numba.njit(cache=True)(_project_all)
     _csr_matvec = numba.njit(cache=True)(_csr_matvec)
     _iterate_compiled = numba.njit(cache=True)(_iterate)
 
@@ -356,6 +368,12 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.einsum("i,i->", a, b))
 
 
+def _force_floor(program: ConeProgram, scale: float) -> float:
+    """F0 = mean particle mass L / dt^2 (force): about the weight of a mean particle at rest."""
+    n = program.n_unknowns // 6
+    return float(np.mean(program.mass[:3 * n])) * scale if n else 1.0
+
+
 class ApgdSolver(Solver):
     """Accelerated projected gradient on the contact forces (see the module docstring).
 
@@ -410,7 +428,7 @@ class ApgdSolver(Solver):
         scale = scale or length_scale(program)
         y = program.local_displacement(u)
         y[:, 0] += program.gap
-        return _residuals(y, forces, program.mu, program.mu_r, scale)
+        return _residuals(y, forces, program.mu, program.mu_r, scale, _force_floor(program, scale))
 
     # -- the iteration ---------------------------------------------------------------------
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
@@ -434,6 +452,7 @@ class ApgdSolver(Solver):
         c[::ROWS_PER_CONTACT] += program.gap
         c *= s_flat
         scale = length_scale(program)
+        force_floor = _force_floor(program, scale)
 
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
             x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
@@ -464,7 +483,8 @@ class ApgdSolver(Solver):
             run.iterate(n)
             k += n
             yloc = (run.gradient_at_x() / s_flat).reshape(m, 5)
-            res = _residuals(yloc, (s_flat * run.x).reshape(m, 5), program.mu, program.mu_r, scale)
+            res = _residuals(yloc, (s_flat * run.x).reshape(m, 5), program.mu, program.mu_r,
+                             scale, force_floor)
             if self.verbose:
                 log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
                          res["complementarity"], run.lip)
@@ -486,7 +506,8 @@ class ApgdSolver(Solver):
         return ConeSolution(u, forces, "Solved", k, setup_time, solve_time, info)
 
 
-def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float) -> dict[str, float]:
+def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,
+               force_floor: float) -> dict[str, float]:
     """Relative residuals from end-of-step gaps y (m, 5) and forces lam (m, 5); see the docstring."""
     nyt = np.sqrt(y[:, 1] ** 2 + y[:, 2] ** 2)
     nyr = np.sqrt(y[:, 3] ** 2 + y[:, 4] ** 2)
@@ -496,10 +517,10 @@ def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float) -> dict[s
     nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
     dual_abs = np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p])
     total = float(np.sum(np.maximum(p, 0.0)))
-    force_scale = total / max(len(p), 1) if total > 0 else 1.0
+    force_scale = max(total / max(len(p), 1), force_floor)
     dual = float(np.max(dual_abs, initial=0.0)) / force_scale
     comp = float(np.sum(np.abs(np.einsum("ij,ij->i", lam, y))))
-    comp = comp / (total * scale) if total > 0 else 0.0
+    comp = comp / ((total + len(p) * force_floor) * scale)
     return {"primal": primal, "dual": max(dual, 0.0), "complementarity": comp}
 
 
