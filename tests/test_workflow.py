@@ -1,0 +1,151 @@
+"""The Snakemake study end to end: the tiny configuration (config/tiny.yaml) in a copy of the workflow.
+
+Runs `snakemake -j2 all --configfile config/tiny.yaml` as a user would (a minute or two on 2 cores),
+then checks results/summary.nc, the figures and the report, that adding a seed or a mu_r value
+schedules only the new jobs, and that a wrong configuration stops snakemake naming the culprit.
+"""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow")
+FIGURES = ("final_height", "runout", "mu_r_effect", "deposit_profiles", "side_views", "front_position")
+SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles", "solid_fraction",
+                     "final_to_peak_kinetic_energy", "wall_time")
+
+
+def copy_workflow(directory: Path) -> Path:
+    for name in WORKFLOW_FILES:
+        source = ROOT / name
+        if source.is_dir():
+            shutil.copytree(source, directory / name)
+        else:
+            shutil.copy2(source, directory / name)
+    return directory
+
+
+def snakemake(directory: Path, *arguments, timeout=600) -> subprocess.CompletedProcess:
+    """Run snakemake in `directory` with the interpreter's bin directory first on PATH (for `colsim`)."""
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    env.setdefault("MPLBACKEND", "Agg")
+    return subprocess.run([sys.executable, "-m", "snakemake", *arguments], cwd=directory, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def planned_outputs(result: subprocess.CompletedProcess) -> list[str]:
+    """Output files of the jobs a dry run (snakemake -n) would run."""
+    outputs = []
+    for line in result.stdout.splitlines() + result.stderr.splitlines():
+        line = line.strip()
+        if line.startswith("output:"):
+            outputs += [p.strip() for p in line[len("output:"):].split(",")]
+    return outputs
+
+
+@pytest.fixture(scope="module")
+def tiny_study(tmp_path_factory):
+    directory = copy_workflow(tmp_path_factory.mktemp("study"))
+    result = snakemake(directory, "-j2", "all", "--configfile", "config/tiny.yaml")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
+    return directory
+
+
+@pytest.mark.slow
+def test_summary_holds_finite_numbers_with_units(tiny_study):
+    xr = pytest.importorskip("xarray")
+    summary = xr.load_dataset(tiny_study / "results" / "summary.nc")
+    assert dict(summary.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1}
+    np.testing.assert_allclose(summary["aspect_ratio"], [0.5, 1.0])
+    np.testing.assert_allclose(summary["mu_r"], [0.0, 0.12])
+    for name in SUMMARY_VARIABLES:
+        variable = summary[name]
+        assert variable.dims == ("aspect_ratio", "mu_r", "seed"), name
+        assert np.all(np.isfinite(variable.values)), name
+        assert "units" in variable.attrs and "long_name" in variable.attrs, name
+    assert np.all(summary["h_inf_over_r0"].values > 0)
+    assert np.all(summary["n_particles"].values > 0)
+    assert "config" in summary.attrs and "run_configs" in summary.attrs
+    table = (tiny_study / "results" / "summary.csv").read_text().splitlines()
+    assert len(table) == 1 + 4 and "h_inf_over_r0" in table[0]
+
+
+@pytest.mark.slow
+def test_figures_logs_and_benchmarks_exist(tiny_study):
+    for name in FIGURES:
+        path = tiny_study / "results" / "figures" / f"{name}.png"
+        assert path.is_file() and path.stat().st_size > 1000, name
+    assert (tiny_study / "results" / "study_config.yaml").is_file()
+    logs = list((tiny_study / "results" / "logs").rglob("*.log"))
+    benchmarks = list((tiny_study / "results" / "benchmarks").rglob("*.tsv"))
+    # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config
+    assert len(logs) == 14 and len(benchmarks) == 14
+    assert not list((tiny_study / "results").rglob("*.checkpoint"))
+
+
+@pytest.mark.slow
+def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
+    result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml")
+    assert result.returncode == 0
+    assert planned_outputs(result) == [], result.stdout
+
+    (tiny_study / "more.yaml").write_text("seeds: [1, 2]\nmu_r: [0, 0.06, 0.12]\n")
+    result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml", "more.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = planned_outputs(result)
+    simulated = [p for p in planned if p.startswith("results/r0_")]
+    expected_new = {f"results/r0_1/seed_2/a_{a}/mu_r_{m}/collapse.nc" for a in ("0.5", "1") for m in ("0", "0.06", "0.12")}
+    expected_new |= {f"results/r0_1/seed_1/a_{a}/mu_r_0.06/collapse.nc" for a in ("0.5", "1")}
+    assert {p for p in simulated if p.endswith("collapse.nc")} == expected_new
+    assert "results/r0_1/seed_2/packing.nc" in simulated
+    assert "results/r0_1/seed_1/packing.nc" not in simulated
+    assert not any(p.startswith("results/r0_1/seed_1/") and p.endswith("column.nc") for p in simulated)
+    assert "results/summary.nc" in planned
+
+
+@pytest.mark.slow
+def test_report_builds(tiny_study):
+    result = snakemake(tiny_study, "--report", "report.html", "--configfile", "config/tiny.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    html = (tiny_study / "report.html").read_text(errors="replace")
+    assert len(html) > 10000
+    assert "final_height.png" in html
+
+
+@pytest.mark.parametrize("setting, culprit", [
+    ("bogus_key=1", "bogus_key"),
+    ("solver=simplex", "simplex"),
+    ("r0=-1", "r0"),
+    ("diameter_min=0.9", "diameter_min"),
+])
+def test_a_wrong_configuration_stops_the_run_naming_it(tmp_path, setting, culprit):
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-n", "all", "--config", setting, timeout=120)
+    assert result.returncode != 0
+    assert culprit in result.stdout + result.stderr
+    assert not (directory / "results").exists()
+
+
+def test_a_misspelt_nested_key_stops_the_run(tmp_path):
+    directory = copy_workflow(tmp_path)
+    (directory / "bad.yaml").write_text("collapse:\n  stepz: 50\n")
+    result = snakemake(directory, "-n", "all", "--configfile", "bad.yaml", timeout=120)
+    assert result.returncode != 0
+    assert "stepz" in result.stdout + result.stderr
+
+
+def test_the_default_study_plans_every_run(tmp_path):
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-n", "all", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = planned_outputs(result)
+    assert sum(p.endswith("packing.nc") for p in planned) == 2
+    assert sum(p.endswith("column.nc") for p in planned) == 2 * 6
+    assert sum(p.endswith("collapse.nc") for p in planned) == 2 * 6 * 4
+    assert sum(p.endswith("analysis.nc") for p in planned) == 2 * 6 * 4

@@ -1,0 +1,100 @@
+# Stages 1-4 of the study, one job per file: pack per (r0, seed), trim per a, collapse per mu_r,
+# analyse per collapse. Every value reaches `colsim` through params, so editing config.yaml reruns
+# exactly the jobs whose settings changed.
+
+
+rule pack:
+    output:
+        "results/r0_{r0}/seed_{seed}/packing.nc",
+    params:
+        height=lambda w: fmt(PACK_ASPECT_RATIO * float(w.r0)),
+        root_seed=config["root_seed"],
+        diameter_min=config["diameter_min"],
+        diameter_max=config["diameter_max"],
+        density=config["density"],
+        gravity=config["gravity"],
+        dt=config["pack"]["dt"],
+        rest_energy=config["pack"]["rest_energy"],
+        max_steps=config["pack"]["max_steps"],
+        solver=config["solver"],
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/pack.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/pack.tsv"
+    shell:
+        "colsim pack --r0 {wildcards.r0} --height {params.height} --seed {wildcards.seed}"
+        " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
+        " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
+        " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps}"
+        " --solver {params.solver} --output {output} > {log} 2>&1"
+
+
+rule trim:
+    input:
+        "results/r0_{r0}/seed_{seed}/packing.nc",
+    output:
+        "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/trim.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/trim.tsv"
+    shell:
+        "colsim trim --input {input} --aspect-ratio {wildcards.a} --output {output} > {log} 2>&1"
+
+
+# `colsim collapse` keeps OUTPUT.checkpoint while it runs and deletes it on success; a job that was
+# killed resumes from it when rerun (snakemake --rerun-incomplete). It is not a declared output.
+rule collapse:
+    input:
+        "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+    output:
+        RUN + "/collapse.nc",
+    params:
+        mu=config["mu"],
+        duration=config["collapse"]["duration"],
+        steps=config["collapse"]["steps"],
+        frame_every=config["collapse"]["frame_every"],
+        checkpoint_every=config["collapse"]["checkpoint_every"],
+        solver=config["solver"],
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.tsv"
+    shell:
+        "colsim collapse --input {input} --mu {params.mu} --mu-r {wildcards.mu_r}"
+        " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
+        " --checkpoint-every {params.checkpoint_every} --solver {params.solver}"
+        " --output {output} > {log} 2>&1"
+
+
+rule analyse:
+    input:
+        RUN + "/collapse.nc",
+    output:
+        RUN + "/analysis.nc",
+    params:
+        contact_tolerance=config["analysis"]["contact_tolerance"],
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.tsv"
+    shell:
+        "colsim analyse --input {input} --contact-tolerance {params.contact_tolerance}"
+        " --output {output} > {log} 2>&1"
+
+
+# Not part of `all`: a ParaView time series of one collapse, on request, e.g.
+#   snakemake -j1 results/r0_2/seed_1/a_2/mu_r_0.12/vtk/collapse.pvd
+rule export_vtk:
+    input:
+        RUN + "/collapse.nc",
+    output:
+        RUN + "/vtk/collapse.pvd",
+    params:
+        directory=lambda w, output: os.path.dirname(output[0]),
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/export_vtk.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/export_vtk.tsv"
+    shell:
+        "colsim export-vtk --input {input} --output-dir {params.directory} > {log} 2>&1"
