@@ -210,3 +210,19 @@ def test_numba_and_numpy_kernels_agree(pile):
     plain = ApgdSolver(kernel="numpy").solve(program)
     assert fast.iterations == plain.iterations
     np.testing.assert_allclose(fast.increments, plain.increments, rtol=0, atol=1e-9 * np.abs(plain.increments).max())
+
+
+def test_collapse_ends_the_same_with_both_solvers(pile):
+    """A small column collapse (100 steps to t/sqrt(h0/g) = 4): h_inf and r_inf within 2 % of r0."""
+    r0 = 1.2
+    h0 = float(np.max(pile.position[:, 2] + pile.radius))
+    settings = StepSettings(dt=0.04 * np.sqrt(h0 / 9.81), law=COLLAPSE.law)
+    ends = {}
+    for name in ("clarabel", "apgd"):
+        state = pile
+        for result in run(pile, settings, 100, make_solver(name)):
+            state = result.state
+        ends[name] = np.array([np.max(state.position[:, 2] + state.radius),
+                               np.max(np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius)])
+    assert ends["clarabel"][1] > 1.5 * r0  # it did collapse
+    assert np.all(np.abs(ends["apgd"] - ends["clarabel"]) <= 0.02 * r0), ends

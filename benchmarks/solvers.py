@@ -1,0 +1,213 @@
+"""Compare the cone-program back-ends (Clarabel, APGD, SCS) on one step of settled columns.
+
+    python benchmarks/solvers.py                      # 1,000 and 4,000 spheres
+    python benchmarks/solvers.py --sizes 1000 4000 16000 64000 --skip-clarabel-above 20000
+    python benchmarks/solvers.py --scs                # add SCS (force form, eps 1e-6)
+
+For each size: a settled packing (benchmarks/packings.py's settled_packing when it is there,
+otherwise poured here and cached under benchmarks/.cache), with the cylinder removed and the
+collapse law (mu = 0.577, mu_r = 0.12). Two programs:
+  - "release": the first step after release (cold start for every solver);
+  - "mid": a step some steps into the collapse, solved cold and warm (APGD warm-started from the
+    previous step's forces, matched by contact pair).
+Printed per solver: seconds per step, iterations, milliseconds per iteration, peak memory of the
+solve (tracemalloc: Python/numpy allocations; Clarabel's own Rust allocations are not seen, so the
+process's peak RSS is printed as well) and the relative difference of the increments from Clarabel.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pickle
+import resource
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+from colsim.apgd import ApgdSolver, WarmStart
+from colsim.contacts import detect
+from colsim.program import assemble
+from colsim.solvers import ClarabelSolver, SolverError
+from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.stepper import predicted_displacement, run, step
+
+HERE = Path(__file__).resolve().parent
+CACHE = HERE / ".cache"
+COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
+
+
+def radius_for(n: int) -> float:
+    """Cylinder radius r0 giving a settled column about 2 r0 high for n spheres (d in [0.25, 0.5])."""
+    return 0.204 * n ** (1.0 / 3.0)
+
+
+def _cloud(n, r0, rng, d_max=0.5):
+    spacing = 1.04 * d_max
+    ticks = np.arange(-r0 + spacing / 2, r0, spacing)
+    gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
+    inside = np.hypot(gx, gy) + spacing / np.sqrt(2) <= r0
+    layer = np.c_[gx[inside], gy[inside]]
+    layers = int(np.ceil(n / len(layer)))
+    sites = np.c_[np.tile(layer, (layers, 1)),
+                  np.repeat(spacing / 2 + spacing * np.arange(layers), len(layer))][:n]
+    radius = 0.5 * rng.uniform(0.25, d_max, len(sites))
+    jitter = rng.uniform(-1, 1, sites.shape) * (0.5 * (spacing - 2 * radius))[:, None]
+    return ParticleState.at_rest(sites + jitter, radius)
+
+
+def pour(n: int, seed: int = 0, max_steps: int = 2000, verbose=True) -> ParticleState:
+    """n spheres poured into a cylinder (mu = mu_r = 0) until at rest; APGD does the pouring."""
+    r0 = radius_for(n)
+    state = _cloud(n, r0, np.random.default_rng(seed))
+    settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=r0))
+    weight_scale = float(np.mean(state.mass)) * 9.81 * 2 * float(np.mean(state.radius))
+    from colsim.apgd import AutoSolver
+
+    solver = AutoSolver(threshold=0, apgd={"tolerance": 1e-4})
+    for result in run(state, settings, max_steps, solver):
+        state = result.state
+        d = result.diagnostics
+        energy = (d.kinetic_energy + d.rotational_energy) / n
+        if verbose and d.step % 20 == 0:
+            print(f"  pour {n}: step {d.step}, {d.n_contacts} contacts, energy/particle "
+                  f"{energy / weight_scale:.2e} m g d, {d.solve_time:.2f} s", flush=True)
+        if d.step > 50 and energy < 1e-6 * weight_scale:
+            break
+    state.velocity[:] = 0.0
+    state.angular_velocity[:] = 0.0
+    state.time = 0.0
+    return state
+
+
+def packing(n: int, seed: int = 0) -> ParticleState:
+    """A settled packing of about n spheres: benchmarks/packings.py if present, else poured here."""
+    sys.path.insert(0, str(HERE))
+    try:
+        from packings import settled_packing  # type: ignore
+    except ImportError:
+        settled_packing = None
+    if settled_packing is not None:
+        return settled_packing(n, seed)
+    CACHE.mkdir(exist_ok=True)
+    path = CACHE / f"poured_{n}_{seed}.pkl"
+    if path.exists():
+        return pickle.loads(path.read_bytes())  # noqa: S301 (our own cache)
+    state = pour(n, seed)
+    path.write_bytes(pickle.dumps(state))
+    return state
+
+
+def program_of(state: ParticleState, settings: StepSettings = COLLAPSE):
+    margin = settings.detection_margin * 2 * float(state.radius.min())
+    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
+                   margin, settings.detection_slack)
+    return assemble(state, found, settings.dt, settings.gravity), found
+
+
+def measure(solver, program, warm=None, step_number=None):
+    """(solution or error, seconds, peak traced MB)."""
+    tracemalloc.start()
+    start = time.perf_counter()
+    try:
+        solution = solver.solve(program, warm_start=warm, step=step_number)
+    except SolverError as error:
+        solution = error
+    seconds = time.perf_counter() - start
+    peak = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    return solution, seconds, peak
+
+
+def report(label, solution, seconds, peak, reference=None):
+    if isinstance(solution, Exception):
+        print(f"    {label:<16} FAILED after {seconds:7.2f} s: {solution}", flush=True)
+        return
+    it = max(solution.iterations, 1)
+    diff = ""
+    if reference is not None and not isinstance(reference, Exception):
+        du = np.linalg.norm(solution.increments - reference.increments) / np.linalg.norm(reference.increments)
+        diff = f"  |du|/|u| vs clarabel {du:.1e}"
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"    {label:<16} {seconds:8.3f} s  {solution.iterations:6d} it  {1e3 * seconds / it:8.2f} ms/it"
+          f"  peak {peak:7.1f} MB (rss {rss:6.0f} MB)  {solution.status}{diff}", flush=True)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 4000])
+    parser.add_argument("--mid-steps", type=int, default=5, help="collapse steps before the 'mid' program")
+    parser.add_argument("--skip-clarabel-above", type=int, default=10**9,
+                        help="do not run Clarabel above this many spheres (minutes per solve)")
+    parser.add_argument("--scs", action="store_true", help="also run SCS on the force form")
+    parser.add_argument("--tolerance", type=float, default=ApgdSolver().tolerance)
+    args = parser.parse_args(argv)
+
+    apgd = ApgdSolver(tolerance=args.tolerance)
+    for n in args.sizes:
+        state = packing(n)
+        print(f"{state.n} spheres (r0 = {radius_for(n):.2f}, height {np.max(state.position[:, 2] + state.radius):.2f})",
+              flush=True)
+        clarabel = ClarabelSolver() if state.n <= args.skip_clarabel_above else None
+        # the mid-collapse state: steps with APGD, keeping the last step's forces for the warm start
+        mid, warm = state, None
+        for k in range(args.mid_steps):
+            result = step(mid, COLLAPSE, apgd, k, warm_start=warm)
+            warm = WarmStart.from_step(result.contacts, result.solution.forces, mid.n)
+            mid = result.state
+        for stage, current in (("release", state), ("mid", mid)):
+            program, found = program_of(current)
+            print(f"  {stage}: {program.m} contacts ({2 * program.m / state.n:.2f} per sphere)", flush=True)
+            reference = None
+            if clarabel is not None:
+                reference, seconds, peak = measure(clarabel, program)
+                report("clarabel", reference, seconds, peak)
+            report("apgd cold", *measure(apgd, program), reference)
+            if stage == "mid":
+                guess = warm.match(found, current.n)
+                report("apgd warm", *measure(apgd, program, guess), reference)
+            if args.scs:
+                report("scs", *measure(_Scs(), program), reference)
+
+
+class _Scs:
+    """SCS on the force form (eps 1e-6), built from Clarabel's force-form matrices."""
+
+    def solve(self, program, warm_start=None, step=None):
+        import scs
+        import scipy.sparse as sp
+
+        from colsim.solvers import ConeSolution
+
+        P, c, A, b, cones, unpack = ClarabelSolver._force_form(program)
+        # Clarabel's cone list -> SCS's: zero cones first, then nonnegative, then second-order
+        kinds = [type(k).__name__ for k in cones]
+        rows = np.cumsum([0] + [_cone_dim(k) for k in cones])
+        order = ([i for i, kind in enumerate(kinds) if kind == "ZeroConeT"]
+                 + [i for i, kind in enumerate(kinds) if kind == "NonnegativeConeT"]
+                 + [i for i, kind in enumerate(kinds) if kind == "SecondOrderConeT"])
+        picked = np.concatenate([np.arange(rows[i], rows[i + 1]) for i in order])
+        A = sp.csc_matrix(A)[picked]
+        b = b[picked]
+        z = sum(_cone_dim(cones[i]) for i in order if kinds[i] == "ZeroConeT")
+        l = sum(_cone_dim(cones[i]) for i in order if kinds[i] == "NonnegativeConeT")
+        q = [3] * sum(1 for kind in kinds if kind == "SecondOrderConeT")
+        solver = scs.SCS({"P": sp.csc_matrix(P + sp.triu(P, 1).T), "A": A, "b": b, "c": c},
+                         {"z": z, "l": l, "q": q}, eps_abs=1e-6, eps_rel=1e-6, verbose=False,
+                         max_iters=100000)
+        start = time.perf_counter()
+        sol = solver.solve()
+        u, forces = unpack(sol["x"], sol["y"])
+        return ConeSolution(u, forces, sol["info"]["status"], sol["info"]["iter"], 0.0,
+                            time.perf_counter() - start)
+
+
+def _cone_dim(cone) -> int:
+    return int(cone.dim)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    main()
