@@ -90,9 +90,11 @@ def law_figure(summary, variable: str, path: Path) -> Path:
     for (name, law), style in zip(LAWS[variable].items(), LAW_STYLES):
         ax.plot(span, law(span), style, color="0.35", lw=1.2, label=name)
     data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
+    n_mu_r = summary.sizes["mu_r"]
     for k, mu_r in enumerate(summary["mu_r"].values):
         mean, low, high = _seed_spread(data.isel(mu_r=k).values)
-        ax.errorbar(ratios, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
+        dodge = (k - (n_mu_r - 1) / 2) * 0.012 * span[-1]  # side by side, so the bars stay readable
+        ax.errorbar(ratios + dodge, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
                     label=f"colsim, $\\mu_r$ = {mu_r:g}")
     ax.set_xlabel("aspect ratio a = h0/r0")
     ax.set_ylabel(_label(summary[variable], variable))
