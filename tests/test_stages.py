@@ -1,0 +1,222 @@
+"""The study's stages (pack, trim, collapse, analyse) as a library and through the CLI."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from colsim import analysis, io
+from colsim.calibration import polygon_rolling_coefficient
+from colsim.cli import main
+from colsim.collapse import CollapseSettings, collapse
+from colsim.packing import column_height, pack, solid_fraction, trim
+from colsim.state import ParticleState
+
+R0 = 1.5
+
+
+@pytest.fixture(scope="module")
+def packing():
+    """A settled packing of ~450 spheres in a cylinder of radius 1.5, 3 high (about 10 s)."""
+    return pack(R0, 3.0, np.random.default_rng([7, 0]))
+
+
+def test_packing_is_settled_tall_enough_and_dense(packing):
+    state = packing.state
+    assert column_height(state) >= 3.0
+    # Random loose packings of frictionless polydisperse spheres: the paper reports 0.58 with
+    # mu = 0 filling; allow 0.52-0.66 for a column only 6 grains across (wall effects).
+    assert 0.52 < packing.solid_fraction < 0.66
+    radial = np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius
+    assert radial.max() <= R0 * (1 + 1e-3)            # inside the cylinder, up to 0.1 % of r0
+    assert (state.position[:, 2] - state.radius).min() > -0.01 * 0.25
+    assert np.all(state.velocity == 0)
+
+
+def test_trim_keeps_spheres_below_h0_and_fails_loudly_when_too_short(packing):
+    h0 = 1.0 * R0
+    column = trim(packing.state, h0)
+    top = column.position[:, 2] + column.radius
+    assert top.max() <= h0
+    # an undisturbed top reads as h0 to within one smallest diameter
+    assert top.max() > h0 - 0.25
+    with pytest.raises(ValueError, match="too short"):
+        trim(packing.state, 10.0)
+
+
+def _chain_state():
+    """A column of three touching spheres, a chain of two more reaching out, and a lost grain."""
+    r = 0.2
+    pos = [[0, 0, r], [0, 0, 3 * r], [0, 0, 5 * r],       # main stack
+           [2 * r, 0, r], [4 * r, 0, r],                   # chain along the floor
+           [3.0, 0, r]]                                    # detached, far away
+    return ParticleState.at_rest(np.array(pos, float), np.full(6, r))
+
+
+def test_runout_counts_a_chain_but_not_a_detached_grain():
+    state = _chain_state()
+    deposit = analysis.measure_deposit(state, tolerance=1e-6)
+    assert deposit.main_mass.tolist() == [True] * 5 + [False]
+    assert deposit.r_inf == pytest.approx(4 * 0.2 + 0.2, abs=1e-12)   # outer edge of the chain
+    assert deposit.h_inf == pytest.approx(6 * 0.2, abs=1e-12)         # top of the stack
+
+
+def test_floor_contacts_do_not_link_grains():
+    r = 0.2
+    state = ParticleState.at_rest(np.array([[0, 0, r], [0.5, 0, r], [0.5, 0, 3 * r]]), np.full(3, r))
+    deposit = analysis.measure_deposit(state, tolerance=1e-6)
+    # grains 0 and 1 both touch the floor but not each other: main mass = the stack {1, 2}
+    assert deposit.main_mass.tolist() == [False, True, True]
+
+
+def test_solid_fraction_of_a_known_arrangement():
+    # one sphere of radius 0.5 centred at z = 0.5 in a cylinder of radius 1, height 1:
+    # (4/3 pi 0.125) / (pi 1) = 1/6
+    state = ParticleState.at_rest([[0, 0, 0.5]], [0.5])
+    assert solid_fraction(state, 1.0, 1.0) == pytest.approx(1 / 6, rel=1e-12)
+    # cut at mid-height: half the sphere in half the volume
+    assert solid_fraction(state, 1.0, 0.5) == pytest.approx(1 / 6, rel=1e-12)
+
+
+def test_polygon_rolling_coefficient_matches_the_paper():
+    assert polygon_rolling_coefficient(6) == pytest.approx(np.pi / 24, rel=1e-15)   # Eq. 10: 0.131
+    assert round(polygon_rolling_coefficient(6), 3) == 0.131
+    # more sides, rounder particle: mu_r falls like 1/N, both methods agree as N grows
+    values = [polygon_rolling_coefficient(n) for n in (3, 4, 6, 12, 100)]
+    assert all(a > b for a, b in zip(values, values[1:]))
+    assert polygon_rolling_coefficient(1000, "exact") == pytest.approx(polygon_rolling_coefficient(1000), rel=1e-5)
+    with pytest.raises(ValueError):
+        polygon_rolling_coefficient(2)
+
+
+@pytest.mark.slow
+def test_zero_rolling_resistance_spreads_further_and_lower(packing):
+    """The paper: spheres without rolling resistance end nearly flat (Eq. 5 vs Eq. 6).
+
+    Measured over all grains, not the main mass: with mu_r = 0 spheres keep rolling on the floor
+    and break into clusters (the main mass can be a small fragment), which is the point.
+    """
+    h0 = 2.0 * R0
+    column = trim(packing.state, h0)
+    top, spread = {}, {}
+    for mu_r in (0.0, 0.12):
+        final = collapse(column, h0, CollapseSettings(mu_r=mu_r, n_steps=100)).frames[-1][1]
+        top[mu_r] = np.percentile(final.position[:, 2] + final.radius, 99)
+        spread[mu_r] = np.mean(np.hypot(final.position[:, 0], final.position[:, 1]) + final.radius)
+    # Margins of half and one largest grain diameter (0.5), the resolution of both measures;
+    # measured with seed [7, 0]: tops 0.75 vs 1.18, mean radial reach 3.30 vs 2.40.
+    assert top[0.0] < top[0.12] - 0.25
+    assert spread[0.0] > spread[0.12] + 0.5
+
+
+def test_collapse_resumes_from_checkpoint_to_the_same_result(packing, tmp_path):
+    h0 = 1.0 * R0
+    column = trim(packing.state, h0)
+    settings = CollapseSettings(n_steps=12, frame_every=4, checkpoint_every=5)
+    whole = collapse(column, h0, settings)
+    checkpoint = tmp_path / "run.checkpoint"
+    first = collapse(column, h0, settings, checkpoint=checkpoint, stop_after=7)   # "killed" at step 7
+    assert len(first.diagnostics) == 7 and checkpoint.exists()
+    resumed = collapse(column, h0, settings, checkpoint=checkpoint)
+    assert resumed.resumed_from == 5                       # the last checkpoint before the kill
+    assert [k for k, _ in resumed.frames] == [k for k, _ in whole.frames]
+    np.testing.assert_allclose(resumed.frames[-1][1].position, whole.frames[-1][1].position, rtol=0, atol=1e-12)
+    # a checkpoint of other settings is ignored, not resumed
+    other = collapse(column, h0, CollapseSettings(n_steps=12, mu_r=0.0, checkpoint_every=5), checkpoint=checkpoint)
+    assert other.resumed_from == 0
+
+
+def _run_cli(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "colsim.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_all_stages_through_the_cli(tmp_path):
+    """A tiny column (r0 = 1, a = 1) through pack, trim, collapse, analyse, export-vtk."""
+    start = time.perf_counter()
+    for args in (["pack", "--r0", "1", "--height", "1", "--seed", "3", "--output", "pack.nc"],
+                 ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc"],
+                 ["collapse", "--input", "column.nc", "--steps", "40", "--output", "collapse.nc"],
+                 ["analyse", "--input", "collapse.nc", "--output", "analysis.nc"],
+                 ["export-vtk", "--input", "collapse.nc", "--output-dir", "vtk"]):
+        done = _run_cli(*args, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+    assert time.perf_counter() - start < 60
+    result = io.open_dataset(tmp_path / "analysis.nc", io.ANALYSIS_KIND)
+    for name in ("h_inf_over_r0", "runout_over_r0", "solid_fraction", "final_to_peak_kinetic_energy"):
+        assert np.isfinite(result[name].values), name
+        assert "units" in result[name].attrs and "long_name" in result[name].attrs
+    assert 0 < float(result["h_inf_over_r0"]) <= 1.0 + 1e-9     # a collapse never grows
+    assert float(result["runout_over_r0"]) >= 0
+    for key in ("Conventions", "source", "history", "config", "seed"):
+        assert key in result.attrs
+    trajectory = io.open_dataset(tmp_path / "collapse.nc", io.TRAJECTORY_KIND)
+    assert trajectory.sizes["step"] == 40 and set(trajectory["position"].dims) == {"time", "particle", "xyz"}
+    assert (tmp_path / "vtk" / "collapse.pvd").exists()
+    frames = list((tmp_path / "vtk").glob("*.vtu"))
+    assert len(frames) == trajectory.sizes["time"]
+    assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob("*.checkpoint"))
+
+
+def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):
+    assert _run_cli("pack", "--r0", "1", "--height", "1.5", "--seed", "4", "--output", "pack.nc", cwd=tmp_path).returncode == 0
+    assert _run_cli("trim", "--input", "pack.nc", "--aspect-ratio", "1.5", "--output", "column.nc", cwd=tmp_path).returncode == 0
+    common = ["collapse", "--input", "column.nc", "--steps", "60", "--checkpoint-every", "5"]
+    assert _run_cli(*common, "--output", "whole.nc", cwd=tmp_path).returncode == 0
+    process = subprocess.Popen([sys.executable, "-m", "colsim.cli", *common, "--output", "killed.nc"],
+                               cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    checkpoint = tmp_path / "killed.nc.checkpoint"
+    deadline = time.time() + 120
+    while not checkpoint.exists() and process.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    if not checkpoint.exists():
+        pytest.skip("the collapse finished before it could be killed")
+    assert not (tmp_path / "killed.nc").exists()
+    done = _run_cli(*common, "--output", "killed.nc", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "resuming from the checkpoint" in done.stderr
+    whole = io.open_dataset(tmp_path / "whole.nc", io.TRAJECTORY_KIND)
+    resumed = io.open_dataset(tmp_path / "killed.nc", io.TRAJECTORY_KIND)
+    assert int(resumed.attrs["resumed_from_step"]) > 0
+    np.testing.assert_allclose(resumed["position"].values, whole["position"].values, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["trim", "--input", "missing.nc", "--aspect-ratio", "1", "--output", "out.nc"], "does not exist"),
+    (["trim", "--input", "foreign.nc", "--aspect-ratio", "1", "--output", "out.nc"], "not a readable netCDF"),
+    (["trim", "--input", "pack.nc", "--aspect-ratio", "0", "--output", "out.nc"], "must be > 0, got 0"),
+    (["trim", "--input", "pack.nc", "--aspect-ratio", "40", "--output", "out.nc"], "too short"),
+    (["collapse", "--input", "pack.nc", "--output", "out.nc"], "not a trimmed column"),
+    (["collapse", "--input", "column.nc", "--mu", "-0.1", "--output", "out.nc"], "must be >= 0, got -0.1"),
+    (["collapse", "--input", "column.nc", "--mu-r", "-1", "--output", "out.nc"], "must be >= 0, got -1"),
+    (["pack", "--r0", "0.2", "--height", "1", "--output", "out.nc"], "smaller than the largest particle"),
+    (["analyse", "--input", "column.nc", "--output", "out.nc"], "expected 'collapse-trajectory'"),
+])
+def test_bad_input_gives_one_clear_error_and_no_output(tmp_path, capsys, args, message):
+    state = ParticleState.at_rest([[0, 0, 0.25], [0, 0, 0.75]], [0.25, 0.25])
+    io.write_state(tmp_path / "pack.nc", state, {**io.global_attributes(io.STATE_KIND, "t", {}), "r0": 1.0})
+    io.write_state(tmp_path / "column.nc", state,
+                   {**io.global_attributes(io.STATE_KIND, "t", {}), "r0": 1.0, "h0": 1.0, "aspect_ratio": 1.0,
+                    "solid_fraction": 0.1})
+    (tmp_path / "foreign.nc").write_text("not netCDF")
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        code = main(args)
+    except SystemExit as exit_:          # argparse rejects the value itself
+        code = exit_.code
+    finally:
+        os.chdir(cwd)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert len([line for line in err.splitlines() if "error" in line]) == 1
+    assert not (tmp_path / "out.nc").exists()
+
