@@ -47,7 +47,7 @@ wildcard_constraints:
 def runs(name, mu_r=None, seeds=None):
     """Paths of one file `name` of every run of the study (optionally one mu_r, some seeds)."""
     return expand(
-        RUN + "/" + name,
+        f"{RUN}/{name}",
         r0=R0,
         seed=seeds or SEEDS,
         a=ASPECT_RATIOS,
@@ -59,6 +59,16 @@ def side_view_mu_r():
     """The swept mu_r nearest to figures.side_view_mu_r."""
     target = config["figures"]["side_view_mu_r"]
     return min(MU_R, key=lambda m: abs(float(m) - target))
+
+
+def pack_height(wildcards):
+    """Height the packing of radius r0 must exceed: pack_aspect_ratio (or the largest a) times r0."""
+    return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
+
+
+def output_directory(wildcards, output):
+    """The directory of a rule's first output (for commands that take --output-dir)."""
+    return os.path.dirname(output[0])
 
 
 def figures():

@@ -7,7 +7,7 @@ rule pack:
     output:
         "results/r0_{r0}/seed_{seed}/packing.nc",
     params:
-        height=lambda w: fmt(PACK_ASPECT_RATIO * float(w.r0)),
+        height=pack_height,
         root_seed=config["root_seed"],
         diameter_min=config["diameter_min"],
         diameter_max=config["diameter_max"],
@@ -48,7 +48,7 @@ rule collapse:
     input:
         "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
     output:
-        RUN + "/collapse.nc",
+        f"{RUN}/collapse.nc",
     params:
         mu=config["mu"],
         duration=config["collapse"]["duration"],
@@ -69,9 +69,9 @@ rule collapse:
 
 rule analyse:
     input:
-        RUN + "/collapse.nc",
+        f"{RUN}/collapse.nc",
     output:
-        RUN + "/analysis.nc",
+        f"{RUN}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
     log:
@@ -87,11 +87,11 @@ rule analyse:
 #   snakemake -j1 results/r0_2/seed_1/a_2/mu_r_0.12/vtk/collapse.pvd
 rule export_vtk:
     input:
-        RUN + "/collapse.nc",
+        f"{RUN}/collapse.nc",
     output:
-        RUN + "/vtk/collapse.pvd",
+        f"{RUN}/vtk/collapse.pvd",
     params:
-        directory=lambda w, output: os.path.dirname(output[0]),
+        directory=output_directory,
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/export_vtk.log",
     benchmark:

@@ -37,7 +37,7 @@ rule plot:
             for name, title in FIGURES.items()
         },
     params:
-        directory="results/figures",
+        directory=output_directory,
     log:
         "results/logs/plot.log",
     benchmark:
