@@ -19,11 +19,15 @@ How a packing is made (``build_packing``):
    ``max_lock_steps``. Friction freezes the frictionless structure in a few tens of steps without
    changing it measurably; the result is what the collapse starts from.
 
-Large packings (``n_target > tile_above``, 8,000 by default) are not poured: pouring 16,000
-spheres with Clarabel takes hours on 2 cores. They are 2 x 2 copies of a settled packing of
-n_target / 4 spheres, the four cylinders' axes at (+-s, +-s) with s = r0 + 0.005, so no two copies
-touch (every particle lies inside its cylinder). The copies are identical, which a one-step benchmark does not
-notice (the program has the same size and structure as a poured one). Velocities are kept (about 0).
+Large packings (``n_target > tile_above``, 2,000 by default) are not poured: on the shared 2-core
+machine a frictionless 1,000-sphere pour took 10 minutes (331 + 11 steps) and 4,000 spheres did not
+get past 50 steps in 3 minutes, so 4,000 would take about an hour and 16,000 many hours. They are
+2 x 2 copies of a settled packing of n_target / 4 spheres (itself
+poured or tiled), their axes at (+-s, +-s) with s = r0 + 0.005, r0 the half-width of the copy (its
+cylinder's radius, or for a tiled copy 2 r0' + 0.01), so no two copies touch. The copies are
+identical, which a one-step benchmark does not notice (the program has the same size and structure
+as a poured one); at the seams the columns meet with a gap of >= 0.01 instead of interlocking.
+Velocities are kept (about 0).
 
 Cache: ``benchmarks/.cache/settled_<n>_seed<seed>.npz`` (git-ignored) with position, velocity,
 angular_velocity, radius, cylinder_radius, and the build's record (steps, final kinetic energy).
@@ -132,7 +136,7 @@ def build_packing(n: int, seed: int = 0, dt: float = 0.02, solver: Solver | None
 
 
 def tile(state: ParticleState, cylinder_radius: float) -> ParticleState:
-    """2 x 2 copies of a packing in a cylinder of radius r0, axes at (+-s, +-s), s = r0 + 0.005."""
+    """2 x 2 copies of a packing within |x|, |y| <= r0 (length), at (+-s, +-s), s = r0 + 0.005."""
     s = cylinder_radius + 0.005
     shifts = np.array([[-s, -s, 0.0], [s, -s, 0.0], [-s, s, 0.0], [s, s, 0.0]])
     return ParticleState(
@@ -148,9 +152,10 @@ def cache_path(n_target: int, seed: int = 0) -> Path:
     return CACHE / f"settled_{n_target}_seed{seed}.npz"
 
 
-def settled_packing(n_target: int, seed: int = 0, tile_above: int = 8000, verbose: bool = True,
+def settled_packing(n_target: int, seed: int = 0, tile_above: int = 2000, verbose: bool = True,
                     **build_options) -> ParticleState:
-    """A settled packing of n_target spheres (exactly n_target, or 4 * (n_target // 4) when tiled).
+    """A settled packing of n_target spheres (exactly n_target, or 4 * (n_target // 4) when tiled:
+    4,000 is 2 x 2 poured 1,000s and 16,000 is 2 x 2 of those).
 
     Read from the cache when there; otherwise built (module docstring) and cached. build_options go
     to :func:`build_packing` and are not part of the cache key.
