@@ -229,11 +229,11 @@ def _csr_matvec(indptr, indices, data, x, out):
 
 
 def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
-             Gp, Gi, Gd, Tp, Ti, Td, c, a, b, inv_mass):
+             Gp, Gi, Gd, Tp, Ti, Td, c, a, b, inv_mass, lip_decay):
     """n_iter APGD iterations in place; returns (theta, lip, backtracks, restarts).
 
     x, hx = T x: the iterate; y, hy: the extrapolated point; g = G hy + c: the gradient at y.
-    The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
+    After each iteration lip *= lip_decay. The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
     descent test of a quadratic), else lip doubles. Restart when g . (x_new - x) > 0.
     """
     m = len(a)
@@ -276,6 +276,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
             beta = 0.0
             restarts += 1
         theta = theta_new
+        lip *= lip_decay
         for i in range(5 * m):
             y[i] = x_new[i] + beta * (x_new[i] - x[i])
             x[i] = x_new[i]
@@ -308,7 +309,7 @@ if _NUMBA:
 class _Iteration:
     """The APGD state between residual checks; iterate(n) runs n iterations (compiled or numpy)."""
 
-    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, compiled=True):
+    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, lip_decay=1.0, compiled=True):
         self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
         self.x, self.hx = x.copy(), hx.copy()
         self.y, self.hy = x.copy(), hx.copy()
@@ -317,6 +318,7 @@ class _Iteration:
         self.theta, self.lip = 1.0, float(lip)
         self.backtracks = self.restarts = 0
         self.compiled = compiled
+        self.lip_decay = float(lip_decay)
 
     def gradient_at_x(self) -> np.ndarray:
         """G hx + c: the scaled end-of-step gaps S (B u + g e_n) at the iterate."""
@@ -328,7 +330,7 @@ class _Iteration:
             theta, lip, bt, rs = _iterate_compiled(
                 n, self.x, self.hx, self.y, self.hy, self.g, self.x_new, self.h_new,
                 self.theta, self.lip, G.indptr, G.indices, G.data, T.indptr, T.indices, T.data,
-                self.c, self.a, self.b, self.inv_mass)
+                self.c, self.a, self.b, self.inv_mass, self.lip_decay)
         else:
             theta, lip, bt, rs = self._iterate_numpy(n)
         self.theta, self.lip = theta, lip
@@ -355,6 +357,7 @@ class _Iteration:
                 theta_new, beta = 1.0, 0.0
                 rs += 1
             theta = theta_new
+            lip *= self.lip_decay
             y = x_new + beta * (x_new - x)
             hy = h_new + beta * (h_new - hx)
             x, hx = x_new, h_new
@@ -381,13 +384,17 @@ class ApgdSolver(Solver):
     max_iter: iterations before :class:`SolverError`. check_every: iterations between residual
     checks. precondition: scale each contact's normal, sliding and rolling rows separately.
     kernel: 'numba' (fused compiled iterations, the default when numba is installed) or 'numpy'.
+    lipschitz_decay: the Lipschitz estimate L shrinks by this factor after every iteration and
+    doubles when the descent test fails (as in Chrono's APGD): longer steps where W is flatter.
+    On the first step of a 1,000-sphere collapse 0.9 took 9,800 iterations against 14,470 for 1.
     """
 
     name = "apgd"
     uses_warm_start = True
 
     def __init__(self, tolerance: float = 1e-5, max_iter: int = 20000, check_every: int = 10,
-                 precondition: bool = True, kernel: str | None = None, verbose: bool = False):
+                 precondition: bool = True, kernel: str | None = None, lipschitz_decay: float = 0.9,
+                 verbose: bool = False):
         if not tolerance > 0:
             raise ValueError(f"APGD tolerance must be positive, got {tolerance}")
         if max_iter < 1 or check_every < 1:
@@ -402,7 +409,10 @@ class ApgdSolver(Solver):
         self.max_iter = int(max_iter)
         self.check_every = int(check_every)
         self.precondition = precondition
+        if not 0 < lipschitz_decay <= 1:
+            raise ValueError(f"lipschitz_decay must be in (0, 1], got {lipschitz_decay}")
         self.kernel = kernel
+        self.lipschitz_decay = float(lipschitz_decay)
         self.verbose = verbose
 
     # -- pieces ----------------------------------------------------------------------------
@@ -471,8 +481,8 @@ class ApgdSolver(Solver):
             lip = _dot(v, wv)
             v = wv
         lip = max(lip, 1e-12)
-        run = _Iteration(G, T, c, a, b, inv_mass, x, hx, lip,
-                                 compiled=self.kernel == "numba")
+        run = _Iteration(G, T, c, a, b, inv_mass, x, hx, lip, self.lipschitz_decay,
+                         compiled=self.kernel == "numba")
         setup_time = time.perf_counter() - start
 
         res = {"primal": np.inf, "dual": 0.0, "complementarity": np.inf}
@@ -527,6 +537,11 @@ def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,
 class AutoSolver(Solver):
     """Clarabel for programs with fewer than `threshold` contacts, APGD from there on.
 
+    The threshold (2,000 potential contacts, about 300-600 spheres) is where the two cost about
+    the same on this project's 2-core machine: 389 contacts (150 spheres) took Clarabel 0.07 s and
+    APGD 0.2-0.4 s; 3,300 contacts (1,000 settled spheres) took Clarabel 8 s and APGD 4 s cold,
+    2-4 s warm. Clarabel's time grows like N^1.8-2, APGD's like N^1.3-1.6.
+
     fallback: if APGD does not converge, log a warning and solve the step with Clarabel (the step
     is then exact but slow); with fallback=False the :class:`SolverError` propagates.
     """
@@ -534,7 +549,7 @@ class AutoSolver(Solver):
     name = "auto"
     uses_warm_start = True
 
-    def __init__(self, threshold: int = 1500, fallback: bool = True, clarabel: dict | None = None,
+    def __init__(self, threshold: int = 2000, fallback: bool = True, clarabel: dict | None = None,
                  apgd: dict | None = None):
         self.threshold = int(threshold)
         self.fallback = fallback
