@@ -4,7 +4,9 @@ The packing is made once per session (about 10 s on 2 cores): 200 spheres with r
 [0.125, 0.25] on a jittered cubic lattice of spacing 0.52 inside a cylinder of radius 1.5, poured
 with mu = mu_r = 0 and dt = 0.02 for 150 steps, then locked by the collapse's friction
 (mu = 0.577, mu_r = 0.12, cylinder still on) until its largest translational speed is below
-1e-5 sqrt(g d) (d the mean diameter). Spin about a contact normal is not resisted (the paper's
+1e-4 sqrt(g d) (d the mean diameter). The last movers are single wedged spheres whose sinking decays
+by a few % a step (the associated law makes their sliding contacts dilate), so a stricter bound
+costs many steps. Spin about a contact normal is not resisted (the paper's
 r.n = 0), so a few spheres keep spinning slowly; the criteria are on translation.
 """
 from __future__ import annotations
@@ -100,9 +102,9 @@ def pile() -> Pile:
     poured = state
     lock = replace(pour, law=COLLAPSE_LAW)
     speed_scale = math.sqrt(G * 2.0 * state.radius.mean())
-    for k in range(1, 61):
+    for k in range(1, 101):
         state = step(state, lock, solver, step_number=POUR_STEPS + k).state
-        if max_speed(state) < 1e-5 * speed_scale:
+        if max_speed(state) < 1e-4 * speed_scale:
             break
     return Pile(cloud, poured, replace(state, time=0.0), CYLINDER_RADIUS, largest, redone,
                 tolerance, k)
