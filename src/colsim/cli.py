@@ -68,8 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--density", type=_positive, default=1.0, help="particle density, mass/length^3 (default: %(default)s)")
     p.add_argument("--gravity", type=_positive, default=9.81, help="gravity, length/time^2 (default: %(default)s)")
     p.add_argument("--dt", type=_positive, default=0.02, help="time step of the filling, time (default: %(default)s)")
-    p.add_argument("--rest-energy", type=_positive, default=1e-4,
-                   help="at rest when 99%% of the particles have kinetic energy < this times m g d (default: %(default)s)")
+    p.add_argument("--rest-energy", type=_positive, default=1e-3,
+                   help="at rest when 95%% of the particles have kinetic energy < this times m g d "
+                        "and 99%% carry a contact force (default: %(default)s)")
     p.add_argument("--max-steps", type=_positive_int, default=5000, help="give up after this many steps (default: %(default)s)")
     _solver_arguments(p)
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
