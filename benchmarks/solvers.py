@@ -148,8 +148,9 @@ def main(argv=None):
     apgd = ApgdSolver(tolerance=args.tolerance)
     for n in args.sizes:
         state = packing(n)
-        print(f"{state.n} spheres (r0 = {radius_for(n):.2f}, height {np.max(state.position[:, 2] + state.radius):.2f})",
-              flush=True)
+        reach = float(np.max(np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius))
+        print(f"{state.n} spheres (radial extent {reach:.2f}, height "
+              f"{np.max(state.position[:, 2] + state.radius):.2f})", flush=True)
         clarabel = ClarabelSolver() if state.n <= args.skip_clarabel_above else None
         # the mid-collapse state: steps with APGD, keeping the last step's forces for the warm start
         mid, warm = state, None
