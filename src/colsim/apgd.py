@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .program import ROWS_PER_CONTACT, ConeProgram
-from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError
+from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError, WarmStart  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -105,49 +105,6 @@ def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> n
     out[:, 1:3] = lam[:, 1:3] * fq[:, None]
     out[:, 3:5] = lam[:, 3:5] * fr[:, None]
     return out
-
-
-# --------------------------------------------------------------------------------------------
-# Warm start by contact pair
-# --------------------------------------------------------------------------------------------
-
-@dataclass
-class WarmStart:
-    """A step's contact forces by pair key, in the global frame.
-
-    keys: (m,) int64 (:meth:`colsim.contacts.Contacts.pair_keys`), sorted
-    force: (m, 3) p n + q1 t1 + q2 t2; rolling: (m, 3) r1 t1 + r2 t2 (force units)
-    """
-
-    keys: np.ndarray
-    force: np.ndarray
-    rolling: np.ndarray
-
-    @classmethod
-    def from_step(cls, contacts, forces: np.ndarray, n_particles: int) -> "WarmStart":
-        keys = contacts.pair_keys(n_particles)
-        order = np.argsort(keys, kind="stable")
-        f = (forces[:, :1] * contacts.normal + forces[:, 1:2] * contacts.tangent1
-             + forces[:, 2:3] * contacts.tangent2)
-        r = forces[:, 3:4] * contacts.tangent1 + forces[:, 4:5] * contacts.tangent2
-        return cls(keys[order], f[order], r[order])
-
-    def match(self, contacts, n_particles: int) -> np.ndarray:
-        """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
-        keys = contacts.pair_keys(n_particles)
-        out = np.zeros((contacts.m, ROWS_PER_CONTACT))
-        if len(self.keys) == 0 or contacts.m == 0:
-            return out
-        pos = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
-        found = self.keys[pos] == keys
-        f, r = self.force[pos[found]], self.rolling[pos[found]]
-        n, t1, t2 = contacts.normal[found], contacts.tangent1[found], contacts.tangent2[found]
-        out[found, 0] = np.einsum("ij,ij->i", f, n)
-        out[found, 1] = np.einsum("ij,ij->i", f, t1)
-        out[found, 2] = np.einsum("ij,ij->i", f, t2)
-        out[found, 3] = np.einsum("ij,ij->i", r, t1)
-        out[found, 4] = np.einsum("ij,ij->i", r, t2)
-        return project_coupled_cone(out, contacts.mu, contacts.mu_r)
 
 
 # --------------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import atomic_path
-from .solvers import Solver, make_solver
+from .solvers import Solver, WarmStart, make_solver
 from .state import ContactLaw, ParticleState, StepSettings, Walls
 from .stepper import StepDiagnostics, step
 
@@ -106,7 +106,9 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
     start = time.perf_counter() - elapsed
     for k in range(resumed_from + 1, settings.n_steps + 1):
         result = step(state, step_settings, solver, step_number=k, warm_start=warm)
-        state, warm = result.state, _warm_data(result)
+        state = result.state
+        if solver.uses_warm_start:
+            warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
         diagnostics.append(result.diagnostics)
         if k % settings.frame_every == 0 or k == settings.n_steps:
             frames.append((k, state.copy()))
@@ -118,12 +120,6 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
         if stop_after is not None and k - resumed_from >= stop_after:
             return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
     return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
-
-
-def _warm_data(result):
-    """What the next step's solver may start from: contact keys and forces of this step."""
-    return {"keys": result.contacts.pair_keys(result.state.n), "forces": result.solution.forces,
-            "normals": result.contacts.normal}
 
 
 def _save_checkpoint(path, fingerprint, state, frames, diagnostics, warm, elapsed):

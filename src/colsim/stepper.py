@@ -19,8 +19,7 @@ import numpy as np
 
 from . import contacts as contact_detection
 from .program import assemble
-from .apgd import WarmStart
-from .solvers import ClarabelSolver, ConeSolution, Solver
+from .solvers import ClarabelSolver, ConeSolution, Solver, WarmStart
 from .state import ParticleState, StepSettings
 
 log = logging.getLogger(__name__)
