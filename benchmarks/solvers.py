@@ -1,18 +1,20 @@
-"""Compare the cone-program back-ends (Clarabel, APGD, SCS) on one step of settled columns.
+"""Compare the cone-program back-ends (Clarabel, APGD, ADMM, SCS) on one step of settled columns.
 
     python benchmarks/solvers.py                      # 1,000 and 4,000 spheres
     python benchmarks/solvers.py --sizes 1000 4000 16000 64000 --skip-clarabel-above 20000
     python benchmarks/solvers.py --scs                # add SCS (force form, eps 1e-6)
+    python benchmarks/solvers.py --no-apgd            # Clarabel and ADMM only (ADMM steps to 'mid')
 
 For each size: a settled packing (benchmarks/packings.py's settled_packing when it is there,
 otherwise poured here and cached under benchmarks/.cache), with the cylinder removed and the
 collapse law (mu = 0.577, mu_r = 0.12). Two programs:
   - "release": the first step after release (cold start for every solver);
-  - "mid": a step some steps into the collapse, solved cold and warm (APGD warm-started from the
-    previous step's forces, matched by contact pair).
+  - "mid": a step some steps into the collapse, solved cold and warm (APGD and ADMM warm-started
+    from the previous step's forces, matched by contact pair).
 Printed per solver: seconds per step, iterations, milliseconds per iteration, peak memory of the
 solve (tracemalloc: Python/numpy allocations; Clarabel's own Rust allocations are not seen, so the
 process's peak RSS is printed as well) and the relative difference of the increments from Clarabel.
+For ADMM also: its rho at the end, refactorisations, factorisation seconds and linear-solve seconds.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from colsim.admm import AdmmSolver
 from colsim.apgd import ApgdSolver, WarmStart
 from colsim.contacts import detect
 from colsim.program import assemble
@@ -131,8 +134,13 @@ def report(label, solution, seconds, peak, reference=None):
         du = np.linalg.norm(solution.increments - reference.increments) / np.linalg.norm(reference.increments)
         diff = f"  |du|/|u| vs clarabel {du:.1e}"
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    extra = ""
+    if "factor_time" in solution.info:
+        i = solution.info
+        extra = (f"  [rho {i['rho']:.3g}, {i['refactors']} refactor, factor {i['factor_time']:.2f} s,"
+                 f" solves {i['linear_solve_time']:.2f} s]")
     print(f"    {label:<16} {seconds:8.3f} s  {solution.iterations:6d} it  {1e3 * seconds / it:8.2f} ms/it"
-          f"  peak {peak:7.1f} MB (rss {rss:6.0f} MB)  {solution.status}{diff}", flush=True)
+          f"  peak {peak:7.1f} MB (rss {rss:6.0f} MB)  {solution.status}{diff}{extra}", flush=True)
 
 
 def main(argv=None):
@@ -143,19 +151,25 @@ def main(argv=None):
                         help="do not run Clarabel above this many spheres (minutes per solve)")
     parser.add_argument("--scs", action="store_true", help="also run SCS on the force form")
     parser.add_argument("--tolerance", type=float, default=ApgdSolver().tolerance)
+    parser.add_argument("--admm-tolerance", type=float, default=AdmmSolver().tolerance)
+    parser.add_argument("--no-apgd", action="store_true", help="skip APGD (ADMM steps to 'mid')")
+    parser.add_argument("--no-admm", action="store_true", help="skip ADMM")
     args = parser.parse_args(argv)
 
-    apgd = ApgdSolver(tolerance=args.tolerance)
+    apgd = None if args.no_apgd else ApgdSolver(tolerance=args.tolerance)
+    admm = None if args.no_admm else AdmmSolver(tolerance=args.admm_tolerance)
+    stepper = apgd or admm or ClarabelSolver()
     for n in args.sizes:
         state = packing(n)
         reach = float(np.max(np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius))
         print(f"{state.n} spheres (radial extent {reach:.2f}, height "
               f"{np.max(state.position[:, 2] + state.radius):.2f})", flush=True)
         clarabel = ClarabelSolver() if state.n <= args.skip_clarabel_above else None
-        # the mid-collapse state: steps with APGD, keeping the last step's forces for the warm start
+        # the mid-collapse state: steps with APGD (else ADMM), keeping the last step's forces for
+        # the warm start
         mid, warm = state, None
         for k in range(args.mid_steps):
-            result = step(mid, COLLAPSE, apgd, k, warm_start=warm)
+            result = step(mid, COLLAPSE, stepper, k, warm_start=warm)
             warm = WarmStart.from_step(result.contacts, result.solution.forces, mid.n)
             mid = result.state
         for stage, current in (("release", state), ("mid", mid)):
@@ -165,10 +179,13 @@ def main(argv=None):
             if clarabel is not None:
                 reference, seconds, peak = measure(clarabel, program)
                 report("clarabel", reference, seconds, peak)
-            report("apgd cold", *measure(apgd, program), reference)
-            if stage == "mid":
-                guess = warm.match(found, current.n)
-                report("apgd warm", *measure(apgd, program, guess), reference)
+            guess = warm.match(found, current.n) if stage == "mid" else None
+            for label, solver in (("apgd", apgd), ("admm", admm)):
+                if solver is None:
+                    continue
+                report(f"{label} cold", *measure(solver, program), reference)
+                if guess is not None:
+                    report(f"{label} warm", *measure(solver, program, guess), reference)
             if args.scs:
                 report("scs", *measure(_Scs(), program), reference)
 

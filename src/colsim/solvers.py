@@ -289,7 +289,8 @@ class ClarabelSolver(Solver):
 
 def make_solver(name: str = "clarabel", **options) -> Solver:
     """A back-end by name: 'clarabel' (displacement form), 'clarabel-force', 'apgd' (first-order,
-    :mod:`colsim.apgd`) or 'auto' (Clarabel for small programs, APGD for large ones)."""
+    :mod:`colsim.apgd`), 'admm' (operator splitting on the displacement form, :mod:`colsim.admm`)
+    or 'auto' (Clarabel for small programs, APGD for large ones)."""
     if name == "clarabel":
         return ClarabelSolver(**options)
     if name == "clarabel-force":
@@ -298,4 +299,8 @@ def make_solver(name: str = "clarabel", **options) -> Solver:
         from .apgd import ApgdSolver, AutoSolver
 
         return ApgdSolver(**options) if name == "apgd" else AutoSolver(**options)
-    raise ValueError(f"unknown solver {name!r}: choose clarabel, clarabel-force, apgd or auto")
+    if name == "admm":
+        from .admm import AdmmSolver
+
+        return AdmmSolver(**options)
+    raise ValueError(f"unknown solver {name!r}: choose clarabel, clarabel-force, apgd, admm or auto")
