@@ -199,46 +199,63 @@ class ClarabelSolver(Solver):
 
     @staticmethod
     def _displacement_form(program: ConeProgram):
-        """Variables [u (6n); a (ms); b (mr)]; cones: g + du_n - a - b >= 0, (a, mu du_t), (b, mu_r dphi)."""
+        """Variables [u (6n); b (mr)], one auxiliary per rolling contact. Per contact k, by type:
+
+        mu > 0:            (g + du_n - b_k, mu du_t) in SOC3      (b_k only if mu_r > 0)
+        mu_r > 0:          (b_k, mu_r dphi) in SOC3
+        mu = 0:            g + du_n - b_k >= 0                    (a non-negative row)
+
+        i.e. g + du_n >= mu ||du_t|| + mu_r ||dphi||. The gap rides in the sliding cone, which saves
+        one variable and one row per contact against a separate non-negative row (KKT size 6n + 7m
+        rather than 6n + 9m). The duals are the forces: p is the first entry of the sliding cone
+        (or the non-negative row), q = mu times its tail, r = mu_r times the rolling cone's tail.
+        """
         import clarabel
 
         nu, m = program.n_unknowns, program.m
         B = program.jacobian
+        plain = np.flatnonzero(program.mu == 0)
         sliding = np.flatnonzero(program.mu > 0)
         rolling = np.flatnonzero(program.mu_r > 0)
-        ms, mr = len(sliding), len(rolling)
-        a_col = nu + np.arange(ms)
-        b_col = nu + ms + np.arange(mr)
-
+        mp, ms, mr = len(plain), len(sliding), len(rolling)
+        aux = np.full(m, -1)
+        aux[rolling] = nu + np.arange(mr)
+        # the row of each contact's normal constraint: first the plain rows, then the sliding cones
+        normal_row = np.empty(m, dtype=np.int64)
+        normal_row[plain] = np.arange(mp)
+        normal_row[sliding] = mp + 3 * np.arange(ms)
         normal = _rows(B, ROWS_PER_CONTACT * np.arange(m))
-        rows = [normal.row, sliding, rolling]
-        cols = [normal.col, a_col, b_col]
-        vals = [-normal.data, np.ones(ms), np.ones(mr)]
-        row0 = m
-        for members, aux_col, coefficient, first in ((sliding, a_col, program.mu, 1),
-                                                     (rolling, b_col, program.mu_r, 3)):
+        has_aux = aux >= 0
+        rows = [normal_row[normal.row], normal_row[has_aux]]
+        cols = [normal.col, aux[has_aux]]
+        vals = [-normal.data, np.ones(int(has_aux.sum()))]
+        row0 = mp + 3 * ms
+        for members, coefficient, first, base in ((sliding, program.mu, 1, mp),
+                                                  (rolling, program.mu_r, 3, row0)):
             picked = np.stack([ROWS_PER_CONTACT * members + first,
                                ROWS_PER_CONTACT * members + first + 1], axis=1).ravel()
             tangential = _rows(B, picked)
             cone = tangential.row // 2
-            rows += [row0 + 3 * np.arange(len(members)), row0 + 3 * cone + 1 + tangential.row % 2]
-            cols += [aux_col, tangential.col]
-            vals += [-np.ones(len(members)), -coefficient[members][cone] * tangential.data]
-            row0 += 3 * len(members)
-
-        n_var = nu + ms + mr
+            rows.append(base + 3 * cone + 1 + tangential.row % 2)
+            cols.append(tangential.col)
+            vals.append(-coefficient[members][cone] * tangential.data)
+        rows.append(row0 + 3 * np.arange(mr))     # rolling cones' first entry: b_k
+        cols.append(aux[rolling])
+        vals.append(-np.ones(mr))
+        n_rows = row0 + 3 * mr
         A = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(row0, n_var))
-        P = sp.diags(np.concatenate([program.mass, np.zeros(ms + mr)]), format="csc")
-        q = np.concatenate([-program.fbar, np.zeros(ms + mr)])
-        b = np.concatenate([program.gap, np.zeros(row0 - m)])
-        cones = [clarabel.NonnegativeConeT(m)] + [clarabel.SecondOrderConeT(3)] * (ms + mr)
+                          shape=(n_rows, nu + mr))
+        P = sp.diags(np.concatenate([program.mass, np.zeros(mr)]), format="csc")
+        q = np.concatenate([-program.fbar, np.zeros(mr)])
+        b = np.zeros(n_rows)
+        b[normal_row] = program.gap
+        cones = ([clarabel.NonnegativeConeT(mp)] if mp else []) + [clarabel.SecondOrderConeT(3)] * (ms + mr)
 
         def unpack(x, z):
             forces = np.zeros((m, ROWS_PER_CONTACT))
-            forces[:, 0] = z[:m]
-            slide = z[m:m + 3 * ms].reshape(ms, 3)
-            roll = z[m + 3 * ms:].reshape(mr, 3)
+            forces[:, 0] = z[normal_row]
+            slide = z[mp:row0].reshape(ms, 3)
+            roll = z[row0:].reshape(mr, 3)
             forces[sliding, 1:3] = program.mu[sliding, None] * slide[:, 1:]
             forces[rolling, 3:5] = program.mu_r[rolling, None] * roll[:, 1:]
             return x[:nu], forces
