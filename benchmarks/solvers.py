@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from colsim.packing import lattice_cloud
+
 from colsim.admm import AdmmSolver
 from colsim.apgd import ApgdSolver, WarmStart
 from colsim.contacts import detect
@@ -47,24 +49,11 @@ def radius_for(n: int) -> float:
     return 0.204 * n ** (1.0 / 3.0)
 
 
-def _cloud(n, r0, rng, d_max=0.5):
-    spacing = 1.04 * d_max
-    ticks = np.arange(-r0 + spacing / 2, r0, spacing)
-    gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
-    inside = np.hypot(gx, gy) + spacing / np.sqrt(2) <= r0
-    layer = np.c_[gx[inside], gy[inside]]
-    layers = int(np.ceil(n / len(layer)))
-    sites = np.c_[np.tile(layer, (layers, 1)),
-                  np.repeat(spacing / 2 + spacing * np.arange(layers), len(layer))][:n]
-    radius = 0.5 * rng.uniform(0.25, d_max, len(sites))
-    jitter = rng.uniform(-1, 1, sites.shape) * (0.5 * (spacing - 2 * radius))[:, None]
-    return ParticleState.at_rest(sites + jitter, radius)
-
-
 def pour(n: int, seed: int = 0, max_steps: int = 2000, verbose=True) -> ParticleState:
     """n spheres poured into a cylinder (mu = mu_r = 0) until at rest; APGD does the pouring."""
     r0 = radius_for(n)
-    state = _cloud(n, r0, np.random.default_rng(seed))
+    position, radius = lattice_cloud(r0, n, 0.0, (0.25, 0.5), np.random.default_rng(seed))
+    state = ParticleState.at_rest(position[:n], radius[:n])
     settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=r0))
     weight_scale = float(np.mean(state.mass)) * 9.81 * 2 * float(np.mean(state.radius))
     from colsim.apgd import AutoSolver

@@ -5,11 +5,9 @@ import pytest
 
 from colsim.admm import AdmmSolver, project_friction_cone
 from colsim.apgd import WarmStart
-from colsim.contacts import detect
-from colsim.program import assemble, cone_violation
+from colsim.program import cone_violation
 from colsim.solvers import ClarabelSolver, SolverError, make_solver
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import predicted_displacement, run, step
+from solver_cases import collapse_program, mid_collapse, small_pile
 
 clarabel = pytest.importorskip("clarabel")
 
@@ -57,48 +55,15 @@ def test_projection_onto_gap_cone_is_exact():
         np.testing.assert_allclose(z[k], _reference_projection(x[k], a[k], b[k]), atol=1e-7 * size[k])
 
 
-def _cloud(n, r0, rng, d_max=0.5):
-    spacing = 1.04 * d_max
-    ticks = np.arange(-r0 + spacing / 2, r0, spacing)
-    gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
-    inside = np.hypot(gx, gy) + spacing / np.sqrt(2) <= r0
-    layer = np.c_[gx[inside], gy[inside]]
-    layers = int(np.ceil(n / len(layer)))
-    sites = np.c_[np.tile(layer, (layers, 1)), np.repeat(spacing / 2 + spacing * np.arange(layers), len(layer))][:n]
-    radius = 0.5 * rng.uniform(0.25, d_max, len(sites))
-    return ParticleState.at_rest(sites + rng.uniform(-1, 1, sites.shape) * (0.5 * (spacing - 2 * radius))[:, None],
-                                 radius)
-
-
 @pytest.fixture(scope="module")
 def pile():
-    """About 90 spheres poured into a cylinder (mu = mu_r = 0) and left to settle."""
-    state = _cloud(90, 1.2, np.random.default_rng(7))
-    settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=1.2))
-    for result in run(state, settings, 100, ClarabelSolver()):
-        state = result.state
-    state.velocity[:] = 0.0
-    state.angular_velocity[:] = 0.0
-    return state
-
-
-COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
-
-
-def _program(state, settings=COLLAPSE):
-    margin = settings.detection_margin * 2 * state.radius.min()
-    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
-                   margin, settings.detection_slack)
-    return assemble(state, found, settings.dt, settings.gravity), found
+    return small_pile()
 
 
 @pytest.mark.parametrize("stage", ["release", "mid-collapse"])
 def test_agrees_with_clarabel(pile, stage):
-    state = pile
-    if stage == "mid-collapse":
-        for k in range(6):
-            state = step(state, COLLAPSE, ClarabelSolver(), k).state
-    program, _ = _program(state)
+    state = pile if stage == "release" else mid_collapse(pile)
+    program, _ = collapse_program(state)
     assert program.m > 100 and np.all(program.mu > 0) and np.any(program.mu_r > 0)
     ref = ClarabelSolver(tolerance=1e-10).solve(program)
     sol = make_solver("admm").solve(program)
@@ -113,7 +78,7 @@ def test_agrees_with_clarabel(pile, stage):
 
 
 def test_warm_start_from_the_solution_converges_at_once(pile):
-    program, found = _program(pile)
+    program, found = collapse_program(pile)
     solver = AdmmSolver()
     cold = solver.solve(program)
     guess = WarmStart.from_step(found, cold.forces, pile.n).match(found, pile.n)
@@ -123,7 +88,7 @@ def test_warm_start_from_the_solution_converges_at_once(pile):
 
 
 def test_non_convergence_is_an_error(pile):
-    program, _ = _program(pile)
+    program, _ = collapse_program(pile)
     with pytest.raises(SolverError, match="step 17"):
         AdmmSolver(max_iter=20, tolerance=1e-12).solve(program, step=17)
     with pytest.raises(ValueError):

@@ -5,11 +5,11 @@ import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
 from colsim.apgd import ApgdSolver, AutoSolver, WarmStart, project_coupled_cone
-from colsim.contacts import detect
-from colsim.program import assemble, cone_violation
+from colsim.program import cone_violation
 from colsim.solvers import ClarabelSolver, SolverError, make_solver
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import predicted_displacement, run, step
+from colsim.state import StepSettings
+from colsim.stepper import run
+from solver_cases import COLLAPSE, collapse_program, mid_collapse, small_pile
 
 clarabel = pytest.importorskip("clarabel")
 
@@ -104,52 +104,15 @@ def test_projection_polar_cone_goes_to_zero():
     np.testing.assert_allclose(z, 0.0, atol=1e-15)
 
 
-def _cloud(n, r0, rng, d_max=0.5):
-    spacing = 1.04 * d_max
-    ticks = np.arange(-r0 + spacing / 2, r0, spacing)
-    gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
-    inside = np.hypot(gx, gy) + spacing / np.sqrt(2) <= r0
-    layer = np.c_[gx[inside], gy[inside]]
-    layers = int(np.ceil(n / len(layer)))
-    sites = np.c_[np.tile(layer, (layers, 1)), np.repeat(spacing / 2 + spacing * np.arange(layers), len(layer))][:n]
-    radius = 0.5 * rng.uniform(0.25, d_max, len(sites))
-    return ParticleState.at_rest(sites + rng.uniform(-1, 1, sites.shape) * (0.5 * (spacing - 2 * radius))[:, None],
-                                 radius)
-
-
 @pytest.fixture(scope="module")
 def pile():
-    """About 90 spheres poured into a cylinder (mu = mu_r = 0) and left to settle."""
-    state = _cloud(90, 1.2, np.random.default_rng(7))
-    settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=1.2))
-    for result in run(state, settings, 100, ClarabelSolver()):
-        state = result.state
-    state.velocity[:] = 0.0
-    state.angular_velocity[:] = 0.0
-    return state
-
-
-COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
-
-
-def _program(state, settings=COLLAPSE):
-    margin = settings.detection_margin * 2 * state.radius.min()
-    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
-                   margin, settings.detection_slack)
-    return assemble(state, found, settings.dt, settings.gravity), found
-
-
-def _mid_collapse(pile, steps=6):
-    state = pile
-    for k in range(steps):
-        state = step(state, COLLAPSE, ClarabelSolver(), k).state
-    return state
+    return small_pile()
 
 
 @pytest.mark.parametrize("stage", ["release", "mid-collapse"])
 def test_agrees_with_clarabel(pile, stage):
-    state = pile if stage == "release" else _mid_collapse(pile)
-    program, _ = _program(state)
+    state = pile if stage == "release" else mid_collapse(pile)
+    program, _ = collapse_program(state)
     assert program.m > 100 and np.all(program.mu > 0) and np.any(program.mu_r > 0)
     ref = ClarabelSolver(tolerance=1e-10).solve(program)
     sol = ApgdSolver().solve(program)
@@ -166,13 +129,13 @@ def test_agrees_with_clarabel(pile, stage):
 
 
 def test_non_convergence_is_an_error(pile):
-    program, _ = _program(pile)
+    program, _ = collapse_program(pile)
     with pytest.raises(SolverError, match="step 17"):
         ApgdSolver(max_iter=5).solve(program, step=17)
 
 
 def test_warm_start_by_pair(pile):
-    program, found = _program(pile)
+    program, found = collapse_program(pile)
     cold = ApgdSolver().solve(program)
     warm = WarmStart.from_step(found, cold.forces, pile.n)
     # the stored forces come back in the same frames, and a restart from them is immediate
@@ -189,14 +152,14 @@ def test_stepper_warm_starts_and_auto_delegates(pile):
     solver = make_solver("apgd")
     results = list(run(pile, COLLAPSE, 3, solver))
     assert [r.solution.info["start"] for r in results] == ["cold", "warm", "warm"]
-    program, _ = _program(pile)
+    program, _ = collapse_program(pile)
     assert make_solver("auto", threshold=program.m + 1).solve(program).info.get("start") is None
     assert make_solver("auto", threshold=program.m).solve(program).info["start"] == "cold"
     assert isinstance(make_solver("auto"), AutoSolver)
 
 
 def test_auto_falls_back_to_clarabel(pile):
-    program, _ = _program(pile)
+    program, _ = collapse_program(pile)
     solver = AutoSolver(threshold=1, apgd={"max_iter": 3})
     assert "APGD fallback" in solver.solve(program, step=2).status
     with pytest.raises(SolverError):
@@ -205,7 +168,7 @@ def test_auto_falls_back_to_clarabel(pile):
 
 def test_numba_and_numpy_kernels_agree(pile):
     pytest.importorskip("numba")
-    program, _ = _program(pile)
+    program, _ = collapse_program(pile)
     fast = ApgdSolver(kernel="numba").solve(program)
     plain = ApgdSolver(kernel="numpy").solve(program)
     assert fast.iterations == plain.iterations

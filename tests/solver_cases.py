@@ -1,0 +1,39 @@
+"""Cone programs shared by the tests of the iterative back-ends (APGD, ADMM) against Clarabel."""
+from __future__ import annotations
+
+import numpy as np
+
+from colsim.contacts import detect
+from colsim.packing import lattice_cloud
+from colsim.program import assemble
+from colsim.solvers import ClarabelSolver
+from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.stepper import predicted_displacement, run, step
+
+COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
+
+
+def small_pile() -> ParticleState:
+    """About 90 spheres (d in [0.25, 0.5]) poured into a cylinder of radius 1.2 (mu = mu_r = 0), 100 steps."""
+    position, radius = lattice_cloud(1.2, 90, 0.0, (0.25, 0.5), np.random.default_rng(7))
+    state = ParticleState.at_rest(position[:90], radius[:90])
+    for result in run(state, StepSettings(dt=0.02, walls=Walls(cylinder_radius=1.2)), 100, ClarabelSolver()):
+        state = result.state
+    state.velocity[:] = 0.0
+    state.angular_velocity[:] = 0.0
+    return state
+
+
+def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE):
+    """(program, contacts) of one collapse step from `state`, detected as the stepper does."""
+    margin = settings.detection_margin * 2 * state.radius.min()
+    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
+                   margin, settings.detection_slack)
+    return assemble(state, found, settings.dt, settings.gravity), found
+
+
+def mid_collapse(state: ParticleState, steps: int = 6) -> ParticleState:
+    """The state after `steps` collapse steps with Clarabel."""
+    for k in range(steps):
+        state = step(state, COLLAPSE, ClarabelSolver(), k).state
+    return state
