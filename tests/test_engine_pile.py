@@ -1,12 +1,11 @@
 """Engine tests on the session's poured pile (conftest.pile): rest, cones, balance, forms, overlaps."""
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from colsim.contacts import detect, overlaps
+from colsim.contacts import detect
 from colsim.program import assemble, cone_violation
 from colsim.solvers import ClarabelSolver
 from colsim.state import FLOOR, StepSettings, Walls

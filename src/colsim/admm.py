@@ -23,15 +23,16 @@ Iteration (scaled ADMM; w is the scaled dual variable, alpha the over-relaxation
 so -w stays in K^ and z in C^ with z . w = 0 exactly; the contact forces are lam = -rho D w (in K
 by construction) and u solves Mbar u = fbar + B' lam at convergence (ClarabelSolver's convention).
 
-Stopping (every `check_every` iterations), on lam and the increments it implies,
-u(lam) = Mbar^-1 (fbar + B' lam): APGD's relative primal infeasibility and complementarity
-(:func:`colsim.apgd._residuals`, relative to the free-flight length L and the force floor F0), so
-that the two first-order back-ends are held to the same measure; the returned increments are u(lam).
-Not converging within `max_iter` iterations raises :class:`SolverError`.
+Stopping (every `check_every` iterations), both as lengths relative to the free-flight length L
+(:func:`colsim.apgd.length_scale`): primal max |B u + g e_n - z| / L, and dual
+max |u - u(lam)| / L with u(lam) = Mbar^-1 (fbar + B' lam). APGD's force-form residuals of the
+result are recorded in the solution's info as force_form_*. Not converging within `max_iter`
+iterations raises :class:`SolverError`.
 
-Adaptive rho (OSQP's rule): every `adapt_every` iterations rho is scaled by
-sqrt(primal residual / dual residual) (each relative, OSQP's definitions) when that changes it by
-more than `adapt_factor`; each change refactorises, at most `max_refactor` times per step.
+Changing rho: every `adapt_every` iterations rho is multiplied by `rho_growth` (default: 10 once,
+after 300 iterations), refactorising at most `max_refactor` times per step. With rho_growth = 0
+the factor is OSQP's rule, sqrt(primal residual / dual residual), applied when it changes rho by
+more than `adapt_factor`; here that rule lowered rho and slowed convergence.
 
 Measured (benchmarks/solvers.py, 2-core machine shared with one simulation; default settings):
 on settled 1k spheres (3.3k contacts) 2,900-3,200 iterations at 2-3 ms (8.8 s release, 6.1 s mid,
@@ -43,7 +44,7 @@ triangular solves per iteration. The u-iterate reaches 1e-3 of Clarabel's increm
 indeterminate (OSQP's adaptive rule lowers rho, which is slower here; hence the fixed increase).
 
 Warm start: forces (m, 5) (the stepper passes the previous step's forces matched by contact pair,
-:class:`colsim.apgd.WarmStart`): w = -D^-1 lam / rho and z = Proj_C^(D (B u(lam) + g e_n) + w).
+:class:`colsim.solvers.WarmStart`): w = -D^-1 lam / rho and z = Proj_C^(D (B u(lam) + g e_n) + w).
 """
 from __future__ import annotations
 
@@ -57,7 +58,7 @@ import scipy.sparse.linalg as spla
 from .apgd import (_NUMBA, ApgdSolver, _force_floor, _project_all, _residuals, length_scale,
                    project_coupled_cone)
 from .program import ROWS_PER_CONTACT, ConeProgram
-from .solvers import ConeSolution, Solver, SolverError
+from .solvers import ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 
@@ -85,8 +86,6 @@ class _Factor:
 
             self._solver = qdldl.Solver(sp.triu(matrix, format="csc"))
             self.solve = self._solver.solve
-        elif method == "cholespy":
-            raise ValueError("cholespy is not supported")
         else:
             lu = spla.splu(sp.csc_matrix(matrix), permc_spec=method,
                            options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
@@ -98,7 +97,7 @@ class AdmmSolver(Solver):
 
     tolerance: on the relative primal infeasibility and complementarity (as APGD's).
     rho: the penalty relative to diag(B Mbar^-1 B')^-1 (dimensionless). alpha: over-relaxation.
-    adaptive: OSQP's rho update, at most `max_refactor` refactorisations per step.
+    adaptive: change rho during the solve (see 'Changing rho' in the module docstring).
     factorization: 'qdldl' (the qdldl package, if installed) or a scipy splu column ordering
     ('MMD_AT_PLUS_A', 'COLAMD', 'MMD_ATA', 'NATURAL').
     """
@@ -170,7 +169,7 @@ class AdmmSolver(Solver):
             lam = np.zeros((m, ROWS_PER_CONTACT))
             w = np.zeros(5 * m)
             started = "cold"
-        u = (fbar + B.T @ lam.ravel()) * inv_mass
+        u = program.increments(lam)
         z = project_friction_cone((A @ u + h + w).reshape(m, 5), a, b).ravel()
         setup_time = time.perf_counter() - start
 
@@ -192,7 +191,7 @@ class AdmmSolver(Solver):
             w = v - z
             if k % self.check_every == 0 or k == self.max_iter:
                 lam = forces_of(w, rho)
-                u_lam = (fbar + B.T @ lam.ravel()) * inv_mass
+                u_lam = program.increments(lam)
                 res = {"primal": float(np.max(np.abs((ax - z) / d))) / scale,
                        "dual": float(np.max(np.abs(u - u_lam))) / scale}
                 if self.verbose:
@@ -224,14 +223,12 @@ class AdmmSolver(Solver):
         info = dict(res, start=started, rho=rho, refactors=refactors, factor_time=factor_time,
                     linear_solve_time=solve_s, length_scale=scale, factorization=self.factorization)
         if not converged:
-            where = f" at step {step}" if step is not None else ""
             raise SolverError(
-                f"ADMM did not converge{where} within {self.max_iter} iterations "
+                f"ADMM did not converge{at_step(step)} within {self.max_iter} iterations "
                 f"(relative primal residual {res['primal']:.2e}, dual residual "
                 f"{res['dual']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        y = program.local_displacement(u)
-        y[:, 0] += program.gap
+        y = program.end_of_step_gaps(u)
         info.update({"force_form_" + key: value for key, value in
                      _residuals(y, lam, program.mu, program.mu_r, scale, force_floor).items()})
         return ConeSolution(u, lam, "Solved", k, setup_time, solve_time, info)

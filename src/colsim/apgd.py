@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .program import ROWS_PER_CONTACT, ConeProgram
-from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError, WarmStart  # noqa: F401
+from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError, WarmStart, at_step  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -392,8 +392,7 @@ class ApgdSolver(Solver):
         if u is None:
             u = program.increments(forces)
         scale = scale or length_scale(program)
-        y = program.local_displacement(u)
-        y[:, 0] += program.gap
+        y = program.end_of_step_gaps(u)
         return _residuals(y, forces, program.mu, program.mu_r, scale, _force_floor(program, scale))
 
     # -- the iteration ---------------------------------------------------------------------
@@ -462,14 +461,12 @@ class ApgdSolver(Solver):
         info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:
-            where = f" at step {step}" if step is not None else ""
             raise SolverError(
-                f"APGD did not converge{where} within {self.max_iter} iterations "
+                f"APGD did not converge{at_step(step)} within {self.max_iter} iterations "
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        u = (program.fbar + program.jacobian.T @ forces.ravel()) * inv_mass
-        return ConeSolution(u, forces, "Solved", k, setup_time, solve_time, info)
+        return ConeSolution(program.increments(forces), forces, "Solved", k, setup_time, solve_time, info)
 
 
 def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,

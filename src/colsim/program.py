@@ -67,6 +67,15 @@ class ConeProgram:
         """(m, 5) B u: (du_n, du_t1, du_t2, dphi_1, dphi_2) of every contact."""
         return (self.jacobian @ u).reshape(-1, ROWS_PER_CONTACT)
 
+    def end_of_step_gaps(self, u: np.ndarray) -> np.ndarray:
+        """(m, 5) B u + g e_n: the local displacement with the gap added to the normal entry.
+
+        The constraint is that every row lies in {y_n >= mu ||y_t|| + mu_r ||y_r||}.
+        """
+        y = self.local_displacement(u)
+        y[:, 0] += self.gap
+        return y
+
 
 def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
     """The (5m, 6n) matrix B mapping u = [dx; dth] to each contact's local relative displacement."""
@@ -140,8 +149,8 @@ def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> d
     """
     if program.m == 0:
         return {"primal": 0.0, "dual": 0.0, "complementarity": 0.0}
-    local = program.local_displacement(u)
-    slack = (program.gap + local[:, 0] - program.mu * np.linalg.norm(local[:, 1:3], axis=1)
+    local = program.end_of_step_gaps(u)
+    slack = (local[:, 0] - program.mu * np.linalg.norm(local[:, 1:3], axis=1)
              - program.mu_r * np.linalg.norm(local[:, 3:5], axis=1))
     p = forces[:, 0]
     dual = np.maximum.reduce([

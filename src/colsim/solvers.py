@@ -28,6 +28,11 @@ class SolverError(RuntimeError):
         super().__init__(message)
 
 
+def at_step(step: int | None) -> str:
+    """' at step N' for an error message, or '' when the step is not known."""
+    return f" at step {step}" if step is not None else ""
+
+
 @dataclass
 class ConeSolution:
     """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units."""
@@ -184,9 +189,8 @@ class ClarabelSolver(Solver):
         residuals = {"primal": result.r_prim, "dual": result.r_dual}
         ok = status == "Solved" or (status == "AlmostSolved" and self.accept_almost_solved)
         if not ok:
-            where = f" at step {step}" if step is not None else ""
             raise SolverError(
-                f"Clarabel ended {status}{where} after {result.iterations} iterations "
+                f"Clarabel ended {status}{at_step(step)} after {result.iterations} iterations "
                 f"(primal residual {result.r_prim:.2e}, dual residual {result.r_dual:.2e}, "
                 f"{program.m} contacts; attempts: {'; '.join(failures) or 'one'})",
                 status=status, step=step, residuals=residuals)
