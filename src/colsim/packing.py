@@ -68,9 +68,11 @@ def solid_fraction(state: ParticleState, r0: float, height: float) -> float:
     z, r = state.position[:, 2], state.radius
     lo = np.clip(0.0 - z, -r, r)
     hi = np.clip(height - z, -r, r)
-    # volume of a sphere between two planes at heights lo and hi relative to its centre
-    cap = lambda h: np.pi * (r**2 * h - h**3 / 3.0)  # noqa: E731
-    return float(np.sum(cap(hi) - cap(lo)) / (np.pi * r0**2 * height))
+    def volume_below(h):
+        """Volume of a sphere of radius r below height h relative to its centre, less half a sphere."""
+        return np.pi * (r**2 * h - h**3 / 3.0)
+
+    return float(np.sum(volume_below(hi) - volume_below(lo)) / (np.pi * r0**2 * height))
 
 
 def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float = 0.95) -> bool:

@@ -53,7 +53,10 @@ def _label(variable, fallback: str) -> str:
 
 
 def _save(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    from .io import atomic_path
+
+    with atomic_path(path) as tmp:   # a killed plot leaves no PNG that looks finished
+        fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
     _pyplot().close(fig)
     log.info("wrote %s", path)
     return path
