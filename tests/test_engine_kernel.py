@@ -2,6 +2,8 @@
 a missed contact (redo or OverlapError) and a solver that does not converge (SolverError)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,7 +13,7 @@ from colsim.contacts import WALL, Contacts, overlaps, tangent_basis
 from colsim.program import contact_jacobian
 from colsim.solvers import ClarabelSolver, SolverError
 from colsim.state import FLOOR, PARTICLE, ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import OverlapError, step
+from colsim.stepper import OverlapError, base_margin, next_margin, step
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 vectors = st.tuples(finite, finite, finite).map(np.array).filter(lambda v: np.linalg.norm(v) > 1e-3)
@@ -108,6 +110,21 @@ def test_missed_contact_is_redone():
     np.testing.assert_allclose(momentum, (state.mass[:, None] * state.velocity).sum(axis=0),
                                rtol=1e-9, atol=1e-9 * state.mass[0] * 2.0)
     assert result.state.velocity[2, 0] > 0.1  # B was pushed: the contact was really taken
+
+
+def test_next_step_starts_from_the_margin_that_caught_the_missed_pair():
+    """The redone step records the missed pair and its grown margin; the next step starts there,
+    and each clean step after that halves it, down to the base margin (here 1e-6 d)."""
+    state, settings = _train(max_redo=3)
+    result = step(state, settings, ClarabelSolver(), step_number=5)
+    base = base_margin(state, settings)
+    d = result.diagnostics
+    assert d.missed_contacts >= 1
+    assert d.detection_margin == pytest.approx(base * settings.margin_growth ** d.redone)
+    assert next_margin(d, base) == d.detection_margin
+    clean = replace(d, redone=0, missed_contacts=0)
+    assert next_margin(clean, base) == pytest.approx(0.5 * d.detection_margin)
+    assert next_margin(replace(clean, detection_margin=base), base) == base
 
 
 def test_missed_contact_without_redo_raises():

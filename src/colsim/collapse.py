@@ -21,7 +21,7 @@ import numpy as np
 from .io import atomic_path
 from .solvers import Solver, WarmStart, make_solver
 from .state import ContactLaw, ParticleState, StepSettings, Walls
-from .stepper import StepDiagnostics, step
+from .stepper import StepDiagnostics, base_margin, next_margin, step
 
 log = logging.getLogger(__name__)
 
@@ -104,8 +104,11 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
         state, frames, diagnostics, warm, elapsed = column.copy(), [(0, column.copy())], [], None, 0.0
     resumed_from = len(diagnostics)
     start = time.perf_counter() - elapsed
+    base = base_margin(column, step_settings)
+    margin = next_margin(diagnostics[-1], base) if diagnostics else None
     for k in range(resumed_from + 1, settings.n_steps + 1):
-        result = step(state, step_settings, solver, step_number=k, warm_start=warm)
+        result = step(state, step_settings, solver, step_number=k, warm_start=warm, margin=margin)
+        margin = next_margin(result.diagnostics, base)
         state = result.state
         if solver.uses_warm_start:
             warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
@@ -168,7 +171,8 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     }
     units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
              "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
-             "setup_time": "s", "solve_time": "s"}
+             "setup_time": "s", "solve_time": "s",
+             "detection_margin": "length", "step_time": "s"}
     for name in DIAGNOSTIC_FIELDS:
         if name == "step":
             continue

@@ -133,6 +133,7 @@ class StepSettings:
     as a fraction of the smallest diameter. detection_slack: fraction of a pair's predicted relative
     displacement added to that margin (see :func:`colsim.contacts.detect`).
     max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.stepper`).
+    margin_growth: factor by which a redone step's detection margin grows.
     """
 
     dt: float
@@ -142,11 +143,14 @@ class StepSettings:
     overlap_tolerance: float = 0.01
     detection_margin: float = 0.05
     detection_slack: float = 0.5
-    max_redo: int = 3
+    max_redo: int = 4
+    margin_growth: float = 2.0
 
     def __post_init__(self):
         if not (self.dt > 0 and np.isfinite(self.dt)):
             raise ValueError(f"time step dt must be positive, got {self.dt}")
+        if self.margin_growth <= 1:
+            raise ValueError(f"margin_growth must be > 1, got {self.margin_growth}")
         if self.overlap_tolerance <= 0 or self.detection_margin < 0 or self.detection_slack < 0:
             raise ValueError("overlap_tolerance must be > 0, detection_margin and detection_slack >= 0")
         if self.walls.cylinder_radius is not None and self.walls.cylinder_radius <= 0:

@@ -66,6 +66,11 @@ def pack_height(wildcards):
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
 
 
+def collapse_priority(wildcards):
+    """Scheduling priority of a collapse: 10 a, so that the costliest columns run first."""
+    return int(round(10 * float(wildcards.a)))
+
+
 def output_directory(wildcards, output):
     """The directory of a rule's first output (for commands that take --output-dir)."""
     return os.path.dirname(output[0])

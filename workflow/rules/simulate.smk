@@ -44,11 +44,13 @@ rule trim:
 
 # `colsim collapse` keeps OUTPUT.checkpoint while it runs and deletes it on success; a job that was
 # killed resumes from it when rerun (snakemake --rerun-incomplete). It is not a declared output.
+# Taller columns start first (their cost grows like a^2): the longest jobs do not end up last, alone.
 rule collapse:
     input:
         "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
     output:
         f"{RUN}/collapse.nc",
+    priority: collapse_priority
     params:
         mu=config["mu"],
         duration=config["collapse"]["duration"],
