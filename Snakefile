@@ -14,11 +14,14 @@ report: "workflow/report/workflow.rst"
 include: "workflow/rules/common.smk"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/summarise.smk"
+include: "workflow/rules/convergence.smk"
 
 
 rule all:
     input:
-        "results/summary.nc",
-        "results/summary.csv",
-        "results/study_config.yaml",
+        f"{STUDY_DIR}/summary.nc",
+        f"{STUDY_DIR}/summary.csv",
+        f"{STUDY_DIR}/lube_table.md",
+        f"{STUDY_DIR}/study_config.yaml",
         figures(),
+        convergence_outputs(),

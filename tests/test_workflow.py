@@ -149,3 +149,52 @@ def test_the_default_study_plans_every_run(tmp_path):
     assert sum(p.endswith("column.nc") for p in planned) == 2 * 6
     assert sum(p.endswith("collapse.nc") for p in planned) == 2 * 6 * 4
     assert sum(p.endswith("analysis.nc") for p in planned) == 2 * 6 * 4
+
+
+def test_the_paper_study_plans_its_convergence_runs(tmp_path):
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-n", "all", "--configfile", "config/paper.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = set(planned_outputs(result))
+    run = "results/r0_2/seed_1/a_{a}/mu_r_0.12"
+    for a in ("2", "5"):
+        for variant in ("steps_200_t_4", "steps_400_t_4", "steps_200_t_8"):   # dt/2, dt/4; run on to 8
+            assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
+        assert f"{run.format(a=a)}/collapse.nc" in planned                    # 100 steps: the study's own
+    assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
+    assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
+    assert "results/r0_2/seed_3/a_5/mu_r_0/collapse.nc" in planned
+    assert {"results/paper/summary.nc", "results/paper/lube_table.md", "results/paper/convergence.nc",
+            "results/paper/figures/convergence.png"} <= planned
+
+
+TINY_CONVERGENCE = """
+convergence:
+  mu_r: 0.12
+  time_step: {aspect_ratios: [0.5], steps: [40, 80]}
+  end_time: {aspect_ratios: [0.5], duration: 6.0}
+  column_size: {aspect_ratio: 0.5, r0: [1, 1.25]}
+  seeds: {aspect_ratio: 0.5, seeds: [1, 2]}
+"""
+
+
+@pytest.mark.slow
+def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
+    """The tiny study plus a convergence block: only the new runs are made, and the table, its
+    Markdown and the figure hold finite numbers for all four sub-studies."""
+    xr = pytest.importorskip("xarray")
+    (tiny_study / "tiny_convergence.yaml").write_text(TINY_CONVERGENCE)
+    arguments = ("all", "--configfile", "config/tiny.yaml", "tiny_convergence.yaml")
+    result = snakemake(tiny_study, "-j2", *arguments)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
+    table = xr.load_dataset(tiny_study / "results" / "convergence.nc")
+    assert sorted(set(table.study.values)) == ["column_size", "end_time", "seeds", "time_step"]
+    assert table.sizes["run"] == 2 + 1 + 2 + 2
+    assert np.all(np.isfinite(table.h_inf_over_r0.values)) and np.all(np.isfinite(table.runout_over_r0.values))
+    end = table.where(table.study == "end_time", drop=True)
+    assert np.isfinite(end.runout_over_r0_at_default_end.values).all()
+    text = (tiny_study / "results" / "convergence.md").read_text()
+    assert "### Time step" in text and "### Seeds" in text
+    assert (tiny_study / "results" / "figures" / "convergence.png").stat().st_size > 10000
+    lube = (tiny_study / "results" / "lube_table.md").read_text()
+    assert "| Lube |" in lube and "| 0.5 | " in lube and "| 1 | " in lube

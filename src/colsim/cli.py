@@ -6,6 +6,7 @@
     colsim analyse    final height, run-out, deposit profile and front of a collapse
     colsim collect    gather analyses into one dataset over (aspect_ratio, mu_r, seed)
     colsim plot       the study's figures from the collected dataset and the analyses
+    colsim convergence  time step, end time, column size and seed studies in one table and figure
     colsim export-vtk a ParaView time series of a collapse
     colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
 
@@ -105,6 +106,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("inputs", nargs="+", help="analysis files from `colsim analyse`")
     p.add_argument("--output", required=True, help="summary file to write (netCDF)")
     p.add_argument("--csv", default=None, help="also write the table as CSV here")
+    p.add_argument("--markdown", default=None,
+                   help="also write h_inf/r0 and the run-out against Lube's laws (mean over seeds) as Markdown here")
+
+    p = sub.add_parser("convergence", help="the convergence study: one table over runs, its figure and relative changes")
+    for study in ("time-step", "end-time", "column-size", "seeds"):
+        p.add_argument(f"--{study}", nargs="*", default=[], help=f"analysis files of the {study.replace('-', ' ')} study")
+    p.add_argument("--default-end", type=_positive, required=True,
+                   help="the study's end time t/sqrt(h0/g); runs that go on are measured there too")
+    p.add_argument("--output", required=True, help="table to write (netCDF)")
+    p.add_argument("--csv", default=None, help="also write the table as CSV here")
+    p.add_argument("--markdown", default=None, help="also write the relative changes as Markdown here")
+    p.add_argument("--figure", default=None, help="also draw the figure (PNG) here")
 
     p = sub.add_parser("plot", help="the study's figures")
     p.add_argument("--summary", required=True, help="summary file from `colsim collect`")

@@ -188,5 +188,6 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "dt": settings.time_step(h0),
+                          "duration": settings.duration, "n_steps": settings.n_steps,
                           "wall_time": run.wall_time, "density": float(run.initial.density)})
     return dataset

@@ -111,8 +111,9 @@ def analyse(args):
     final = io.state_from_dataset(trajectory, -1)
     tolerance = analysis.contact_tolerance(final, args.contact_tolerance)
     deposit = analysis.measure_deposit(final, tolerance)
-    fronts = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance).r_inf
-              for k in range(trajectory.sizes["time"])]
+    history = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance)
+               for k in range(trajectory.sizes["time"])]
+    fronts = [d.r_inf for d in history]
     bin_width = args.bin_width or 2.0 * float(final.radius.max())
     centres, height = analysis.deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
@@ -135,6 +136,9 @@ def analyse(args):
         "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
         "front_position": ("time", (np.array(fronts) - r0) / r0,
                            {"units": "1", "long_name": "front (r_front - r0) over r0"}),
+        "height_history": ("time", np.array([d.h_inf for d in history]),
+                           {"units": "length", "long_name": "height of the main mass"}),
+        "mean_diameter": scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
         "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
         "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
     }
@@ -143,8 +147,9 @@ def analyse(args):
     attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
                                  {**_settings(args), "input_config": io.config_of(trajectory)},
                                  trajectory.attrs.get("seed"))
-    for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0"):
+    for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration"):
         attrs[key] = float(trajectory.attrs[key])
+    attrs["n_steps"] = int(trajectory.attrs["n_steps"])
     io.write_dataset(xr.Dataset(data, coords=coords, attrs=attrs), args.output)
     log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f",
              attrs["aspect_ratio"], attrs["mu_r"], deposit.h_inf / r0, (deposit.r_inf - r0) / r0)
@@ -159,6 +164,36 @@ def collect(args):
     if args.csv:
         with io.atomic_path(args.csv) as tmp:
             summary.to_dataframe().to_csv(tmp)
+    if args.markdown:
+        from .convergence import lube_markdown
+
+        _write_text(args.markdown, lube_markdown(summary))
+
+
+def _write_text(path, text: str) -> None:
+    with io.atomic_path(path) as tmp:
+        Path(tmp).write_text(text)
+
+
+def convergence(args):
+    from . import convergence as study
+
+    groups = {name: [io.open_dataset(p, io.ANALYSIS_KIND) for p in getattr(args, name)]
+              for name in study.SUB_STUDIES}
+    table = study.runs_table(groups, args.default_end)
+    table.attrs.update(io.global_attributes("convergence-table", "colsim convergence study", _settings(args)))
+    io.write_dataset(table, args.output)
+    if args.csv:
+        with io.atomic_path(args.csv) as tmp:
+            table.to_dataframe().to_csv(tmp)
+    text = study.convergence_markdown(table)
+    log.info("convergence:\n%s", text)
+    if args.markdown:
+        _write_text(args.markdown, text)
+    if args.figure:
+        from .plots import convergence_figure
+
+        convergence_figure(table, Path(args.figure))
 
 
 def plot(args):

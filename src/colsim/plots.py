@@ -32,6 +32,7 @@ FIGURES = ("final_height.png", "runout.png", "mu_r_effect.png", "deposit_profile
 """File names that :func:`all_figures` writes, in order."""
 
 MARKERS = "osD^vP*X<>"
+QUANTITY_LABELS = {"h_inf_over_r0": "$h_\\infty/r_0$", "runout_over_r0": "$(r_\\infty - r_0)/r_0$"}
 BREAKPOINTS = (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK)
 LAW_STYLES = ("-", "--", ":", "-.")
 
@@ -270,3 +271,41 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
         side_view_figure(trajectories, output_dir / FIGURES[4]),
         front_figure(analyses, output_dir / FIGURES[5]),
     ]
+
+
+def convergence_figure(table, path: Path) -> Path:
+    """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
+    both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
+    the mean diameter, and per seed with the mean. Filled markers: h_inf/r0; open: the run-out."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 2, figsize=(10, 8), layout="constrained")
+    panels = (("time_step", "scaled_dt", "time step dt / sqrt(h0/g)"),
+              ("end_time", "duration", "time t / sqrt(h0/g)"),
+              ("column_size", "r0_over_mean_diameter", "r0 / mean diameter"),
+              ("seeds", "seed", "packing seed"))
+    for ax, (study, x_name, x_label) in zip(axes.ravel(), panels):
+        part = table.where(table.study == study, drop=True)
+        if part.sizes.get("run", 0) == 0:
+            _empty(ax, f"no {study.replace('_', ' ')} runs")
+            continue
+        for k, a in enumerate(np.unique(part.aspect_ratio.values)):
+            rows = part.where(part.aspect_ratio == a, drop=True).sortby(x_name)
+            x = rows[x_name].values
+            colour = f"C{k}"
+            for variable, fill in (("h_inf_over_r0", colour), ("runout_over_r0", "none")):
+                y = rows[variable].values
+                if study == "end_time":  # one run, measured at the default end and at its own end
+                    x = np.r_[table.attrs["default_end_time"], rows.duration.values[0]]
+                    y = np.r_[rows[f"{variable}_at_default_end"].values[0], y[0]]
+                ax.plot(x, y, "o-", color=colour, mfc=fill, label=f"a = {a:g}, {QUANTITY_LABELS[variable]}")
+                if study == "seeds":
+                    ax.axhline(np.mean(y), color=colour, lw=0.8, ls="--")
+        if study == "time_step":
+            ax.set_xscale("log")
+        ax.set_xlabel(x_label)
+        ax.set_ylabel("h_inf/r0 (filled), (r_inf - r0)/r0 (open)")
+        ax.set_title(study.replace("_", " "), fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    return _save(fig, path)
+

@@ -36,12 +36,18 @@ FIGURES = {
 }
 
 RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
+# a collapse with its own number of steps and end time (the convergence study)
+VARIANT = RUN + "/steps_{steps}_t_{duration}"
+# where the study's summary, tables and figures go (runs are shared between studies)
+STUDY_DIR = f"results/{config['study']}" if config["study"] else "results"
 
 wildcard_constraints:
     r0=r"[0-9][0-9.e+-]*",
     a=r"[0-9][0-9.e+-]*",
     mu_r=r"[0-9][0-9.e+-]*",
     seed=r"[0-9]+",
+    steps=r"[0-9]+",
+    duration=r"[0-9][0-9.e+-]*",
 
 
 def runs(name, mu_r=None, seeds=None):
@@ -62,8 +68,51 @@ def side_view_mu_r():
 
 
 def pack_height(wildcards):
-    """Height the packing of radius r0 must exceed: pack_aspect_ratio (or the largest a) times r0."""
+    """Height the packing of radius r0 must exceed: pack_aspect_ratio (or the largest a) times r0.
+    A packing only the convergence study uses (another r0, or a seed outside `seeds`) is packed
+    just tall enough for its sub-study's aspect ratio."""
+    study = config.get("convergence")
+    if study and wildcards.r0 != R0:
+        return fmt(study["column_size"]["aspect_ratio"] * float(wildcards.r0))
+    if study and wildcards.seed not in SEEDS:
+        return fmt(study["seeds"]["aspect_ratio"] * float(wildcards.r0))
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
+
+
+def run_path(name, r0, seed, a, mu_r, steps=None, duration=None):
+    """Path of file `name` of one run; a run with the study's own steps and end time is the study's run."""
+    collapse = config["collapse"]
+    steps = collapse["steps"] if steps is None else int(steps)
+    duration = collapse["duration"] if duration is None else float(duration)
+    pattern = RUN if (steps, duration) == (collapse["steps"], float(collapse["duration"])) else VARIANT
+    return pattern.format(r0=fmt(r0), seed=seed, a=fmt(a), mu_r=fmt(mu_r), steps=steps,
+                          duration=fmt(duration)) + f"/{name}"
+
+
+def convergence_runs(name):
+    """{sub-study: [paths of file `name`]} of the convergence study (empty without one)."""
+    study = config.get("convergence")
+    if not study:
+        return {}
+    mu_r, seed, steps, end = study["mu_r"], SEEDS[0], config["collapse"]["steps"], config["collapse"]["duration"]
+    longer = study["end_time"]["duration"]
+    return {
+        "time_step": [run_path(name, R0, seed, a, mu_r, n, end)
+                      for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]],
+        "end_time": [run_path(name, R0, seed, a, mu_r, round(steps * longer / end), longer)
+                     for a in study["end_time"]["aspect_ratios"]],
+        "column_size": [run_path(name, r0, seed, study["column_size"]["aspect_ratio"], mu_r)
+                        for r0 in study["column_size"]["r0"]],
+        "seeds": [run_path(name, R0, s, study["seeds"]["aspect_ratio"], mu_r)
+                  for s in study["seeds"]["seeds"]],
+    }
+
+
+def convergence_outputs():
+    """The convergence study's products, or none."""
+    if not config.get("convergence"):
+        return []
+    return [f"{STUDY_DIR}/convergence.nc", f"{STUDY_DIR}/convergence.md", f"{STUDY_DIR}/figures/convergence.png"]
 
 
 def collapse_priority(wildcards):
@@ -77,7 +126,7 @@ def output_directory(wildcards, output):
 
 
 def figures():
-    return expand("results/figures/{figure}.png", figure=FIGURES)
+    return expand(f"{STUDY_DIR}/figures/{{figure}}.png", figure=FIGURES)
 
 
 # cheap jobs that a cluster run keeps on the submitting node

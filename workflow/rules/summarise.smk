@@ -6,30 +6,37 @@ rule collect:
     input:
         runs("analysis.nc"),
     output:
-        nc="results/summary.nc",
+        nc=f"{STUDY_DIR}/summary.nc",
+        markdown=report(
+            f"{STUDY_DIR}/lube_table.md",
+            caption="../report/lube_table.rst",
+            category="Summary",
+            labels={"table": "against Lube's laws (Markdown)"},
+        ),
         csv=report(
-            "results/summary.csv",
+            f"{STUDY_DIR}/summary.csv",
             caption="../report/summary.rst",
             category="Summary",
             labels={"table": "summary over (aspect_ratio, mu_r, seed)"},
         ),
     log:
-        "results/logs/collect.log",
+        f"{STUDY_DIR}/logs/collect.log",
     benchmark:
-        "results/benchmarks/collect.tsv"
+        f"{STUDY_DIR}/benchmarks/collect.tsv"
     shell:
-        "colsim collect {input} --output {output.nc} --csv {output.csv} > {log} 2>&1"
+        "colsim collect {input} --output {output.nc} --csv {output.csv}"
+        " --markdown {output.markdown} > {log} 2>&1"
 
 
 rule plot:
     input:
-        summary="results/summary.nc",
+        summary=f"{STUDY_DIR}/summary.nc",
         analyses=runs("analysis.nc"),
         trajectories=runs("collapse.nc", mu_r=side_view_mu_r(), seeds=SEEDS[:1]),
     output:
         **{
             name: report(
-                f"results/figures/{name}.png",
+                f"{STUDY_DIR}/figures/{name}.png",
                 caption=f"../report/{name}.rst",
                 category="Figures",
                 labels={"figure": title},
@@ -39,9 +46,9 @@ rule plot:
     params:
         directory=output_directory,
     log:
-        "results/logs/plot.log",
+        f"{STUDY_DIR}/logs/plot.log",
     benchmark:
-        "results/benchmarks/plot.tsv"
+        f"{STUDY_DIR}/benchmarks/plot.tsv"
     shell:
         "colsim plot --summary {input.summary} --analyses {input.analyses}"
         " --trajectories {input.trajectories} --output-dir {params.directory} > {log} 2>&1"
@@ -50,7 +57,7 @@ rule plot:
 rule study_config:
     output:
         report(
-            "results/study_config.yaml",
+            f"{STUDY_DIR}/study_config.yaml",
             caption="../report/study_config.rst",
             category="Configuration",
             labels={"file": "study configuration"},
@@ -58,9 +65,9 @@ rule study_config:
     params:
         config=config,
     log:
-        "results/logs/study_config.log",
+        f"{STUDY_DIR}/logs/study_config.log",
     benchmark:
-        "results/benchmarks/study_config.tsv"
+        f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
         import yaml
 

@@ -1,0 +1,179 @@
+"""The study held to itself (issue 6) and to the experiments, as tables.
+
+Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks them along `run`):
+
+- time_step: the same columns with more steps over the same t/sqrt(h0/g);
+- end_time: the same columns run on past the default end at the same dt; its deposit is measured
+  on every frame, so the change from the default end to the last frame is read off one run;
+- column_size: the same a at several r0 (reported as r0 over the mean diameter);
+- seeds: the same column from several packings.
+
+:func:`convergence_markdown` turns the table into the relative changes the README quotes, and
+:func:`lube_markdown` compares a summary (mean over seeds) with Lube et al.'s laws.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .laws import lube_height, lube_runout
+
+SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
+QUANTITIES = {"h_inf_over_r0": "h_inf/r0", "runout_over_r0": "(r_inf - r0)/r0"}
+RUN_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "final_to_peak_kinetic_energy", "n_particles",
+                 "wall_time")
+
+
+def runs_table(groups: dict, default_end: float) -> "xarray.Dataset":  # noqa: F821
+    """One Dataset over `run` from {sub-study: [analysis Datasets]}; default_end: the study's end
+    time t/sqrt(h0/g), where the runs that go on are measured a second time.
+
+    Coordinates per run: study, r0, aspect_ratio, mu_r, seed, n_steps, duration (t/sqrt(h0/g) at the
+    end), scaled_dt (dt/sqrt(h0/g)), r0_over_mean_diameter. For the end_time study the deposit at the
+    default end is added as h_inf_over_r0_at_default_end and runout_over_r0_at_default_end.
+    """
+    import xarray as xr
+
+    unknown = set(groups) - set(SUB_STUDIES)
+    if unknown:
+        raise ValueError(f"unknown convergence sub-studies {sorted(unknown)}; choose from {SUB_STUDIES}")
+    rows = [(study, analysis) for study in SUB_STUDIES for analysis in groups.get(study, [])]
+    if not rows:
+        raise ValueError("no analyses to tabulate")
+    coords = {
+        "study": [s for s, _ in rows],
+        "r0": [float(a.attrs["r0"]) for _, a in rows],
+        "aspect_ratio": [float(a.attrs["aspect_ratio"]) for _, a in rows],
+        "mu_r": [float(a.attrs["mu_r"]) for _, a in rows],
+        "seed": [int(a.attrs.get("seed", 0)) for _, a in rows],
+        "n_steps": [int(a.attrs["n_steps"]) for _, a in rows],
+        "duration": [float(a.attrs["duration"]) for _, a in rows],
+        "r0_over_mean_diameter": [float(a.attrs["r0"]) / float(a["mean_diameter"]) for _, a in rows],
+    }
+    coords["scaled_dt"] = list(np.array(coords["duration"]) / np.array(coords["n_steps"]))
+    long_names = {"study": "convergence sub-study", "r0": "cylinder radius", "aspect_ratio": "aspect ratio h0/r0",
+                  "mu_r": "rolling resistance coefficient", "seed": "packing seed",
+                  "n_steps": "number of time steps", "duration": "end time over sqrt(h0/g)",
+                  "r0_over_mean_diameter": "r0 over the mean particle diameter",
+                  "scaled_dt": "time step over sqrt(h0/g)"}
+    data = {}
+    for name in RUN_VARIABLES:
+        data[name] = ("run", [float(a[name]) for _, a in rows], dict(rows[0][1][name].attrs))
+    for name, history in (("h_inf_over_r0", "height_history"), ("runout_over_r0", "front_position")):
+        data[f"{name}_at_default_end"] = (
+            "run", [_at_time(a, history, default_end) for _, a in rows],
+            {"units": "1", "long_name": f"{rows[0][1][name].attrs['long_name']} at the default end time"})
+    coords = {k: ("run", v, {"long_name": long_names[k], "units": "length" if k == "r0" else "1"})
+              for k, v in coords.items()}
+    return xr.Dataset(data, coords=coords, attrs={"default_end_time": float(default_end)})
+
+
+def _at_time(analysis, history: str, scaled_time: float) -> float:
+    """A history variable of an analysis at the frame nearest scaled_time (NaN if not covered)."""
+    t = analysis["scaled_time"].values
+    if not np.isfinite(scaled_time) or len(t) == 0 or scaled_time > t.max() + 1e-9:
+        return np.nan
+    values = analysis[history].values
+    if history == "height_history":
+        values = values / float(analysis.attrs["r0"])
+    return float(values[np.argmin(np.abs(t - scaled_time))])
+
+
+def _relative(new, old) -> float:
+    return abs(new - old) / max(abs(old), 1e-12)
+
+
+def convergence_markdown(table) -> str:
+    """Markdown tables of the relative change of h_inf/r0 and the run-out per refinement."""
+    lines = []
+    study = table.where(table.study == "time_step", drop=True)
+    if study.sizes.get("run", 0):
+        lines += ["### Time step (same end time, more steps)", "",
+                  "| a | steps | dt/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
+                  "|---|---|---|---|---|---|---|"]
+        for a in np.unique(study.aspect_ratio.values):
+            rows = study.where(study.aspect_ratio == a, drop=True).sortby("n_steps")
+            previous = None
+            for k in range(rows.sizes["run"]):
+                h, r = float(rows.h_inf_over_r0[k]), float(rows.runout_over_r0[k])
+                changes = ("", "") if previous is None else (
+                    f"{100 * _relative(h, previous[0]):.1f} %", f"{100 * _relative(r, previous[1]):.1f} %")
+                lines.append(f"| {a:g} | {int(rows.n_steps[k])} | {float(rows.scaled_dt[k]):.3g} | {h:.3f} | "
+                             f"{changes[0]} | {r:.3f} | {changes[1]} |")
+                previous = (h, r)
+        lines.append("")
+    study = table.where(table.study == "end_time", drop=True)
+    if study.sizes.get("run", 0):
+        lines += ["### End time (run on at the same dt)", "",
+                  "| a | end t/sqrt(h0/g) | h_inf/r0 at default end | at end | change | run-out at default end "
+                  "| at end | change | final/peak kinetic energy |", "|---|---|---|---|---|---|---|---|---|"]
+        for k in range(study.sizes["run"]):
+            h0, h1 = float(study.h_inf_over_r0_at_default_end[k]), float(study.h_inf_over_r0[k])
+            r0, r1 = float(study.runout_over_r0_at_default_end[k]), float(study.runout_over_r0[k])
+            lines.append(f"| {float(study.aspect_ratio[k]):g} | {float(study.duration[k]):g} | {h0:.3f} | {h1:.3f} | "
+                         f"{100 * _relative(h1, h0):.1f} % | {r0:.3f} | {r1:.3f} | {100 * _relative(r1, r0):.1f} % | "
+                         f"{float(study.final_to_peak_kinetic_energy[k]):.2g} |")
+        lines.append("")
+    study = table.where(table.study == "column_size", drop=True)
+    if study.sizes.get("run", 0):
+        rows = study.sortby("r0")
+        lines += ["### Column size", "", "| a | r0 | r0/mean d | spheres | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
+                  "|---|---|---|---|---|---|---|---|"]
+        previous = None
+        for k in range(rows.sizes["run"]):
+            h, r = float(rows.h_inf_over_r0[k]), float(rows.runout_over_r0[k])
+            changes = ("", "") if previous is None else (
+                f"{100 * _relative(h, previous[0]):.1f} %", f"{100 * _relative(r, previous[1]):.1f} %")
+            lines.append(f"| {float(rows.aspect_ratio[k]):g} | {float(rows.r0[k]):g} | "
+                         f"{float(rows.r0_over_mean_diameter[k]):.1f} | {int(rows.n_particles[k])} | {h:.3f} | "
+                         f"{changes[0]} | {r:.3f} | {changes[1]} |")
+            previous = (h, r)
+        lines.append("")
+    study = table.where(table.study == "seeds", drop=True)
+    if study.sizes.get("run", 0):
+        lines += ["### Seeds", "", "| a | seeds | h_inf/r0 mean | std | std/mean | (r_inf - r0)/r0 mean | std | std/mean |",
+                  "|---|---|---|---|---|---|---|---|"]
+        h, r = study.h_inf_over_r0.values, study.runout_over_r0.values
+        lines.append(f"| {float(study.aspect_ratio[0]):g} | {len(h)} | {h.mean():.3f} | {h.std(ddof=1) if len(h) > 1 else 0:.3f} | "
+                     f"{100 * (h.std(ddof=1) if len(h) > 1 else 0) / h.mean():.1f} % | {r.mean():.3f} | "
+                     f"{r.std(ddof=1) if len(r) > 1 else 0:.3f} | "
+                     f"{100 * (r.std(ddof=1) if len(r) > 1 else 0) / max(r.mean(), 1e-12):.1f} % |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def claims_markdown(summary) -> str:
+    """Markdown table of the paper's qualitative claims, per mu_r and a (mean over seeds): the final
+    height over h0 (1 where the top is undisturbed, below 1 where it was eroded), the radius of the
+    top disc that did not move, over r0, and the share of grains in the main mass."""
+    lines = ["| mu_r | a | h_inf/h0 | undisturbed top radius/r0 | main mass / grains |", "|---|---|---|---|---|"]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            kept = np.nanmean(part.n_main_mass.values / part.n_particles.values)
+            lines.append(f"| {float(m):g} | {a:g} | {np.nanmean(part.h_inf_over_r0.values) / a:.2f} | "
+                         f"{np.nanmean(part.undisturbed_top_radius.values):.2f} | {kept:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def lube_markdown(summary, mu_r: float | None = None) -> str:
+    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per a."""
+    mu_rs = summary.mu_r.values if mu_r is None else [min(summary.mu_r.values, key=lambda m: abs(m - mu_r))]
+    lines = []
+    for m in mu_rs:
+        part = summary.sel(mu_r=m)
+        seeds = int(np.isfinite(part.h_inf_over_r0.values).sum(axis=-1).min())
+        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
+                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for a in part.aspect_ratio.values:
+            h = part.h_inf_over_r0.sel(aspect_ratio=a).values
+            r = part.runout_over_r0.sel(aspect_ratio=a).values
+            h_mean, r_mean = np.nanmean(h), np.nanmean(r)
+            h_law, r_law = lube_height(a), lube_runout(a)
+            lines.append(f"| {a:g} | {h_mean:.3f} | {np.nanmax(h) - np.nanmin(h):.3f} | {h_law:.3f} | "
+                         f"{100 * (h_mean - h_law) / h_law:+.0f} % | {r_mean:.3f} | {np.nanmax(r) - np.nanmin(r):.3f} | "
+                         f"{r_law:.3f} | {100 * (r_mean - r_law) / r_law:+.0f} % |")
+        lines.append("")
+    if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
+        lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    return "\n".join(lines)

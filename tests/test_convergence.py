@@ -1,0 +1,82 @@
+"""The convergence study's tables and figure, from synthetic analyses with known numbers."""
+import numpy as np
+import pytest
+
+xr = pytest.importorskip("xarray")
+
+from colsim.convergence import convergence_markdown, lube_markdown, runs_table  # noqa: E402
+from colsim.laws import lube_height, lube_runout  # noqa: E402
+
+
+def analysis(a=2.0, r0=2.0, seed=1, steps=100, duration=4.0, h=1.0, runout=1.5, mean_d=0.4):
+    """An analysis Dataset as `colsim analyse` writes it (the variables the table reads).
+    Its height and front grow linearly to their final values over the run (frames every 0.5)."""
+    t = np.arange(0.0, duration + 1e-9, 0.5)
+    ramp = t / duration
+    scalar = lambda value, units="1": ((), value, {"units": units, "long_name": "x"})  # noqa: E731
+    return xr.Dataset(
+        {"h_inf_over_r0": scalar(h), "runout_over_r0": scalar(runout),
+         "final_to_peak_kinetic_energy": scalar(1e-3), "n_particles": scalar(900), "wall_time": scalar(10.0, "s"),
+         "mean_diameter": scalar(mean_d, "length"),
+         "height_history": ("time", (a + (h - a) * ramp) * r0, {"units": "length"}),
+         "front_position": ("time", runout * ramp, {"units": "1"}),
+         "scaled_time": ("time", t, {"units": "1"})},
+        attrs={"r0": r0, "aspect_ratio": a, "mu_r": 0.12, "seed": seed, "n_steps": steps, "duration": duration})
+
+
+def test_table_has_one_row_per_run_with_its_coordinates():
+    groups = {"time_step": [analysis(steps=100), analysis(steps=200)],
+              "end_time": [analysis(steps=200, duration=8.0)],
+              "column_size": [analysis(r0=2.0), analysis(r0=3.0)],
+              "seeds": [analysis(seed=s) for s in (1, 2, 3)]}
+    table = runs_table(groups, default_end=4.0)
+    assert table.sizes["run"] == 8
+    assert list(table.study.values[:3]) == ["time_step", "time_step", "end_time"]
+    np.testing.assert_allclose(table.scaled_dt.values[:2], [0.04, 0.02])
+    np.testing.assert_allclose(table.r0_over_mean_diameter.values[3:5], [5.0, 7.5])
+    # the run to t = 8 is measured again at t = 4, half-way along its ramps
+    end = table.isel(run=2)
+    assert float(end.runout_over_r0_at_default_end) == pytest.approx(0.75)
+    assert float(end.h_inf_over_r0_at_default_end) == pytest.approx(1.5)
+    assert table.scaled_dt.attrs["long_name"] == "time step over sqrt(h0/g)"
+    assert table.h_inf_over_r0.attrs["units"] == "1"
+    assert table.attrs["default_end_time"] == 4.0
+
+
+def test_markdown_gives_the_relative_change_per_refinement():
+    groups = {"time_step": [analysis(steps=100, h=1.0, runout=2.0), analysis(steps=200, h=1.1, runout=2.0),
+                            analysis(steps=400, h=1.1, runout=1.9)],
+              "seeds": [analysis(seed=s, h=h) for s, h in ((1, 0.9), (2, 1.0), (3, 1.1))]}
+    text = convergence_markdown(runs_table(groups, 4.0))
+    assert "| 2 | 200 | 0.02 | 1.100 | 10.0 % | 2.000 | 0.0 % |" in text
+    assert "| 2 | 400 | 0.01 | 1.100 | 0.0 % | 1.900 | 5.0 % |" in text
+    assert "| 2 | 3 | 1.000 | 0.100 | 10.0 % |" in text   # sample std of 0.9, 1.0, 1.1
+
+
+def test_unknown_sub_study_and_empty_input_are_errors():
+    with pytest.raises(ValueError, match="unknown convergence sub-studies"):
+        runs_table({"timestep": [analysis()]}, 4.0)
+    with pytest.raises(ValueError, match="no analyses"):
+        runs_table({}, 4.0)
+
+
+def test_lube_table_reports_zero_error_on_the_law_itself():
+    ratios = np.array([0.5, 2.0, 5.0])
+    h = np.stack([lube_height(ratios)] * 2, axis=-1)[:, None, :]
+    r = np.stack([lube_runout(ratios)] * 2, axis=-1)[:, None, :]
+    dims = ("aspect_ratio", "mu_r", "seed")
+    summary = xr.Dataset({"h_inf_over_r0": (dims, h), "runout_over_r0": (dims, r)},
+                         coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1, 2]})
+    text = lube_markdown(summary)
+    assert "mean of 2 seeds" in text
+    assert text.count("+0 %") == 6
+    assert "| 0.5 | 0.500 | 0.000 | 0.500 | +0 % | 0.620 |" in text
+
+
+def test_convergence_figure_is_written(tmp_path):
+    from colsim.plots import convergence_figure
+
+    groups = {"time_step": [analysis(steps=n) for n in (100, 200)], "end_time": [analysis(duration=8.0)],
+              "seeds": [analysis(seed=s) for s in (1, 2)]}
+    path = convergence_figure(runs_table(groups, 4.0), tmp_path / "convergence.png")
+    assert path.stat().st_size > 10000
