@@ -163,7 +163,7 @@ def test_the_paper_study_plans_its_convergence_runs(tmp_path):
         assert f"{run.format(a=a)}/collapse.nc" in planned                    # 100 steps: the study's own
     assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
     assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
-    assert "results/r0_2/seed_3/a_5/mu_r_0/collapse.nc" in planned
+    assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned
     assert {"results/paper/summary.nc", "results/paper/lube_table.md", "results/paper/convergence.nc",
             "results/paper/figures/convergence.png"} <= planned
 

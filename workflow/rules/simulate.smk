@@ -6,6 +6,7 @@
 rule pack:
     output:
         "results/r0_{r0}/seed_{seed}/packing.nc",
+    priority: 1000
     params:
         height=pack_height,
         root_seed=config["root_seed"],
@@ -29,11 +30,14 @@ rule pack:
         " --solver {params.solver} --output {output} > {log} 2>&1"
 
 
+# A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
+# passed up the DAG, so without this the columns of the tallest collapses were cut last).
 rule trim:
     input:
         "results/r0_{r0}/seed_{seed}/packing.nc",
     output:
         "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+    priority: 1000
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/trim.log",
     benchmark:
