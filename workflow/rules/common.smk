@@ -116,8 +116,10 @@ def convergence_outputs():
 
 
 def collapse_priority(wildcards):
-    """Scheduling priority of a collapse: 10 a, so that the costliest columns run first."""
-    return int(round(10 * float(wildcards.a)))
+    """Scheduling priority of a collapse: 10 a (times its steps over the study's), so that the
+    costliest columns run first."""
+    steps = int(wildcards.get("steps", config["collapse"]["steps"]))
+    return int(round(10 * float(wildcards.a) * steps / config["collapse"]["steps"]))
 
 
 def output_directory(wildcards, output):
