@@ -82,62 +82,72 @@ def _relative(new, old) -> float:
     return abs(new - old) / max(abs(old), 1e-12)
 
 
+def _with_changes(rows):
+    """(k, h_inf/r0, run-out, change of each from the row before as text) along `rows`' runs."""
+    previous = None
+    for k in range(rows.sizes["run"]):
+        h, r = float(rows.h_inf_over_r0[k]), float(rows.runout_over_r0[k])
+        changes = ("", "") if previous is None else (
+            f"{100 * _relative(h, previous[0]):.1f} %", f"{100 * _relative(r, previous[1]):.1f} %")
+        yield k, h, r, changes
+        previous = (h, r)
+
+
+def _time_step_lines(study) -> list[str]:
+    lines = ["### Time step (same end time, more steps)", "",
+             "| a | steps | dt/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
+             "|---|---|---|---|---|---|---|"]
+    for a in np.unique(study.aspect_ratio.values):
+        rows = study.where(study.aspect_ratio == a, drop=True).sortby("n_steps")
+        for k, h, r, changes in _with_changes(rows):
+            lines.append(f"| {a:g} | {int(rows.n_steps[k])} | {float(rows.scaled_dt[k]):.3g} | {h:.3f} | "
+                         f"{changes[0]} | {r:.3f} | {changes[1]} |")
+    return lines
+
+
+def _end_time_lines(study) -> list[str]:
+    lines = ["### End time (run on at the same dt)", "",
+             "| a | end t/sqrt(h0/g) | h_inf/r0 at default end | at end | change | run-out at default end "
+             "| at end | change | final/peak kinetic energy |", "|---|---|---|---|---|---|---|---|---|"]
+    for k in range(study.sizes["run"]):
+        h0, h1 = float(study.h_inf_over_r0_at_default_end[k]), float(study.h_inf_over_r0[k])
+        r0, r1 = float(study.runout_over_r0_at_default_end[k]), float(study.runout_over_r0[k])
+        lines.append(f"| {float(study.aspect_ratio[k]):g} | {float(study.duration[k]):g} | {h0:.3f} | {h1:.3f} | "
+                     f"{100 * _relative(h1, h0):.1f} % | {r0:.3f} | {r1:.3f} | {100 * _relative(r1, r0):.1f} % | "
+                     f"{float(study.final_to_peak_kinetic_energy[k]):.2g} |")
+    return lines
+
+
+def _column_size_lines(study) -> list[str]:
+    lines = ["### Column size", "", "| a | r0 | r0/mean d | spheres | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
+             "|---|---|---|---|---|---|---|---|"]
+    rows = study.sortby("r0")
+    for k, h, r, changes in _with_changes(rows):
+        lines.append(f"| {float(rows.aspect_ratio[k]):g} | {float(rows.r0[k]):g} | "
+                     f"{float(rows.r0_over_mean_diameter[k]):.1f} | {int(rows.n_particles[k])} | {h:.3f} | "
+                     f"{changes[0]} | {r:.3f} | {changes[1]} |")
+    return lines
+
+
+def _seed_lines(study) -> list[str]:
+    def spread(values):
+        std = values.std(ddof=1) if len(values) > 1 else 0.0
+        return f"{values.mean():.3f} | {std:.3f} | {100 * std / max(abs(values.mean()), 1e-12):.1f} %"
+
+    h, r = study.h_inf_over_r0.values, study.runout_over_r0.values
+    return ["### Seeds", "", "| a | seeds | h_inf/r0 mean | std | std/mean | (r_inf - r0)/r0 mean | std | std/mean |",
+            "|---|---|---|---|---|---|---|---|",
+            f"| {float(study.aspect_ratio[0]):g} | {len(h)} | {spread(h)} | {spread(r)} |"]
+
+
 def convergence_markdown(table) -> str:
     """Markdown tables of the relative change of h_inf/r0 and the run-out per refinement."""
     lines = []
-    study = table.where(table.study == "time_step", drop=True)
-    if study.sizes.get("run", 0):
-        lines += ["### Time step (same end time, more steps)", "",
-                  "| a | steps | dt/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
-                  "|---|---|---|---|---|---|---|"]
-        for a in np.unique(study.aspect_ratio.values):
-            rows = study.where(study.aspect_ratio == a, drop=True).sortby("n_steps")
-            previous = None
-            for k in range(rows.sizes["run"]):
-                h, r = float(rows.h_inf_over_r0[k]), float(rows.runout_over_r0[k])
-                changes = ("", "") if previous is None else (
-                    f"{100 * _relative(h, previous[0]):.1f} %", f"{100 * _relative(r, previous[1]):.1f} %")
-                lines.append(f"| {a:g} | {int(rows.n_steps[k])} | {float(rows.scaled_dt[k]):.3g} | {h:.3f} | "
-                             f"{changes[0]} | {r:.3f} | {changes[1]} |")
-                previous = (h, r)
-        lines.append("")
-    study = table.where(table.study == "end_time", drop=True)
-    if study.sizes.get("run", 0):
-        lines += ["### End time (run on at the same dt)", "",
-                  "| a | end t/sqrt(h0/g) | h_inf/r0 at default end | at end | change | run-out at default end "
-                  "| at end | change | final/peak kinetic energy |", "|---|---|---|---|---|---|---|---|---|"]
-        for k in range(study.sizes["run"]):
-            h0, h1 = float(study.h_inf_over_r0_at_default_end[k]), float(study.h_inf_over_r0[k])
-            r0, r1 = float(study.runout_over_r0_at_default_end[k]), float(study.runout_over_r0[k])
-            lines.append(f"| {float(study.aspect_ratio[k]):g} | {float(study.duration[k]):g} | {h0:.3f} | {h1:.3f} | "
-                         f"{100 * _relative(h1, h0):.1f} % | {r0:.3f} | {r1:.3f} | {100 * _relative(r1, r0):.1f} % | "
-                         f"{float(study.final_to_peak_kinetic_energy[k]):.2g} |")
-        lines.append("")
-    study = table.where(table.study == "column_size", drop=True)
-    if study.sizes.get("run", 0):
-        rows = study.sortby("r0")
-        lines += ["### Column size", "", "| a | r0 | r0/mean d | spheres | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
-                  "|---|---|---|---|---|---|---|---|"]
-        previous = None
-        for k in range(rows.sizes["run"]):
-            h, r = float(rows.h_inf_over_r0[k]), float(rows.runout_over_r0[k])
-            changes = ("", "") if previous is None else (
-                f"{100 * _relative(h, previous[0]):.1f} %", f"{100 * _relative(r, previous[1]):.1f} %")
-            lines.append(f"| {float(rows.aspect_ratio[k]):g} | {float(rows.r0[k]):g} | "
-                         f"{float(rows.r0_over_mean_diameter[k]):.1f} | {int(rows.n_particles[k])} | {h:.3f} | "
-                         f"{changes[0]} | {r:.3f} | {changes[1]} |")
-            previous = (h, r)
-        lines.append("")
-    study = table.where(table.study == "seeds", drop=True)
-    if study.sizes.get("run", 0):
-        lines += ["### Seeds", "", "| a | seeds | h_inf/r0 mean | std | std/mean | (r_inf - r0)/r0 mean | std | std/mean |",
-                  "|---|---|---|---|---|---|---|---|"]
-        h, r = study.h_inf_over_r0.values, study.runout_over_r0.values
-        lines.append(f"| {float(study.aspect_ratio[0]):g} | {len(h)} | {h.mean():.3f} | {h.std(ddof=1) if len(h) > 1 else 0:.3f} | "
-                     f"{100 * (h.std(ddof=1) if len(h) > 1 else 0) / h.mean():.1f} % | {r.mean():.3f} | "
-                     f"{r.std(ddof=1) if len(r) > 1 else 0:.3f} | "
-                     f"{100 * (r.std(ddof=1) if len(r) > 1 else 0) / max(r.mean(), 1e-12):.1f} % |")
-        lines.append("")
+    for name, section in (("time_step", _time_step_lines), ("end_time", _end_time_lines),
+                          ("column_size", _column_size_lines), ("seeds", _seed_lines)):
+        study = table.where(table.study == name, drop=True)
+        if study.sizes.get("run", 0):
+            lines += section(study) + [""]
     return "\n".join(lines)
 
 
