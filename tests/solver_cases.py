@@ -37,3 +37,18 @@ def mid_collapse(state: ParticleState, steps: int = 6) -> ParticleState:
     for k in range(steps):
         state = step(state, COLLAPSE, ClarabelSolver(), k).state
     return state
+
+
+def against_clarabel(solver, state: ParticleState):
+    """Solve one collapse step from `state` with `solver` and with Clarabel at 1e-10.
+
+    Returns (program, solution, relative difference of the increments, relative difference of the
+    net contact force on the particles B' lam, which is unique even where the forces are not)."""
+    program, _ = collapse_program(state)
+    assert program.m > 100 and np.all(program.mu > 0) and np.any(program.mu_r > 0)
+    ref = ClarabelSolver(tolerance=1e-10).solve(program)
+    sol = solver.solve(program)
+    du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
+    net = program.jacobian.T @ sol.forces.ravel()
+    net_ref = program.jacobian.T @ ref.forces.ravel()
+    return program, sol, du, np.linalg.norm(net - net_ref) / np.linalg.norm(net_ref)

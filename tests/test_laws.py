@@ -14,7 +14,6 @@ from colsim import laws
     (laws.lube_height, 0.5, 0.5),
     (laws.lube_height, 1.0 - 1e-12, 1.0),
     (laws.lube_height, 1.0, 0.88),
-    (laws.lube_height, 64.0 ** 0, 0.88),
     (laws.lube_height, 9.0, 0.88 * 9.0 ** (1 / 6)),
     (laws.lajeunesse_runout, 0.5, 0.675),
     (laws.lajeunesse_runout, 0.74 - 1e-12, 1.35 * 0.74),

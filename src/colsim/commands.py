@@ -162,8 +162,7 @@ def collect(args):
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
     io.write_dataset(summary, args.output)
     if args.csv:
-        with io.atomic_path(args.csv) as tmp:
-            summary.to_dataframe().to_csv(tmp)
+        _write_csv(args.csv, summary)
     if args.markdown:
         from .convergence import lube_markdown
 
@@ -175,6 +174,12 @@ def _write_text(path, text: str) -> None:
         Path(tmp).write_text(text)
 
 
+def _write_csv(path, dataset) -> None:
+    """A Dataset as a CSV table (one row per coordinate combination), written atomically."""
+    with io.atomic_path(path) as tmp:
+        dataset.to_dataframe().to_csv(tmp)
+
+
 def convergence(args):
     from . import convergence as study
 
@@ -184,8 +189,7 @@ def convergence(args):
     table.attrs.update(io.global_attributes("convergence-table", "colsim convergence study", _settings(args)))
     io.write_dataset(table, args.output)
     if args.csv:
-        with io.atomic_path(args.csv) as tmp:
-            table.to_dataframe().to_csv(tmp)
+        _write_csv(args.csv, table)
     text = study.convergence_markdown(table)
     log.info("convergence:\n%s", text)
     if args.markdown:
