@@ -53,6 +53,18 @@ def test_markdown_gives_the_relative_change_per_refinement():
     assert "| 2 | 3 | 1.000 | 0.100 | 10.0 % |" in text   # sample std of 0.9, 1.0, 1.1
 
 
+def test_column_size_is_tabled_per_aspect_ratio_at_both_end_times():
+    groups = {"column_size": [analysis(a=0.5, r0=r0, duration=8.0, steps=200, runout=r, h=0.5)
+                              for r0, r in ((3.0, 0.6), (2.0, 0.4))]
+              + [analysis(a=2.0, r0=2.0, runout=1.5)]}
+    text = convergence_markdown(runs_table(groups, 4.0))
+    assert "run-out at t/sqrt(h0/g) = 4 |" in text
+    # sorted by r0 within a = 0.5; the run-out at t = 4 is half-way along the ramp
+    assert "| 0.5 | 2 | 5.0 | 900 | 8 | 0.500 |  | 0.400 |  | 0.200 |" in text
+    assert "| 0.5 | 3 | 7.5 | 900 | 8 | 0.500 | 0.0 % | 0.600 | 50.0 % | 0.300 |" in text
+    assert "| 2 | 2 | 5.0 | 900 | 4 | 1.000 |  | 1.500 |  | 1.500 |" in text
+
+
 def test_unknown_sub_study_and_empty_input_are_errors():
     with pytest.raises(ValueError, match="unknown convergence sub-studies"):
         runs_table({"timestep": [analysis()]}, 4.0)
@@ -77,6 +89,7 @@ def test_convergence_figure_is_written(tmp_path):
     from colsim.plots import convergence_figure
 
     groups = {"time_step": [analysis(steps=n) for n in (100, 200)], "end_time": [analysis(duration=8.0)],
+              "column_size": [analysis(a=0.5, r0=r0, duration=8.0) for r0 in (2.0, 3.0)],
               "seeds": [analysis(seed=s) for s in (1, 2)]}
     path = convergence_figure(runs_table(groups, 4.0), tmp_path / "convergence.png")
     assert path.stat().st_size > 10000

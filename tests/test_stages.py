@@ -131,6 +131,38 @@ def test_collapse_resumes_from_checkpoint_to_the_same_result(packing, tmp_path):
     assert other.resumed_from == 0
 
 
+def test_rest_criterion_needs_the_whole_window_steady():
+    from colsim.collapse import deposit_at_rest
+
+    t = np.arange(0.0, 3.01, 0.2)
+    steady = np.r_[np.linspace(1.0, 2.0, 6), np.full(10, 2.0)]      # moving until t = 1, then still
+    assert deposit_at_rest(t, np.ones_like(t), steady, window=1.0, tolerance=0.01)
+    assert not deposit_at_rest(t[:8], np.ones(8), steady[:8], window=1.0, tolerance=0.01)  # t <= 1.4
+    assert not deposit_at_rest(t[:3], np.ones(3), np.ones(3), window=1.0, tolerance=0.01)  # too short
+    assert not deposit_at_rest(t, steady, np.ones_like(t), window=3.0, tolerance=0.01)      # height moved
+
+
+def test_collapse_runs_on_to_rest_and_stops_there(packing):
+    """An a = 0.5 column (79 spheres) run on past its nominal end t/sqrt(h0/g) = 2: it ends where the
+    deposit is at rest, well before 12 (measured: at rest at t = 4.5, step 45 of 120 at most), and
+    follows the fixed-length run exactly up to its end."""
+    h0 = 0.5 * R0
+    column = trim(packing.state, h0)
+    fixed = CollapseSettings(n_steps=20, duration=2.0, frame_every=5)
+    settings = CollapseSettings(n_steps=20, duration=2.0, frame_every=5, max_duration=12.0,
+                                rest_window=1.0, rest_tolerance=0.1)
+    run = collapse(column, h0, settings)
+    assert run.at_rest
+    assert settings.n_steps <= len(run.diagnostics) < settings.max_steps
+    assert run.frames[-1][0] == len(run.diagnostics)
+    short = collapse(column, h0, fixed)              # the same steps up to the nominal end
+    assert run.frames[len(short.frames) - 1][0] == short.frames[-1][0]
+    np.testing.assert_allclose(run.frames[len(short.frames) - 1][1].position, short.frames[-1][1].position,
+                               rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="max_duration"):
+        CollapseSettings(duration=4.0, max_duration=2.0)
+
+
 def _run_cli(*args, cwd):
     return subprocess.run([sys.executable, "-m", "colsim.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=300)

@@ -162,10 +162,28 @@ def test_the_paper_study_plans_its_convergence_runs(tmp_path):
             assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
         assert f"{run.format(a=a)}/collapse.nc" in planned                    # 100 steps: the study's own
     assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
+    for r0 in ("2", "3", "4"):   # small columns at three sizes, run on to t/sqrt(h0/g) = 8
+        for a in ("0.5", "1"):
+            assert f"results/r0_{r0}/seed_1/a_{a}/mu_r_0.12/steps_200_t_8/collapse.nc" in planned
+    assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
     assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
     assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned
     assert {"results/paper/summary.nc", "results/paper/lube_table.md", "results/paper/convergence.nc",
             "results/paper/figures/convergence.png"} <= planned
+
+
+def test_run_to_rest_reaches_the_collapse_command(tmp_path):
+    """collapse.max_duration set: every study collapse gets the rest options; unset (the paper):
+    none does, and the command is the fixed-length one."""
+    directory = copy_workflow(tmp_path)
+    (directory / "rest.yaml").write_text("collapse: {max_duration: 8, rest_tolerance: 0.2}\n")
+    on = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "rest.yaml", timeout=120)
+    off = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", timeout=120)
+    assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
+    commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
+    assert len(commands) == 4
+    assert all("--max-duration 8 --rest-window 1.0 --rest-tolerance 0.2" in c for c in commands)
+    assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 
 TINY_CONVERGENCE = """
@@ -173,7 +191,7 @@ convergence:
   mu_r: 0.12
   time_step: {aspect_ratios: [0.5], steps: [40, 80]}
   end_time: {aspect_ratios: [0.5], duration: 6.0}
-  column_size: {aspect_ratio: 0.5, r0: [1, 1.25]}
+  column_size: [{aspect_ratio: 0.5, r0: [1, 1.25]}, {aspect_ratio: 1, r0: [1.25], duration: 6.0}]
   seeds: {aspect_ratio: 0.5, seeds: [1, 2]}
 """
 
@@ -189,7 +207,7 @@ def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
     table = xr.load_dataset(tiny_study / "results" / "convergence.nc")
     assert sorted(set(table.study.values)) == ["column_size", "end_time", "seeds", "time_step"]
-    assert table.sizes["run"] == 2 + 1 + 2 + 2
+    assert table.sizes["run"] == 2 + 1 + 3 + 2
     assert np.all(np.isfinite(table.h_inf_over_r0.values)) and np.all(np.isfinite(table.runout_over_r0.values))
     end = table.where(table.study == "end_time", drop=True)
     assert np.isfinite(end.runout_over_r0_at_default_end.values).all()

@@ -89,6 +89,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--floor-mu-r", type=_non_negative, default=None, help="floor's mu_r (default: same as --mu-r)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
     p.add_argument("--steps", type=_positive_int, default=100, help="number of equal steps (default: %(default)s)")
+    p.add_argument("--max-duration", type=_positive, default=None,
+                   help="go on past --duration at the same dt until the deposit is at rest, up to this "
+                        "t / sqrt(h0/g) (default: stop at --duration)")
+    p.add_argument("--rest-window", type=_positive, default=1.0,
+                   help="at rest: h_inf and r_inf steady over this t / sqrt(h0/g) (default: %(default)s)")
+    p.add_argument("--rest-tolerance", type=_positive, default=0.1,
+                   help="at rest: h_inf and r_inf moved less than this many mean diameters (default: %(default)s)")
     p.add_argument("--frame-every", type=_positive_int, default=5, help="keep a frame every k steps (default: %(default)s)")
     p.add_argument("--checkpoint-every", type=_positive_int, default=10, help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")

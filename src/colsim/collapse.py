@@ -2,6 +2,9 @@
 
 The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
 mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
+With max_duration set, it goes on at the same dt until the deposit is at rest (its final height and
+run-out, measured as in :mod:`colsim.analysis`, moved less than rest_tolerance mean diameters over
+the last rest_window) or t / sqrt(h0/g) reaches max_duration, whichever comes first.
 Frames (state every `frame_every` steps, and the first and last) and per-step diagnostics are kept.
 A checkpoint is written every `checkpoint_every` steps (atomically); a run started again with the
 same inputs resumes from it and ends with the same result as an uninterrupted run.
@@ -18,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .analysis import measure_deposit
 from .io import atomic_path
 from .solvers import Solver, WarmStart, make_solver
 from .state import ContactLaw, ParticleState, StepSettings, Walls
@@ -43,6 +47,9 @@ class CollapseSettings:
     solver: str = "clarabel"
     solver_options: dict = field(default_factory=dict)
     checkpoint_every: int = 10
+    max_duration: float | None = None   # None: stop at `duration` (the paper)
+    rest_window: float = 1.0             # t / sqrt(h0/g)
+    rest_tolerance: float = 0.1          # mean diameters
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
@@ -53,6 +60,11 @@ class CollapseSettings:
                              f"{self.duration}, {self.n_steps}, {self.frame_every}")
         if self.gravity <= 0:
             raise ValueError(f"gravity must be positive, got {self.gravity}")
+        if self.max_duration is not None and self.max_duration < self.duration:
+            raise ValueError(f"max_duration {self.max_duration} is below duration {self.duration}")
+        if self.rest_window <= 0 or self.rest_tolerance <= 0:
+            raise ValueError(f"need rest_window > 0 and rest_tolerance > 0; got "
+                             f"{self.rest_window}, {self.rest_tolerance}")
 
     def law(self) -> ContactLaw:
         floor_mu = self.mu if self.floor_mu is None else self.floor_mu
@@ -62,16 +74,44 @@ class CollapseSettings:
     def time_step(self, h0: float) -> float:
         return self.duration / self.n_steps * np.sqrt(h0 / self.gravity)
 
+    def scaled_time(self, steps: int) -> float:
+        """t / sqrt(h0/g) after `steps` steps."""
+        return steps * self.duration / self.n_steps
+
+    @property
+    def max_steps(self) -> int:
+        """Steps to max_duration (n_steps without one)."""
+        if self.max_duration is None:
+            return self.n_steps
+        return int(round(self.n_steps * self.max_duration / self.duration))
+
 
 @dataclass
 class CollapseRun:
-    """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step)."""
+    """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step);
+    at_rest: whether the deposit was found at rest (None: not checked, no max_duration)."""
 
     initial: ParticleState
     frames: list
     diagnostics: list
     wall_time: float
     resumed_from: int = 0
+    at_rest: bool | None = None
+
+
+def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> bool:
+    """True when the history (frame times, h_inf, r_inf; lengths in any one unit) covers `window`
+    back from its last frame and neither quantity moved more than `tolerance` within it."""
+    times, heights, fronts = (np.asarray(v, dtype=float) for v in (times, heights, fronts))
+    if len(times) == 0 or times[-1] - times[0] < window * (1 - 1e-9):
+        return False
+    recent = times >= times[-1] - window * (1 + 1e-9)
+    return bool(np.ptp(heights[recent]) < tolerance and np.ptp(fronts[recent]) < tolerance)
+
+
+def _deposit(state: ParticleState) -> tuple[float, float]:
+    deposit = measure_deposit(state)
+    return deposit.h_inf, deposit.r_inf
 
 
 def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float) -> str:
@@ -106,23 +146,41 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
     start = time.perf_counter() - elapsed
     base = base_margin(column, step_settings)
     margin = next_margin(diagnostics[-1], base) if diagnostics else None
-    for k in range(resumed_from + 1, settings.n_steps + 1):
+    rest_check = settings.max_duration is not None
+    history = [_deposit(s) for _, s in frames] if rest_check else []
+    at_rest = None
+    last = settings.max_steps
+    for k in range(resumed_from + 1, last + 1):
         result = step(state, step_settings, solver, step_number=k, warm_start=warm, margin=margin)
         margin = next_margin(result.diagnostics, base)
         state = result.state
         if solver.uses_warm_start:
             warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
         diagnostics.append(result.diagnostics)
-        if k % settings.frame_every == 0 or k == settings.n_steps:
+        is_frame = k % settings.frame_every == 0 or k in (settings.n_steps, last)
+        if is_frame:
             frames.append((k, state.copy()))
         if progress is not None:
             progress(result.diagnostics)
-        if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < settings.n_steps:
+        if rest_check and is_frame:
+            history.append(_deposit(state))
+            at_rest = k >= settings.n_steps and _at_rest(frames, history, column, settings, dt)
+            if at_rest:
+                break
+        if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
             _save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, warm,
                              time.perf_counter() - start)
         if stop_after is not None and k - resumed_from >= stop_after:
-            return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
-    return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from)
+            break
+    return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from, at_rest)
+
+
+def _at_rest(frames, history, column, settings, dt) -> bool:
+    times = np.array([s.time for _, s in frames])
+    heights, fronts = np.array(history).T
+    scale = settings.duration / settings.n_steps / dt        # 1 / sqrt(h0/g)
+    return deposit_at_rest(times * scale, heights, fronts, settings.rest_window,
+                           settings.rest_tolerance * 2.0 * float(column.radius.mean()))
 
 
 def _save_checkpoint(path, fingerprint, state, frames, diagnostics, warm, elapsed):
@@ -188,6 +246,10 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "dt": settings.time_step(h0),
-                          "duration": settings.duration, "n_steps": settings.n_steps,
+                          "duration": settings.scaled_time(len(run.diagnostics)),
+                          "n_steps": len(run.diagnostics),
                           "wall_time": run.wall_time, "density": float(run.initial.density)})
+    if settings.max_duration is not None:   # the run went on towards rest: say how far and whether
+        dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
+                              "rest_tolerance": settings.rest_tolerance, "at_rest": int(bool(run.at_rest))})
     return dataset

@@ -84,10 +84,11 @@ def collapse(args):
         mu=args.mu, mu_r=args.mu_r, floor_mu=args.floor_mu, floor_mu_r=args.floor_mu_r,
         duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
         gravity=float(source.attrs.get("gravity", 9.81)), solver=args.solver,
-        checkpoint_every=args.checkpoint_every,
+        checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
+        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance,
         solver_options={} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance})
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    progress = _progress_bar(args.steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
+    progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
     try:
         run = run_collapse(column, h0, settings, checkpoint=checkpoint, progress=progress)
     finally:
@@ -100,6 +101,9 @@ def collapse(args):
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)
     log.info("collapse done: %d steps in %.1f s", len(run.diagnostics), run.wall_time)
+    if run.at_rest is not None:
+        log.info("the deposit %s at t/sqrt(h0/g) = %g", "came to rest" if run.at_rest else "was still moving",
+                 settings.scaled_time(len(run.diagnostics)))
 
 
 def analyse(args):
@@ -150,6 +154,8 @@ def analyse(args):
     for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration"):
         attrs[key] = float(trajectory.attrs[key])
     attrs["n_steps"] = int(trajectory.attrs["n_steps"])
+    if "at_rest" in trajectory.attrs:
+        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     io.write_dataset(xr.Dataset(data, coords=coords, attrs=attrs), args.output)
     log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f",
              attrs["aspect_ratio"], attrs["mu_r"], deposit.h_inf / r0, (deposit.r_inf - r0) / r0)

@@ -5,7 +5,8 @@ Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks th
 - time_step: the same columns with more steps over the same t/sqrt(h0/g);
 - end_time: the same columns run on past the default end at the same dt; its deposit is measured
   on every frame, so the change from the default end to the last frame is read off one run;
-- column_size: the same a at several r0 (reported as r0 over the mean diameter);
+- column_size: the same a at several r0 (reported as r0 over the mean diameter), possibly run on
+  past the default end, where it is also measured;
 - seeds: the same column from several packings.
 
 :func:`convergence_markdown` turns the table into the relative changes the README quotes, and
@@ -118,13 +119,16 @@ def _end_time_lines(study) -> list[str]:
 
 
 def _column_size_lines(study) -> list[str]:
-    lines = ["### Column size", "", "| a | r0 | r0/mean d | spheres | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
-             "|---|---|---|---|---|---|---|---|"]
-    rows = study.sortby("r0")
-    for k, h, r, changes in _with_changes(rows):
-        lines.append(f"| {float(rows.aspect_ratio[k]):g} | {float(rows.r0[k]):g} | "
-                     f"{float(rows.r0_over_mean_diameter[k]):.1f} | {int(rows.n_particles[k])} | {h:.3f} | "
-                     f"{changes[0]} | {r:.3f} | {changes[1]} |")
+    end = study.attrs["default_end_time"]
+    lines = ["### Column size", "",
+             "| a | r0 | r0/mean d | spheres | end t/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change "
+             f"| run-out at t/sqrt(h0/g) = {end:g} |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for a in np.unique(study.aspect_ratio.values):
+        rows = study.where(study.aspect_ratio == a, drop=True).sortby("r0")
+        for k, h, r, changes in _with_changes(rows):
+            lines.append(f"| {a:g} | {float(rows.r0[k]):g} | {float(rows.r0_over_mean_diameter[k]):.1f} | "
+                         f"{int(rows.n_particles[k])} | {float(rows.duration[k]):g} | {h:.3f} | {changes[0]} | "
+                         f"{r:.3f} | {changes[1]} | {float(rows.runout_over_r0_at_default_end[k]):.3f} |")
     return lines
 
 

@@ -276,7 +276,8 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
 def convergence_figure(table, path: Path) -> Path:
     """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
     both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
-    the mean diameter, and per seed with the mean. Filled markers: h_inf/r0; open: the run-out."""
+    the mean diameter (runs that go on past the default end also show their run-out there, dotted),
+    and per seed with the mean. Filled markers: h_inf/r0; open: the run-out."""
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10, 8), layout="constrained")
     panels = (("time_step", "scaled_dt", "time step dt / sqrt(h0/g)"),
@@ -298,6 +299,10 @@ def convergence_figure(table, path: Path) -> Path:
                     x = np.r_[table.attrs["default_end_time"], rows.duration.values[0]]
                     y = np.r_[rows[f"{variable}_at_default_end"].values[0], y[0]]
                 ax.plot(x, y, "o-", color=colour, mfc=fill, label=f"a = {a:g}, {QUANTITY_LABELS[variable]}")
+            end = table.attrs["default_end_time"]
+            if study == "column_size" and bool((rows.duration > end + 1e-9).any()):
+                ax.plot(x, rows.runout_over_r0_at_default_end.values, "s:", color=colour, mfc="none",
+                        label=f"a = {a:g}, run-out at t/sqrt(h0/g) = {end:g}")
                 if study == "seeds":
                     ax.axhline(np.mean(y), color=colour, lw=0.8, ls="--")
         if study == "time_step":

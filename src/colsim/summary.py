@@ -9,6 +9,13 @@ SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_par
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
                      "undisturbed_top_radius", "n_main_mass")
 
+# attributes of an analysis that become summary variables (NaN where a run does not have them)
+RUN_ATTRIBUTES = {
+    "duration": {"name": "end_time", "units": "1", "long_name": "end time of the collapse over sqrt(h0/g)"},
+    "at_rest": {"units": "1", "long_name": "1: the run went on to rest, 0: it stopped at max_duration still "
+                                          "moving, NaN: fixed end time"},
+}
+
 
 def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
     """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
@@ -28,6 +35,12 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
         for (a, m, s), analysis in zip(keys, analyses):
             values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = float(analysis[name].values)
         data[name] = (("aspect_ratio", "mu_r", "seed"), values, dict(analyses[0][name].attrs))
+    for name, described in RUN_ATTRIBUTES.items():
+        attrs = dict(described)
+        values = np.full(shape, np.nan)
+        for (a, m, s), analysis in zip(keys, analyses):
+            values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = float(analysis.attrs.get(name, np.nan))
+        data[attrs.pop("name", name)] = (("aspect_ratio", "mu_r", "seed"), values, attrs)
     coords = {
         "aspect_ratio": ("aspect_ratio", ratios, {"units": "1", "long_name": "aspect ratio h0/r0"}),
         "mu_r": ("mu_r", mu_rs, {"units": "1", "long_name": "rolling resistance coefficient"}),

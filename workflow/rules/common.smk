@@ -70,13 +70,24 @@ def side_view_mu_r():
 def pack_height(wildcards):
     """Height the packing of radius r0 must exceed: pack_aspect_ratio (or the largest a) times r0.
     A packing only the convergence study uses (another r0, or a seed outside `seeds`) is packed
-    just tall enough for its sub-study's aspect ratio."""
+    just tall enough for its sub-study's (largest) aspect ratio."""
     study = config.get("convergence")
-    if study and wildcards.r0 != R0:
-        return fmt(study["column_size"]["aspect_ratio"] * float(wildcards.r0))
+    sizes = [entry["aspect_ratio"] for entry in (study or {}).get("column_size", [])
+             if wildcards.r0 != R0 and wildcards.r0 in [fmt(r0) for r0 in entry["r0"]]]
+    if sizes:
+        return fmt(max(sizes) * float(wildcards.r0))
     if study and wildcards.seed not in SEEDS:
         return fmt(study["seeds"]["aspect_ratio"] * float(wildcards.r0))
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
+
+
+def run_to_rest_options():
+    """colsim collapse options that run the study's collapses on to rest ("" without max_duration)."""
+    collapse = config["collapse"]
+    if collapse["max_duration"] is None:
+        return ""
+    return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
+            f" --rest-tolerance {collapse['rest_tolerance']}")
 
 
 def run_path(name, r0, seed, a, mu_r, steps=None, duration=None):
@@ -96,13 +107,19 @@ def convergence_runs(name):
         return {}
     mu_r, seed, steps, end = study["mu_r"], SEEDS[0], config["collapse"]["steps"], config["collapse"]["duration"]
     longer = study["end_time"]["duration"]
+
+    def same_dt(duration):
+        """(steps, end time) of a run to `duration` at the study's dt."""
+        return round(steps * duration / end), duration
+
     return {
         "time_step": [run_path(name, R0, seed, a, mu_r, n, end)
                       for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]],
-        "end_time": [run_path(name, R0, seed, a, mu_r, round(steps * longer / end), longer)
+        "end_time": [run_path(name, R0, seed, a, mu_r, *same_dt(longer))
                      for a in study["end_time"]["aspect_ratios"]],
-        "column_size": [run_path(name, r0, seed, study["column_size"]["aspect_ratio"], mu_r)
-                        for r0 in study["column_size"]["r0"]],
+        "column_size": [run_path(name, r0, seed, entry["aspect_ratio"], mu_r,
+                                 *same_dt(entry.get("duration", end)))
+                        for entry in study["column_size"] for r0 in entry["r0"]],
         "seeds": [run_path(name, R0, s, study["seeds"]["aspect_ratio"], mu_r)
                   for s in study["seeds"]["seeds"]],
     }

@@ -61,6 +61,7 @@ rule collapse:
         steps=config["collapse"]["steps"],
         frame_every=config["collapse"]["frame_every"],
         checkpoint_every=config["collapse"]["checkpoint_every"],
+        to_rest=run_to_rest_options(),
         solver=config["solver"],
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.log",
@@ -69,7 +70,7 @@ rule collapse:
     shell:
         "colsim collapse --input {input} --mu {params.mu} --mu-r {wildcards.mu_r}"
         " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
-        " --checkpoint-every {params.checkpoint_every} --solver {params.solver}"
+        " --checkpoint-every {params.checkpoint_every} {params.to_rest} --solver {params.solver}"
         " --output {output} > {log} 2>&1"
 
 
