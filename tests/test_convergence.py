@@ -85,6 +85,21 @@ def test_lube_table_reports_zero_error_on_the_law_itself():
     assert "| 0.5 | 0.500 | 0.000 | 0.500 | +0 % | 0.620 |" in text
 
 
+def test_other_runout_measures_are_tabled_against_lube():
+    ratios = np.array([2.0])
+    runout = lube_runout(ratios)[0]
+    dims = ("aspect_ratio", "mu_r", "seed")
+    summary = xr.Dataset(
+        {"h_inf_over_r0": (dims, [[[1.0]]]), "runout_over_r0": (dims, [[[runout]]]),
+         "runout_over_r0_by_tolerance": (dims + ("contact_tolerance",), [[[[runout, 1.1 * runout]]]]),
+         "mass_front_over_r0": (dims + ("mass_share",), [[[[0.9 * runout]]]])},
+        coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1], "contact_tolerance": [0.01, 0.5],
+                "mass_share": [0.95]})
+    text = lube_markdown(summary)
+    assert "| mu_r | a | Lube | connected, gap <= 1 % d_min | connected, gap <= 50 % d_min | 95 % of the mass |" in text
+    assert f"| 0.12 | 2 | {runout:.2f} | {runout:.2f} (+0 %) | {1.1 * runout:.2f} (+10 %) | {0.9 * runout:.2f} (-10 %) |" in text
+
+
 def test_convergence_figure_is_written(tmp_path):
     from colsim.plots import convergence_figure
 

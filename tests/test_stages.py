@@ -66,6 +66,19 @@ def test_runout_counts_a_chain_but_not_a_detached_grain():
     assert deposit.h_inf == pytest.approx(6 * 0.2, abs=1e-12)         # top of the stack
 
 
+def test_looser_tolerance_and_mass_front_reach_the_detached_grain():
+    state = _chain_state()
+    tight = analysis.measure_deposit(state, tolerance=1e-6)
+    loose = analysis.measure_deposit(state, tolerance=1.8 + 1e-9)   # bridges the 3.0 - 0.8 - 0.4 gap
+    assert loose.main_mass.all() and loose.r_inf == pytest.approx(3.2) and tight.r_inf == pytest.approx(1.0)
+    # equal masses at reaches 0.2 (x3), 0.6, 1.0, 3.2: half the mass within 0.2, 5/6 within 1.0
+    assert analysis.mass_front(state, 0.5) == pytest.approx(0.2)
+    assert analysis.mass_front(state, 5 / 6) == pytest.approx(1.0)
+    assert analysis.mass_front(state, 1.0) == pytest.approx(3.2)
+    with pytest.raises(ValueError, match="mass share"):
+        analysis.mass_front(state, 1.5)
+
+
 def test_floor_contacts_do_not_link_grains():
     r = 0.2
     state = ParticleState.at_rest(np.array([[0, 0, r], [0.5, 0, r], [0.5, 0, 3 * r]]), np.full(3, r))
@@ -185,6 +198,12 @@ def test_all_stages_through_the_cli(tmp_path):
         assert "units" in result[name].attrs and "long_name" in result[name].attrs
     assert 0 < float(result["h_inf_over_r0"]) <= 1.0 + 1e-9     # a collapse never grows
     assert float(result["runout_over_r0"]) >= 0
+    # the checks: the study's tolerance (1 %) first, looser ones reach at least as far
+    np.testing.assert_allclose(result.contact_tolerance.values, [0.01, 0.1, 0.5, 1.0])
+    by_tolerance = result.runout_over_r0_by_tolerance.values
+    assert by_tolerance[0] == pytest.approx(float(result["runout_over_r0"]))
+    assert np.all(np.diff(by_tolerance) >= -1e-12)
+    assert np.all(np.diff(result.mass_front_over_r0.values) >= 0)
     for key in ("Conventions", "source", "history", "config", "seed"):
         assert key in result.attrs
     trajectory = io.open_dataset(tmp_path / "collapse.nc", io.TRAJECTORY_KIND)

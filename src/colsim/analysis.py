@@ -6,6 +6,10 @@
 - r_inf: the outmost grain connected to the main mass, max over it of sqrt(x^2 + y^2) + R,
   measured from the column axis.
 - Normalised: h_inf / r0 and (r_inf - r0) / r0, against a = h0 / r0.
+
+The edge of a deposit is a sparse layer of grains on the floor, a few hundredths of a diameter
+apart, so r_inf depends on the contact tolerance. Two checks come with it: r_inf at looser
+tolerances, and :func:`mass_front`, the radius that holds a given share of the mass (no contacts).
 """
 from __future__ import annotations
 
@@ -51,6 +55,16 @@ def measure_deposit(state: ParticleState, tolerance: float | None = None) -> Dep
     top = state.position[mass, 2] + state.radius[mass]
     reach = np.hypot(state.position[mass, 0], state.position[mass, 1]) + state.radius[mass]
     return Deposit(mass, float(top.max()), float(reach.max()))
+
+
+def mass_front(state: ParticleState, share: float) -> float:
+    """Radius (length) from the axis, sqrt(x^2 + y^2) + R, within which `share` (0-1) of the mass lies."""
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f"mass share must be in (0, 1], got {share}")
+    reach = np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius
+    order = np.argsort(reach)
+    cumulative = np.cumsum(state.mass[order]) / state.mass.sum()
+    return float(reach[order][np.searchsorted(cumulative, share - 1e-12)])
 
 
 def deposit_profile(state: ParticleState, mask: np.ndarray, bin_width: float, r_max: float):

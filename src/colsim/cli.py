@@ -106,6 +106,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--input", required=True, help="trajectory file from `colsim collapse`")
     p.add_argument("--contact-tolerance", type=_non_negative, default=0.01,
                    help="particles touch when their gap <= this fraction of the smallest diameter (default: %(default)s)")
+    p.add_argument("--check-tolerances", type=_non_negative, nargs="*", default=[0.1, 0.5, 1.0],
+                   help="also measure the run-out with these contact tolerances (default: %(default)s)")
+    p.add_argument("--mass-shares", type=_positive, nargs="*", default=[0.9, 0.95, 0.99],
+                   help="also report the radius holding these shares of the mass (default: %(default)s)")
     p.add_argument("--bin-width", type=_positive, default=None, help="radial bin of the deposit profile, length (default: largest diameter)")
     p.add_argument("--output", required=True, help="analysis file to write (netCDF)")
 

@@ -118,6 +118,9 @@ def analyse(args):
     history = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance)
                for k in range(trajectory.sizes["time"])]
     fronts = [d.r_inf for d in history]
+    fractions = sorted(set(args.check_tolerances) | {args.contact_tolerance})
+    checks = [analysis.measure_deposit(final, analysis.contact_tolerance(final, f)) for f in fractions]
+    shares = sorted(set(args.mass_shares))
     bin_width = args.bin_width or 2.0 * float(final.radius.max())
     centres, height = analysis.deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
@@ -142,12 +145,20 @@ def analyse(args):
                            {"units": "1", "long_name": "front (r_front - r0) over r0"}),
         "height_history": ("time", np.array([d.h_inf for d in history]),
                            {"units": "length", "long_name": "height of the main mass"}),
+        "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
+                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at other "
+                                                                    "contact tolerances"}),
+        "mass_front_over_r0": ("mass_share", [(analysis.mass_front(final, share) - r0) / r0 for share in shares],
+                               {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
         "mean_diameter": scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
         "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
         "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
     }
     coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
-              "step": trajectory["step"]}
+              "step": trajectory["step"],
+              "contact_tolerance": ("contact_tolerance", fractions,
+                                    {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),
+              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"})}
     attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
                                  {**_settings(args), "input_config": io.config_of(trajectory)},
                                  trajectory.attrs.get("seed"))

@@ -168,6 +168,25 @@ def claims_markdown(summary) -> str:
     return "\n".join(lines) + "\n"
 
 
+def runout_measures_markdown(summary) -> str:
+    """Markdown table per mu_r and a: Lube's run-out, r_inf at each contact tolerance and the radius
+    holding each share of the mass, as (r - r0)/r0, mean over seeds, with the error against Lube."""
+    tolerances = summary.contact_tolerance.values
+    shares = summary.mass_share.values
+    header = (["mu_r", "a", "Lube"] + [f"connected, gap <= {100 * t:g} % d_min" for t in tolerances]
+              + [f"{100 * s:g} % of the mass" for s in shares])
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            law = lube_runout(a)
+            values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
+                np.nanmean(part.mass_front_over_r0.values, axis=0))
+            cells = [f"{v:.2f} ({100 * (v - law) / law:+.0f} %)" for v in values]
+            lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def lube_markdown(summary) -> str:
     """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and a."""
     lines = []
@@ -186,6 +205,9 @@ def lube_markdown(summary) -> str:
                          f"{100 * (h_mean - h_law) / h_law:+.0f} % | {r_mean:.3f} | {np.nanmax(r) - np.nanmin(r):.3f} | "
                          f"{r_law:.3f} | {100 * (r_mean - r_law) / r_law:+.0f} % |")
         lines.append("")
+    if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
+        lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
+                  runout_measures_markdown(summary)]
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
     return "\n".join(lines)

@@ -8,6 +8,8 @@ import numpy as np
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
                      "undisturbed_top_radius", "n_main_mass")
+# per-run checks with a dimension of their own (kept only when every analysis has them)
+CHECK_VARIABLES = {"runout_over_r0_by_tolerance": "contact_tolerance", "mass_front_over_r0": "mass_share"}
 
 # attributes of an analysis that become summary variables (NaN where a run does not have them)
 RUN_ATTRIBUTES = {
@@ -28,20 +30,28 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
     if len(set(keys)) != len(keys):
         raise ValueError("two analyses share the same (aspect_ratio, mu_r, seed)")
     ratios, mu_rs, seeds = (sorted(set(values)) for values in zip(*keys))
-    shape = (len(ratios), len(mu_rs), len(seeds))
-    data = {}
-    for name in SUMMARY_VARIABLES:
-        values = np.full(shape, np.nan)
+    dims = ("aspect_ratio", "mu_r", "seed")
+
+    def grid(value, extra=()):
+        """An array over (aspect_ratio, mu_r, seed) + extra of value(analysis); NaN where none."""
+        values = np.full((len(ratios), len(mu_rs), len(seeds)) + extra, np.nan)
         for (a, m, s), analysis in zip(keys, analyses):
-            values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = float(analysis[name].values)
-        data[name] = (("aspect_ratio", "mu_r", "seed"), values, dict(analyses[0][name].attrs))
+            values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = value(analysis)
+        return values
+
+    data = {name: (dims, grid(lambda a, name=name: float(a[name].values)), dict(analyses[0][name].attrs))
+            for name in SUMMARY_VARIABLES}
+    coords = {}
+    reference = analyses[0]
+    for name, dim in CHECK_VARIABLES.items():
+        if all(name in a and np.array_equal(a[dim].values, reference[dim].values) for a in analyses):
+            data[name] = (dims + (dim,), grid(lambda a, name=name: a[name].values, (reference.sizes[dim],)),
+                          dict(reference[name].attrs))
+            coords[dim] = reference[dim]
     for name, described in RUN_ATTRIBUTES.items():
         attrs = dict(described)
-        values = np.full(shape, np.nan)
-        for (a, m, s), analysis in zip(keys, analyses):
-            values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = float(analysis.attrs.get(name, np.nan))
-        data[attrs.pop("name", name)] = (("aspect_ratio", "mu_r", "seed"), values, attrs)
-    coords = {
+        data[attrs.pop("name", name)] = (dims, grid(lambda a, name=name: float(a.attrs.get(name, np.nan))), attrs)
+    coords |= {
         "aspect_ratio": ("aspect_ratio", ratios, {"units": "1", "long_name": "aspect ratio h0/r0"}),
         "mu_r": ("mu_r", mu_rs, {"units": "1", "long_name": "rolling resistance coefficient"}),
         "seed": ("seed", seeds, {"units": "1", "long_name": "packing seed"}),

@@ -81,12 +81,15 @@ rule analyse:
         f"{RUN}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
+        check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
+        mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.log",
     benchmark:
         "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.tsv"
     shell:
         "colsim analyse --input {input} --contact-tolerance {params.contact_tolerance}"
+        " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
         " --output {output} > {log} 2>&1"
 
 
