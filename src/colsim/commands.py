@@ -146,8 +146,8 @@ def analyse(args):
         "height_history": ("time", np.array([d.h_inf for d in history]),
                            {"units": "length", "long_name": "height of the main mass"}),
         "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
-                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at other "
-                                                                    "contact tolerances"}),
+                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at each "
+                                                                    "contact tolerance"}),
         "mass_front_over_r0": ("mass_share", [(analysis.mass_front(final, share) - r0) / r0 for share in shares],
                                {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
         "mean_diameter": scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
