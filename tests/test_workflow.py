@@ -182,7 +182,7 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
     commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 4
-    assert all("--max-duration 8 --rest-window 1.0 --rest-tolerance 0.2" in c for c in commands)
+    assert all("--max-duration 8 --rest-window 1.0 --rest-tolerance 0.2 --rest-energy 0.01" in c for c in commands)
     assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 

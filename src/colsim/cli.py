@@ -96,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at rest: h_inf and r_inf steady over this t / sqrt(h0/g) (default: %(default)s)")
     p.add_argument("--rest-tolerance", type=_positive, default=0.1,
                    help="at rest: h_inf and r_inf moved less than this many mean diameters (default: %(default)s)")
+    p.add_argument("--rest-energy", type=_positive, default=1e-2,
+                   help="at rest: kinetic energy below this times its peak (default: %(default)s)")
     p.add_argument("--frame-every", type=_positive_int, default=5, help="keep a frame every k steps (default: %(default)s)")
     p.add_argument("--checkpoint-every", type=_positive_int, default=10, help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")

@@ -2,9 +2,11 @@
 
 The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
 mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
-With max_duration set, it goes on at the same dt until the deposit is at rest (its final height and
-run-out, measured as in :mod:`colsim.analysis`, moved less than rest_tolerance mean diameters over
-the last rest_window) or t / sqrt(h0/g) reaches max_duration, whichever comes first.
+With max_duration set, it goes on at the same dt until the deposit is at rest or t / sqrt(h0/g)
+reaches max_duration, whichever comes first. At rest: the final height and run-out (measured as in
+:mod:`colsim.analysis`) moved less than rest_tolerance mean diameters over the last rest_window,
+and the kinetic energy (translational and rotational) is below rest_energy times its peak. The
+energy test is needed: grains at the edge join the main mass in jumps, a time unit or more apart.
 Frames (state every `frame_every` steps, and the first and last) and per-step diagnostics are kept.
 A checkpoint is written every `checkpoint_every` steps (atomically); a run started again with the
 same inputs resumes from it and ends with the same result as an uninterrupted run.
@@ -50,6 +52,7 @@ class CollapseSettings:
     max_duration: float | None = None   # None: stop at `duration` (the paper)
     rest_window: float = 1.0             # t / sqrt(h0/g)
     rest_tolerance: float = 0.1          # mean diameters
+    rest_energy: float = 1e-2            # of the peak kinetic energy
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
@@ -62,9 +65,9 @@ class CollapseSettings:
             raise ValueError(f"gravity must be positive, got {self.gravity}")
         if self.max_duration is not None and self.max_duration < self.duration:
             raise ValueError(f"max_duration {self.max_duration} is below duration {self.duration}")
-        if self.rest_window <= 0 or self.rest_tolerance <= 0:
-            raise ValueError(f"need rest_window > 0 and rest_tolerance > 0; got "
-                             f"{self.rest_window}, {self.rest_tolerance}")
+        if self.rest_window <= 0 or self.rest_tolerance <= 0 or self.rest_energy <= 0:
+            raise ValueError(f"need rest_window, rest_tolerance and rest_energy > 0; got "
+                             f"{self.rest_window}, {self.rest_tolerance}, {self.rest_energy}")
 
     def law(self) -> ContactLaw:
         floor_mu = self.mu if self.floor_mu is None else self.floor_mu
@@ -164,7 +167,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
             progress(result.diagnostics)
         if rest_check and is_frame:
             history.append(_deposit(state))
-            at_rest = k >= settings.n_steps and _at_rest(frames, history, column, settings, dt)
+            at_rest = k >= settings.n_steps and _at_rest(frames, history, diagnostics, column, settings, dt)
             if at_rest:
                 break
         if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
@@ -175,7 +178,10 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
     return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from, at_rest)
 
 
-def _at_rest(frames, history, column, settings, dt) -> bool:
+def _at_rest(frames, history, diagnostics, column, settings, dt) -> bool:
+    energy = np.array([d.kinetic_energy + d.rotational_energy for d in diagnostics])
+    if energy[-1] > settings.rest_energy * energy.max():
+        return False
     times = np.array([s.time for _, s in frames])
     heights, fronts = np.array(history).T
     scale = settings.duration / settings.n_steps / dt        # 1 / sqrt(h0/g)
@@ -251,5 +257,6 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
                           "wall_time": run.wall_time, "density": float(run.initial.density)})
     if settings.max_duration is not None:   # the run went on towards rest: say how far and whether
         dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
-                              "rest_tolerance": settings.rest_tolerance, "at_rest": int(bool(run.at_rest))})
+                              "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy,
+                              "at_rest": int(bool(run.at_rest))})
     return dataset

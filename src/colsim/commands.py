@@ -85,7 +85,7 @@ def collapse(args):
         duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
         gravity=float(source.attrs.get("gravity", 9.81)), solver=args.solver,
         checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
-        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance,
+        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy,
         solver_options={} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance})
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")

@@ -87,7 +87,7 @@ def run_to_rest_options():
     if collapse["max_duration"] is None:
         return ""
     return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
-            f" --rest-tolerance {collapse['rest_tolerance']}")
+            f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")
 
 
 def run_path(name, r0, seed, a, mu_r, steps=None, duration=None):
