@@ -125,7 +125,8 @@ def test_summary_matches_a_local_run(slurm_study, local_study):
     directory, _ = slurm_study
     on_slurm = xr.load_dataset(directory / "results" / "summary.nc")
     local = xr.load_dataset(local_study / "results" / "summary.nc")
-    assert dict(on_slurm.sizes) == dict(local.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1}
+    assert dict(on_slurm.sizes) == dict(local.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1,
+                                                         "contact_tolerance": 4, "mass_share": 3}
     assert set(on_slurm.data_vars) == set(local.data_vars)
     for name in on_slurm.data_vars:
         assert on_slurm[name].attrs.get("units") == local[name].attrs.get("units"), name

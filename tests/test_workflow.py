@@ -61,7 +61,9 @@ def tiny_study(tmp_path_factory):
 def test_summary_holds_finite_numbers_with_units(tiny_study):
     xr = pytest.importorskip("xarray")
     summary = xr.load_dataset(tiny_study / "results" / "summary.nc")
-    assert dict(summary.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1}
+    assert dict(summary.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1, "contact_tolerance": 4,
+                                   "mass_share": 3}
+    assert summary.runout_over_r0_by_tolerance.dims == ("aspect_ratio", "mu_r", "seed", "contact_tolerance")
     np.testing.assert_allclose(summary["aspect_ratio"], [0.5, 1.0])
     np.testing.assert_allclose(summary["mu_r"], [0.0, 0.12])
     for name in SUMMARY_VARIABLES:
@@ -74,6 +76,7 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
     assert "config" in summary.attrs and "run_configs" in summary.attrs
     table = (tiny_study / "results" / "summary.csv").read_text().splitlines()
     assert len(table) == 1 + 4 and "h_inf_over_r0" in table[0]
+    assert "runout_over_r0_by_tolerance_0.5" in table[0] and "mass_front_over_r0_0.95" in table[0]
 
 
 @pytest.mark.slow

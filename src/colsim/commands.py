@@ -173,13 +173,13 @@ def analyse(args):
 
 
 def collect(args):
-    from .summary import collect_analyses
+    from .summary import collect_analyses, one_row_per_run
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
     io.write_dataset(summary, args.output)
     if args.csv:
-        _write_csv(args.csv, summary)
+        _write_csv(args.csv, one_row_per_run(summary))
     if args.markdown:
         from .convergence import lube_markdown
 

@@ -19,6 +19,17 @@ RUN_ATTRIBUTES = {
 }
 
 
+def one_row_per_run(summary) -> "xarray.Dataset":  # noqa: F821
+    """The summary over (aspect_ratio, mu_r, seed) only: each check variable becomes one variable per
+    value of its own dimension, e.g. mass_front_over_r0_0.95 (for a CSV with a row per run)."""
+    flat = summary.drop_vars([name for name in CHECK_VARIABLES if name in summary])
+    for name, dim in CHECK_VARIABLES.items():
+        if name in summary:
+            for value in summary[dim].values:
+                flat[f"{name}_{value:g}"] = summary[name].sel({dim: value}, drop=True)
+    return flat.drop_dims([dim for dim in CHECK_VARIABLES.values() if dim in flat.dims])
+
+
 def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
     """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
     import xarray as xr
