@@ -54,15 +54,15 @@ def test_markdown_gives_the_relative_change_per_refinement():
 
 
 def test_column_size_is_tabled_per_aspect_ratio_at_both_end_times():
-    groups = {"column_size": [analysis(a=0.5, r0=r0, duration=8.0, steps=200, runout=r, h=0.5)
-                              for r0, r in ((3.0, 0.6), (2.0, 0.4))]
+    groups = {"column_size": [analysis(a=0.5, r0=r0, seed=seed, duration=8.0, steps=200, runout=r, h=0.5)
+                              for r0, seed, r in ((3.0, 1, 0.5), (2.0, 1, 0.4), (3.0, 2, 0.7))]
               + [analysis(a=2.0, r0=2.0, runout=1.5)]}
     text = convergence_markdown(runs_table(groups, 4.0))
     assert "run-out at t/sqrt(h0/g) = 4 |" in text
-    # sorted by r0 within a = 0.5; the run-out at t = 4 is half-way along the ramp
-    assert "| 0.5 | 2 | 5.0 | 900 | 8 | 0.500 |  | 0.400 |  | 0.200 |" in text
-    assert "| 0.5 | 3 | 7.5 | 900 | 8 | 0.500 | 0.0 % | 0.600 | 50.0 % | 0.300 |" in text
-    assert "| 2 | 2 | 5.0 | 900 | 4 | 1.000 |  | 1.500 |  | 1.500 |" in text
+    # sorted by r0 within a = 0.5, two seeds averaged at r0 = 3; the run-out at t = 4 is half-way
+    assert "| 0.5 | 2 | 5.0 | 1 | 900 | 8 | 0.500 |  | 0.400 | 0.000 |  | 0.200 |" in text
+    assert "| 0.5 | 3 | 7.5 | 2 | 900 | 8 | 0.500 | 0.0 % | 0.600 | 0.200 | 50.0 % | 0.300 |" in text
+    assert "| 2 | 2 | 5.0 | 1 | 900 | 4 | 1.000 |  | 1.500 | 0.000 |  | 1.500 |" in text
 
 
 def test_unknown_sub_study_and_empty_input_are_errors():
@@ -104,7 +104,7 @@ def test_convergence_figure_is_written(tmp_path):
     from colsim.plots import convergence_figure
 
     groups = {"time_step": [analysis(steps=n) for n in (100, 200)], "end_time": [analysis(duration=8.0)],
-              "column_size": [analysis(a=0.5, r0=r0, duration=8.0) for r0 in (2.0, 3.0)],
+              "column_size": [analysis(a=0.5, r0=r0, seed=seed, duration=8.0) for r0 in (2.0, 3.0) for seed in (1, 2)],
               "seeds": [analysis(seed=s) for s in (1, 2)]}
     path = convergence_figure(runs_table(groups, 4.0), tmp_path / "convergence.png")
     assert path.stat().st_size > 10000

@@ -165,9 +165,11 @@ def test_the_paper_study_plans_its_convergence_runs(tmp_path):
             assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
         assert f"{run.format(a=a)}/collapse.nc" in planned                    # 100 steps: the study's own
     assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
-    for r0 in ("2", "3", "4"):   # small columns at three sizes, run on to t/sqrt(h0/g) = 8
+    for r0, seeds in (("2", "123"), ("3", "123"), ("4", "1")):   # small columns run on to t = 8
         for a in ("0.5", "1"):
-            assert f"results/r0_{r0}/seed_1/a_{a}/mu_r_0.12/steps_200_t_8/collapse.nc" in planned
+            for seed in seeds:
+                assert f"results/r0_{r0}/seed_{seed}/a_{a}/mu_r_0.12/steps_200_t_8/collapse.nc" in planned
+    assert "results/r0_4/seed_2/packing.nc" not in planned
     assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
     assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
     assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned

@@ -118,17 +118,37 @@ def _end_time_lines(study) -> list[str]:
     return lines
 
 
+def means_per_size(study) -> "xarray.Dataset":  # noqa: F821
+    """The column-size runs averaged over seeds: one `run` per (aspect_ratio, r0), with the numeric
+    variables and coordinates as means, plus n_seeds and runout_spread (max - min of the run-out)."""
+    import xarray as xr
+
+    pairs = sorted({(float(a), float(r)) for a, r in zip(study.aspect_ratio.values, study.r0.values)})
+    parts = []
+    for a, r0 in pairs:
+        rows = study.isel(run=np.flatnonzero((study.aspect_ratio.values == a) & (study.r0.values == r0)))
+        numeric = rows.drop_vars([n for n in rows.coords if not np.issubdtype(rows[n].dtype, np.number)])
+        mean = numeric.reset_coords().mean("run", keep_attrs=True)
+        mean["n_seeds"] = rows.sizes["run"]
+        mean["runout_spread"] = float(rows.runout_over_r0.max() - rows.runout_over_r0.min())
+        parts.append(mean)
+    means = xr.concat(parts, dim="run")
+    return means.set_coords([n for n in ("r0", "aspect_ratio", "r0_over_mean_diameter", "duration") if n in means])
+
+
 def _column_size_lines(study) -> list[str]:
     end = study.attrs["default_end_time"]
-    lines = ["### Column size", "",
-             "| a | r0 | r0/mean d | spheres | end t/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change "
-             f"| run-out at t/sqrt(h0/g) = {end:g} |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for a in np.unique(study.aspect_ratio.values):
-        rows = study.where(study.aspect_ratio == a, drop=True).sortby("r0")
+    lines = ["### Column size (mean over seeds; spread = max - min)", "",
+             "| a | r0 | r0/mean d | seeds | spheres | end t/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 "
+             f"| spread | change | run-out at t/sqrt(h0/g) = {end:g} |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    means = means_per_size(study)
+    for a in np.unique(means.aspect_ratio.values):
+        rows = means.isel(run=np.flatnonzero(means.aspect_ratio.values == a))
         for k, h, r, changes in _with_changes(rows):
             lines.append(f"| {a:g} | {float(rows.r0[k]):g} | {float(rows.r0_over_mean_diameter[k]):.1f} | "
-                         f"{int(rows.n_particles[k])} | {float(rows.duration[k]):g} | {h:.3f} | {changes[0]} | "
-                         f"{r:.3f} | {changes[1]} | {float(rows.runout_over_r0_at_default_end[k]):.3f} |")
+                         f"{int(rows.n_seeds[k])} | {float(rows.n_particles[k]):.0f} | {float(rows.duration[k]):g} | "
+                         f"{h:.3f} | {changes[0]} | {r:.3f} | {float(rows.runout_spread[k]):.3f} | {changes[1]} | "
+                         f"{float(rows.runout_over_r0_at_default_end[k]):.3f} |")
     return lines
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .convergence import means_per_size
 from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK
 
 log = logging.getLogger(__name__)
@@ -276,7 +277,8 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
 def convergence_figure(table, path: Path) -> Path:
     """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
     both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
-    the mean diameter (runs that go on past the default end also show their run-out there, dotted),
+    the mean diameter (mean over seeds; runs that go on past the default end also show their
+    run-out there, dotted),
     and per seed with the mean. Filled markers: h_inf/r0; open: the run-out."""
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10, 8), layout="constrained")
@@ -289,6 +291,8 @@ def convergence_figure(table, path: Path) -> Path:
         if part.sizes.get("run", 0) == 0:
             _empty(ax, f"no {study.replace('_', ' ')} runs")
             continue
+        if study == "column_size":   # the mean over seeds at each r0
+            part = means_per_size(part)
         for k, a in enumerate(np.unique(part.aspect_ratio.values)):
             rows = part.where(part.aspect_ratio == a, drop=True).sortby(x_name)
             x = rows[x_name].values

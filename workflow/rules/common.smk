@@ -117,9 +117,9 @@ def convergence_runs(name):
                       for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]],
         "end_time": [run_path(name, R0, seed, a, mu_r, *same_dt(longer))
                      for a in study["end_time"]["aspect_ratios"]],
-        "column_size": [run_path(name, r0, seed, entry["aspect_ratio"], mu_r,
-                                 *same_dt(entry.get("duration", end)))
-                        for entry in study["column_size"] for r0 in entry["r0"]],
+        "column_size": [run_path(name, r0, s, entry["aspect_ratio"], mu_r, *same_dt(entry.get("duration", end)))
+                        for entry in study["column_size"] for r0 in entry["r0"]
+                        for s in entry.get("seeds", [seed])],
         "seeds": [run_path(name, R0, s, study["seeds"]["aspect_ratio"], mu_r)
                   for s in study["seeds"]["seeds"]],
     }
