@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .convergence import means_per_size
-from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK
+from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_runout
 
 log = logging.getLogger(__name__)
 
@@ -278,8 +278,8 @@ def convergence_figure(table, path: Path) -> Path:
     """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
     both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
     the mean diameter (mean over seeds; runs that go on past the default end also show their
-    run-out there, dotted),
-    and per seed with the mean. Filled markers: h_inf/r0; open: the run-out."""
+    run-out there, dotted; Lube's run-out as a thin dashed line), and per seed with the mean.
+    Filled markers: h_inf/r0; open: the run-out."""
     plt = _pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(10, 8), layout="constrained")
     panels = (("time_step", "scaled_dt", "time step dt / sqrt(h0/g)"),
@@ -307,6 +307,8 @@ def convergence_figure(table, path: Path) -> Path:
             if study == "column_size" and bool((rows.duration > end + 1e-9).any()):
                 ax.plot(x, rows.runout_over_r0_at_default_end.values, "s:", color=colour, mfc="none",
                         label=f"a = {a:g}, run-out at t/sqrt(h0/g) = {end:g}")
+            if study == "column_size":
+                ax.axhline(float(lube_runout(a)), color=colour, lw=0.8, ls="--")
                 if study == "seeds":
                     ax.axhline(np.mean(y), color=colour, lw=0.8, ls="--")
         if study == "time_step":
