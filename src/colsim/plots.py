@@ -303,14 +303,14 @@ def convergence_figure(table, path: Path) -> Path:
                     x = np.r_[table.attrs["default_end_time"], rows.duration.values[0]]
                     y = np.r_[rows[f"{variable}_at_default_end"].values[0], y[0]]
                 ax.plot(x, y, "o-", color=colour, mfc=fill, label=f"a = {a:g}, {QUANTITY_LABELS[variable]}")
-            end = table.attrs["default_end_time"]
-            if study == "column_size" and bool((rows.duration > end + 1e-9).any()):
-                ax.plot(x, rows.runout_over_r0_at_default_end.values, "s:", color=colour, mfc="none",
-                        label=f"a = {a:g}, run-out at t/sqrt(h0/g) = {end:g}")
-            if study == "column_size":
-                ax.axhline(float(lube_runout(a)), color=colour, lw=0.8, ls="--")
                 if study == "seeds":
                     ax.axhline(np.mean(y), color=colour, lw=0.8, ls="--")
+            if study == "column_size":
+                end = table.attrs["default_end_time"]
+                if bool((rows.duration > end + 1e-9).any()):
+                    ax.plot(x, rows.runout_over_r0_at_default_end.values, "s:", color=colour, mfc="none",
+                            label=f"a = {a:g}, run-out at t/sqrt(h0/g) = {end:g}")
+                ax.axhline(float(lube_runout(a)), color=colour, lw=0.8, ls="--")
         if study == "time_step":
             ax.set_xscale("log")
         ax.set_xlabel(x_label)
