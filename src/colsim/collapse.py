@@ -112,9 +112,10 @@ def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> 
     return bool(np.ptp(heights[recent]) < tolerance and np.ptp(fronts[recent]) < tolerance)
 
 
-def _deposit(state: ParticleState) -> tuple[float, float]:
+def _deposit(state: ParticleState, time_scale: float) -> tuple[float, float, float]:
+    """(t / sqrt(h0/g), h_inf, r_inf) of a frame."""
     deposit = measure_deposit(state)
-    return deposit.h_inf, deposit.r_inf
+    return state.time / time_scale, deposit.h_inf, deposit.r_inf
 
 
 def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float) -> str:
@@ -150,7 +151,8 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
     base = base_margin(column, step_settings)
     margin = next_margin(diagnostics[-1], base) if diagnostics else None
     rest_check = settings.max_duration is not None
-    history = [_deposit(s) for _, s in frames] if rest_check else []
+    time_scale = np.sqrt(h0 / settings.gravity)
+    history = [_deposit(s, time_scale) for _, s in frames] if rest_check else []
     at_rest = None
     last = settings.max_steps
     for k in range(resumed_from + 1, last + 1):
@@ -166,8 +168,8 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
         if progress is not None:
             progress(result.diagnostics)
         if rest_check and is_frame:
-            history.append(_deposit(state))
-            at_rest = k >= settings.n_steps and _at_rest(frames, history, diagnostics, column, settings, dt)
+            history.append(_deposit(state, time_scale))
+            at_rest = k >= settings.n_steps and _at_rest(history, diagnostics, column, settings)
             if at_rest:
                 break
         if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
@@ -178,14 +180,12 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
     return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from, at_rest)
 
 
-def _at_rest(frames, history, diagnostics, column, settings, dt) -> bool:
+def _at_rest(history, diagnostics, column, settings) -> bool:
     energy = np.array([d.kinetic_energy + d.rotational_energy for d in diagnostics])
     if energy[-1] > settings.rest_energy * energy.max():
         return False
-    times = np.array([s.time for _, s in frames])
-    heights, fronts = np.array(history).T
-    scale = settings.duration / settings.n_steps / dt        # 1 / sqrt(h0/g)
-    return deposit_at_rest(times * scale, heights, fronts, settings.rest_window,
+    times, heights, fronts = np.array(history).T
+    return deposit_at_rest(times, heights, fronts, settings.rest_window,
                            settings.rest_tolerance * 2.0 * float(column.radius.mean()))
 
 

@@ -114,9 +114,9 @@ def analyse(args):
     initial = io.state_from_dataset(trajectory, 0)
     final = io.state_from_dataset(trajectory, -1)
     tolerance = analysis.contact_tolerance(final, args.contact_tolerance)
-    deposit = analysis.measure_deposit(final, tolerance)
     history = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance)
                for k in range(trajectory.sizes["time"])]
+    deposit = history[-1]
     fronts = [d.r_inf for d in history]
     fractions = sorted(set(args.check_tolerances) | {args.contact_tolerance})
     checks = [analysis.measure_deposit(final, analysis.contact_tolerance(final, f)) for f in fractions]

@@ -173,10 +173,10 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
         first_step: int = 0) -> Iterator[StepResult]:
     """Yield the result of each of n_steps steps from `state` (step numbers from first_step + 1)."""
     solver = solver or ClarabelSolver()
-    warm, margin = None, None
+    warm, margin, base = None, None, base_margin(state, settings)
     for k in range(first_step + 1, first_step + n_steps + 1):
         result = step(state, settings, solver, step_number=k, warm_start=warm, margin=margin)
-        margin = next_margin(result.diagnostics, base_margin(state, settings))
+        margin = next_margin(result.diagnostics, base)
         if solver.uses_warm_start:  # the step's forces by contact pair, for the next step
             warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
         state = result.state

@@ -11,11 +11,12 @@ SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_par
 # per-run checks with a dimension of their own (kept only when every analysis has them)
 CHECK_VARIABLES = {"runout_over_r0_by_tolerance": "contact_tolerance", "mass_front_over_r0": "mass_share"}
 
-# attributes of an analysis that become summary variables (NaN where a run does not have them)
+# attributes of an analysis that become summary variables (NaN where a run does not have them):
+# attribute -> (variable, its attributes)
 RUN_ATTRIBUTES = {
-    "duration": {"name": "end_time", "units": "1", "long_name": "end time of the collapse over sqrt(h0/g)"},
-    "at_rest": {"units": "1", "long_name": "1: the run went on to rest, 0: it stopped at max_duration still "
-                                          "moving, NaN: fixed end time"},
+    "duration": ("end_time", {"units": "1", "long_name": "end time of the collapse over sqrt(h0/g)"}),
+    "at_rest": ("at_rest", {"units": "1", "long_name": "1: the run went on to rest, 0: it stopped at "
+                                                       "max_duration still moving, NaN: fixed end time"}),
 }
 
 
@@ -59,9 +60,8 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
             data[name] = (dims + (dim,), grid(lambda a, name=name: a[name].values, (reference.sizes[dim],)),
                           dict(reference[name].attrs))
             coords[dim] = reference[dim]
-    for name, described in RUN_ATTRIBUTES.items():
-        attrs = dict(described)
-        data[attrs.pop("name", name)] = (dims, grid(lambda a, name=name: float(a.attrs.get(name, np.nan))), attrs)
+    for name, (variable, attrs) in RUN_ATTRIBUTES.items():
+        data[variable] = (dims, grid(lambda a, name=name: float(a.attrs.get(name, np.nan))), dict(attrs))
     coords |= {
         "aspect_ratio": ("aspect_ratio", ratios, {"units": "1", "long_name": "aspect ratio h0/r0"}),
         "mu_r": ("mu_r", mu_rs, {"units": "1", "long_name": "rolling resistance coefficient"}),
