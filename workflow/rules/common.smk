@@ -81,10 +81,21 @@ def pack_height(wildcards):
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
 
 
-def run_to_rest_options():
-    """colsim collapse options that run the study's collapses on to rest ("" without max_duration)."""
+def collapse_steps(wildcards):
+    """Steps of a collapse: its own (a convergence variant's {steps}) or the study's."""
+    return wildcards.get("steps", config["collapse"]["steps"])
+
+
+def collapse_duration(wildcards):
+    """End time t/sqrt(h0/g) of a collapse: its own (a variant's {duration}) or the study's."""
+    return wildcards.get("duration", config["collapse"]["duration"])
+
+
+def run_to_rest_options(wildcards):
+    """colsim collapse options that run the study's collapses on to rest ("" without max_duration;
+    a convergence variant keeps its own fixed length)."""
     collapse = config["collapse"]
-    if collapse["max_duration"] is None:
+    if collapse["max_duration"] is None or "steps" in wildcards.keys():
         return ""
     return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
             f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")

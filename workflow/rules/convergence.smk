@@ -2,45 +2,26 @@
 # number of steps and end time, then one table, its relative changes and a figure.
 
 
-rule collapse_variant:
-    input:
-        "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+# The study's own collapse and analyse rules at the variant's path; collapse takes its steps and end
+# time from the {steps} and {duration} wildcards (common.smk: collapse_steps, collapse_duration).
+use rule collapse as collapse_variant with:
     output:
         f"{VARIANT}/collapse.nc",
-    priority: collapse_priority
-    params:
-        mu=config["mu"],
-        frame_every=config["collapse"]["frame_every"],
-        checkpoint_every=config["collapse"]["checkpoint_every"],
-        solver=config["solver"],
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/collapse.log",
     benchmark:
         "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/collapse.tsv"
-    shell:
-        "colsim collapse --input {input} --mu {params.mu} --mu-r {wildcards.mu_r}"
-        " --duration {wildcards.duration} --steps {wildcards.steps} --frame-every {params.frame_every}"
-        " --checkpoint-every {params.checkpoint_every} --solver {params.solver}"
-        " --output {output} > {log} 2>&1"
 
 
-rule analyse_variant:
+use rule analyse as analyse_variant with:
     input:
         f"{VARIANT}/collapse.nc",
     output:
         f"{VARIANT}/analysis.nc",
-    params:
-        contact_tolerance=config["analysis"]["contact_tolerance"],
-        check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
-        mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/analyse.log",
     benchmark:
         "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/analyse.tsv"
-    shell:
-        "colsim analyse --input {input} --contact-tolerance {params.contact_tolerance}"
-        " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
-        " --output {output} > {log} 2>&1"
 
 
 rule convergence:

@@ -57,11 +57,11 @@ rule collapse:
     priority: collapse_priority
     params:
         mu=config["mu"],
-        duration=config["collapse"]["duration"],
-        steps=config["collapse"]["steps"],
+        duration=collapse_duration,
+        steps=collapse_steps,
         frame_every=config["collapse"]["frame_every"],
         checkpoint_every=config["collapse"]["checkpoint_every"],
-        to_rest=run_to_rest_options(),
+        to_rest=run_to_rest_options,
         solver=config["solver"],
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.log",
