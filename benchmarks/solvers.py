@@ -32,10 +32,10 @@ import numpy as np
 from colsim.packing import lattice_cloud
 
 from colsim.admm import AdmmSolver
-from colsim.apgd import ApgdSolver, WarmStart
+from colsim.apgd import ApgdSolver
 from colsim.contacts import detect
 from colsim.program import assemble
-from colsim.solvers import ClarabelSolver, SolverError
+from colsim.solvers import AutoSolver, ClarabelSolver, SolverError, WarmStart
 from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.stepper import predicted_displacement, run, step
 
@@ -56,8 +56,6 @@ def pour(n: int, seed: int = 0, max_steps: int = 2000, verbose=True) -> Particle
     state = ParticleState.at_rest(position[:n], radius[:n])
     settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=r0))
     weight_scale = float(np.mean(state.mass)) * 9.81 * 2 * float(np.mean(state.radius))
-    from colsim.apgd import AutoSolver
-
     solver = AutoSolver(threshold=0, apgd={"tolerance": 1e-4})
     for result in run(state, settings, max_steps, solver):
         state = result.state
@@ -93,7 +91,7 @@ def packing(n: int, seed: int = 0) -> ParticleState:
 
 
 def program_of(state: ParticleState, settings: StepSettings = COLLAPSE):
-    margin = settings.detection_margin * 2 * float(state.radius.min())
+    margin = settings.detection_margin_fraction * 2 * float(state.radius.min())
     found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
                    margin, settings.detection_slack)
     return assemble(state, found, settings.dt, settings.gravity), found

@@ -26,7 +26,7 @@ def small_pile() -> ParticleState:
 
 def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE):
     """(program, contacts) of one collapse step from `state`, detected as the stepper does."""
-    margin = settings.detection_margin * 2 * state.radius.min()
+    margin = settings.detection_margin_fraction * 2 * state.radius.min()
     found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
                    margin, settings.detection_slack)
     return assemble(state, found, settings.dt, settings.gravity), found

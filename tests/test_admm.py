@@ -3,10 +3,10 @@ warm start, errors."""
 import numpy as np
 import pytest
 
-from colsim.admm import AdmmSolver, project_friction_cone
-from colsim.apgd import WarmStart
+from colsim.admm import AdmmSolver
+from colsim.cones import project_gap_cone
 from colsim.program import cone_violation
-from colsim.solvers import SolverError, make_solver
+from colsim.solvers import SolverError, WarmStart, make_solver
 from solver_cases import against_clarabel, collapse_program, mid_collapse, small_pile
 
 clarabel = pytest.importorskip("clarabel")
@@ -42,7 +42,7 @@ def test_projection_onto_gap_cone_is_exact():
     x[inner, 0] = (2 * (a[inner] * np.linalg.norm(x[inner, 1:3], axis=1)
                         + b[inner] * np.linalg.norm(x[inner, 3:5], axis=1)) + np.abs(x[inner, 0]))
     x[50:80, 0] = -50 * np.abs(x[50:80, 0])                                  # near or in -K
-    z = project_friction_cone(x, a, b)
+    z = project_gap_cone(x, a, b)
     size = np.linalg.norm(x, axis=1)
     slack = z[:, 0] - a * np.linalg.norm(z[:, 1:3], axis=1) - b * np.linalg.norm(z[:, 3:5], axis=1)
     assert np.all(slack >= -1e-12 * size)

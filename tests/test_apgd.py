@@ -4,9 +4,10 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
-from colsim.apgd import ApgdSolver, AutoSolver, WarmStart, project_coupled_cone
+from colsim.apgd import ApgdSolver
+from colsim.cones import project_compiled, project_coupled_cone
 from colsim.program import cone_violation
-from colsim.solvers import SolverError, make_solver
+from colsim.solvers import AutoSolver, SolverError, WarmStart, make_solver
 from colsim.state import StepSettings
 from colsim.stepper import run
 from solver_cases import COLLAPSE, against_clarabel, collapse_program, mid_collapse, small_pile
@@ -87,15 +88,40 @@ def test_projection_is_exact():
 
 def test_compiled_projection_matches():
     """The scalar kernel of the compiled iterations gives the same projection, mu = 0 included."""
-    from colsim.apgd import _project_all
 
     rng = np.random.default_rng(5)
     x = rng.standard_normal((2000, 5))
     x[:300, 1:] = 0.0                                  # pure normal, either sign
     a = rng.choice([0.0, 0.577, 1.5], len(x))
     b = rng.choice([0.0, 0.12], len(x))
-    np.testing.assert_allclose(_project_all(x, a, b), project_coupled_cone(x, a, b), rtol=0, atol=1e-13)
-    assert np.all(_project_all(x, a, b)[:, 0] >= 0)
+    np.testing.assert_allclose(project_compiled(x, a, b), project_coupled_cone(x, a, b), rtol=0, atol=1e-13)
+    assert np.all(project_compiled(x, a, b)[:, 0] >= 0)
+
+
+@pytest.mark.parametrize("kernel", [project_coupled_cone, project_compiled])
+@pytest.mark.parametrize("sliding_first", [True, False])
+def test_projection_exact_next_to_a_breakpoint(kernel, sliding_first):
+    """Points whose projection has p a hair (1e-12 to 1e-6 relative) above the first breakpoint
+    ||q0||/mu (or ||r0||/mu_r): the piece must be chosen exactly, so p is right to rounding
+    (1e-12 relative), not only to sqrt(eps) as when nearly equal distances are compared."""
+    rng = np.random.default_rng(11)
+    n = 400
+    mu, mu_r = np.full(n, 0.577), np.full(n, 0.12)
+    first, second = (mu, mu_r) if sliding_first else (mu_r, mu)
+    t1 = rng.uniform(0.5, 2.0, n)                       # the first breakpoint
+    p_star = t1 * (1.0 + 10.0 ** rng.uniform(-12, -6, n))
+    n1, n2 = first * t1, second * 3.0 * t1               # the second breakpoint is at 3 t1
+    p0 = p_star * (1.0 + second**2) - second * n2         # the middle piece's minimiser is p_star
+    u1, u2 = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in rng.standard_normal((2, n, 2)))
+    x = np.empty((n, 5))
+    x[:, 0] = p0
+    x[:, 1:3], x[:, 3:5] = (n1[:, None] * u1, n2[:, None] * u2) if sliding_first else \
+        (n2[:, None] * u2, n1[:, None] * u1)
+    z = kernel(x, mu, mu_r)
+    np.testing.assert_allclose(z[:, 0], p_star, rtol=1e-12, atol=0)
+    kept, clipped = (slice(1, 3), slice(3, 5)) if sliding_first else (slice(3, 5), slice(1, 3))
+    np.testing.assert_array_equal(z[:, kept], x[:, kept])   # that term is inactive: left alone
+    np.testing.assert_allclose(np.linalg.norm(z[:, clipped], axis=1), second * p_star, rtol=1e-12)
 
 
 def test_projection_polar_cone_goes_to_zero():

@@ -29,7 +29,7 @@ def test_free_fall_matches_the_implicit_scheme(walls):
     x0, v0, w0 = np.array([0.5, -1.0, 50.0]), np.array([0.7, 0.1, 1.5]), np.array([1.0, -2.0, 3.0])
     state = ParticleState(x0[None], v0[None], w0[None], [RADIUS])
     settings = StepSettings(dt=dt, gravity=tuple(gravity), walls=walls)
-    for result in run(state, settings, steps):
+    for result in run(state, settings, steps, ClarabelSolver()):
         k = result.diagnostics.step
         assert result.diagnostics.n_contacts == 0  # the floor is 45 below the lowest point it reaches
         x_exact = x0 + k * v0 * dt + gravity * dt**2 * k * (k + 1) / 2

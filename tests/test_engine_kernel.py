@@ -90,7 +90,7 @@ def _train(max_redo: int):
     velocity = np.array([[2.0, 0, 0], [0, 0, 0], [0, 0, 0]])
     state = ParticleState(position, velocity, np.zeros((3, 3)), radius)
     settings = StepSettings(dt=0.02, gravity=(0.0, 0.0, 0.0), walls=Walls(floor=False),
-                            law=ContactLaw.uniform(0.3, 0.0), detection_margin=1e-6,
+                            law=ContactLaw.uniform(0.3, 0.0), detection_margin_fraction=1e-6,
                             detection_slack=0.0, max_redo=max_redo)
     return state, settings
 

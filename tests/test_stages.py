@@ -15,7 +15,10 @@ from colsim.calibration import polygon_rolling_coefficient
 from colsim.cli import main
 from colsim.collapse import CollapseSettings, collapse
 from colsim.packing import column_height, pack, solid_fraction, trim
+from colsim.solvers import ClarabelSolver
 from colsim.state import ParticleState
+
+CLARABEL = ClarabelSolver()
 
 R0 = 1.5
 
@@ -23,7 +26,7 @@ R0 = 1.5
 @pytest.fixture(scope="module")
 def packing():
     """A settled packing of ~450 spheres in a cylinder of radius 1.5, 3 high (about 10 s)."""
-    return pack(R0, 3.0, np.random.default_rng([7, 0]))
+    return pack(R0, 3.0, np.random.default_rng([7, 0]), CLARABEL)
 
 
 def test_packing_is_settled_tall_enough_and_dense(packing):
@@ -118,7 +121,7 @@ def test_zero_rolling_resistance_spreads_further_and_lower(packing):
     column = trim(packing.state, h0)
     top, spread = {}, {}
     for mu_r in (0.0, 0.12):
-        final = collapse(column, h0, CollapseSettings(mu_r=mu_r, n_steps=100)).frames[-1][1]
+        final = collapse(column, h0, CollapseSettings(mu_r=mu_r, n_steps=100), CLARABEL).frames[-1][1]
         top[mu_r] = np.percentile(final.position[:, 2] + final.radius, 99)
         spread[mu_r] = np.mean(np.hypot(final.position[:, 0], final.position[:, 1]) + final.radius)
     # Margins of half and one largest grain diameter (0.5), the resolution of both measures;
@@ -131,16 +134,17 @@ def test_collapse_resumes_from_checkpoint_to_the_same_result(packing, tmp_path):
     h0 = 1.0 * R0
     column = trim(packing.state, h0)
     settings = CollapseSettings(n_steps=12, frame_every=4, checkpoint_every=5)
-    whole = collapse(column, h0, settings)
+    whole = collapse(column, h0, settings, CLARABEL)
     checkpoint = tmp_path / "run.checkpoint"
-    first = collapse(column, h0, settings, checkpoint=checkpoint, stop_after=7)   # "killed" at step 7
+    first = collapse(column, h0, settings, CLARABEL, checkpoint=checkpoint, stop_after=7)   # "killed" at step 7
     assert len(first.diagnostics) == 7 and checkpoint.exists()
-    resumed = collapse(column, h0, settings, checkpoint=checkpoint)
+    resumed = collapse(column, h0, settings, CLARABEL, checkpoint=checkpoint)
     assert resumed.resumed_from == 5                       # the last checkpoint before the kill
     assert [k for k, _ in resumed.frames] == [k for k, _ in whole.frames]
     np.testing.assert_allclose(resumed.frames[-1][1].position, whole.frames[-1][1].position, rtol=0, atol=1e-12)
     # a checkpoint of other settings is ignored, not resumed
-    other = collapse(column, h0, CollapseSettings(n_steps=12, mu_r=0.0, checkpoint_every=5), checkpoint=checkpoint)
+    other = collapse(column, h0, CollapseSettings(n_steps=12, mu_r=0.0, checkpoint_every=5), CLARABEL,
+                     checkpoint=checkpoint)
     assert other.resumed_from == 0
 
 
@@ -164,13 +168,13 @@ def test_collapse_runs_on_to_rest_and_stops_there(packing):
     fixed = CollapseSettings(n_steps=20, duration=2.0, frame_every=5)
     settings = CollapseSettings(n_steps=20, duration=2.0, frame_every=5, max_duration=12.0,
                                 rest_window=1.0, rest_tolerance=0.1)
-    run = collapse(column, h0, settings)
+    run = collapse(column, h0, settings, CLARABEL)
     assert run.at_rest
     assert settings.n_steps <= len(run.diagnostics) < settings.max_steps
     assert run.frames[-1][0] == len(run.diagnostics)
     energy = np.array([d.kinetic_energy + d.rotational_energy for d in run.diagnostics])
     assert energy[-1] <= settings.rest_energy * energy.max()
-    short = collapse(column, h0, fixed)              # the same steps up to the nominal end
+    short = collapse(column, h0, fixed, CLARABEL)              # the same steps up to the nominal end
     assert run.frames[len(short.frames) - 1][0] == short.frames[-1][0]
     np.testing.assert_allclose(run.frames[len(short.frames) - 1][1].position, short.frames[-1][1].position,
                                rtol=0, atol=1e-12)

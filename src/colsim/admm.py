@@ -9,7 +9,7 @@ whose dual cone is the force cone K = {(p, q, r): ||q|| <= mu p, ||r|| <= mu_r p
 
 Scaling: each contact's normal, sliding and rolling rows are scaled, y^ = D y with
 D = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(B Mbar^-1 B')^-1/2 (the scaling of
-:mod:`colsim.apgd`). The scaled cone is the same kind of cone with mu^ = mu s_n/s_t and
+:func:`colsim.cones.row_scaling`). The scaled cone is the same kind of cone with mu^ = mu s_n/s_t and
 mu_r^ = mu_r s_n/s_r, so the Euclidean projection onto it stays exact, and a scalar penalty rho in
 the scaled space is the per-row penalty R = rho D^2 in the original one.
 
@@ -24,7 +24,7 @@ so -w stays in K^ and z in C^ with z . w = 0 exactly; the contact forces are lam
 by construction) and u solves Mbar u = fbar + B' lam at convergence (ClarabelSolver's convention).
 
 Stopping (every `check_every` iterations), both as lengths relative to the free-flight length L
-(:func:`colsim.apgd.length_scale`): primal max |B u + g e_n - z| / L, and dual
+(:func:`colsim.cones.length_scale`): primal max |B u + g e_n - z| / L, and dual
 max |u - u(lam)| / L with u(lam) = Mbar^-1 (fbar + B' lam). APGD's force-form residuals of the
 result are recorded in the solution's info as force_form_*. Not converging within `max_iter`
 iterations raises :class:`SolverError`.
@@ -55,41 +55,20 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .apgd import (_NUMBA, ApgdSolver, _force_floor, _project_all, _residuals, length_scale,
-                   project_coupled_cone)
-from .program import ROWS_PER_CONTACT, ConeProgram
-from .solvers import ConeSolution, Solver, SolverError, at_step
+from .cones import (force_floor, length_scale, project_coupled_cone, project_gap_cone,
+                    relative_residuals, row_scaling, scaled_coefficients)
+from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 
 
-def project_friction_cone(y: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
-    """Euclidean projection of y (m, 5) onto C = {y_n >= mu ||y_t|| + mu_r ||y_r||}, the dual cone
-    of the force cone: by Moreau's decomposition Proj_C(y) = y + Proj_K(-y), K = C*."""
-    return y + _project(-y, mu, mu_r)
-
-
-def _project(lam, mu, mu_r):
-    if _NUMBA:
-        return _project_all(np.ascontiguousarray(lam, dtype=float),
-                            np.ascontiguousarray(mu, dtype=float), np.ascontiguousarray(mu_r, dtype=float))
-    return project_coupled_cone(lam, mu, mu_r)
-
-
 class _Factor:
-    """A factorisation of the SPD matrix Mbar + rho B' D^2 B with a solve(rhs) method."""
+    """A sparse LU factorisation (scipy splu, symmetric mode) of the SPD matrix Mbar + rho B' D^2 B."""
 
-    def __init__(self, matrix: sp.spmatrix, method: str):
-        self.method = method
-        if method == "qdldl":
-            import qdldl
-
-            self._solver = qdldl.Solver(sp.triu(matrix, format="csc"))
-            self.solve = self._solver.solve
-        else:
-            lu = spla.splu(sp.csc_matrix(matrix), permc_spec=method,
-                           options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
-            self.solve = lu.solve
+    def __init__(self, matrix: sp.spmatrix, ordering: str):
+        lu = spla.splu(sp.csc_matrix(matrix), permc_spec=ordering,
+                       options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
+        self.solve = lu.solve
 
 
 class AdmmSolver(Solver):
@@ -98,8 +77,7 @@ class AdmmSolver(Solver):
     tolerance: on the relative primal infeasibility and complementarity (as APGD's).
     rho: the penalty relative to diag(B Mbar^-1 B')^-1 (dimensionless). alpha: over-relaxation.
     adaptive: change rho during the solve (see 'Changing rho' in the module docstring).
-    factorization: 'qdldl' (the qdldl package, if installed) or a scipy splu column ordering
-    ('MMD_AT_PLUS_A', 'COLAMD', 'MMD_ATA', 'NATURAL').
+    factorization: the scipy splu column ordering ('MMD_AT_PLUS_A', 'COLAMD', 'MMD_ATA', 'NATURAL').
     """
 
     name = "admm"
@@ -134,24 +112,23 @@ class AdmmSolver(Solver):
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None) -> ConeSolution:
         if program.m == 0:
-            return self._no_contacts(program)
+            return self.no_contacts(program)
         start = time.perf_counter()
         m = program.m
         B = program.jacobian.tocsr()
         mass = program.mass
         inv_mass = 1.0 / mass
         fbar = program.fbar
-        s = ApgdSolver._scaling(program, B, inv_mass)  # (m, 5): D
+        s = row_scaling(B, inv_mass)            # (m, 5): D
         d = s.ravel()
-        a = program.mu * s[:, 0] / s[:, 1]      # scaled cone coefficients
-        b = program.mu_r * s[:, 0] / s[:, 3]
+        a, b = scaled_coefficients(program, s)  # the scaled cone's coefficients
         A = (sp.diags(d) @ B).tocsr()           # D B
         AT = A.T.tocsr()
         AtA = (AT @ A).tocsc()
         h = np.zeros(5 * m)                     # D g e_n
         h[::ROWS_PER_CONTACT] = d[::ROWS_PER_CONTACT] * program.gap
         scale = length_scale(program)
-        force_floor = _force_floor(program, scale)
+        floor = force_floor(program, scale)
         rho = self.rho
         t0 = time.perf_counter()
         factor = _Factor(sp.diags(mass) + rho * AtA, self.factorization)
@@ -170,7 +147,7 @@ class AdmmSolver(Solver):
             w = np.zeros(5 * m)
             started = "cold"
         u = program.increments(lam)
-        z = project_friction_cone((A @ u + h + w).reshape(m, 5), a, b).ravel()
+        z = project_gap_cone((A @ u + h + w).reshape(m, 5), a, b).ravel()
         setup_time = time.perf_counter() - start
 
         res = {"primal": np.inf, "dual": np.inf}
@@ -187,7 +164,7 @@ class AdmmSolver(Solver):
             x = self.alpha * ax + (1.0 - self.alpha) * z
             z_prev = z
             v = x + w
-            z = project_friction_cone(v.reshape(m, 5), a, b).ravel()
+            z = project_gap_cone(v.reshape(m, 5), a, b).ravel()
             w = v - z
             if k % self.check_every == 0 or k == self.max_iter:
                 lam = forces_of(w, rho)
@@ -230,5 +207,5 @@ class AdmmSolver(Solver):
                 status="MaxIterations", step=step, residuals=res)
         y = program.end_of_step_gaps(u)
         info.update({"force_form_" + key: value for key, value in
-                     _residuals(y, lam, program.mu, program.mu_r, scale, force_floor).items()})
+                     relative_residuals(y, lam, program.mu, program.mu_r, scale, floor).items()})
         return ConeSolution(u, lam, "Solved", k, setup_time, solve_time, info)

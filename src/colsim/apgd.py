@@ -13,26 +13,21 @@ Chrono's APGD (Mazhar et al. 2015). W is never formed: the gradient is
 
 i.e. each contact's gap at the end of the step, so one iteration costs one product with B' and one
 with B (work linear in the number of contacts) plus the exact Euclidean projection onto K_k
-(:func:`project_coupled_cone`).
+(:func:`colsim.cones.project_point`).
 
 Preconditioning: each contact's normal, sliding and rolling rows are scaled separately, lam = S z
 with S = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(W)^-1/2 (averaged over the two rows
 of a pair). The scaled cone is again a coupled cone with mu' = mu s_n/s_t, mu_r' = mu_r s_n/s_r, so
 the projection stays exact.
 
-Stopping (checked every `check_every` iterations, at the current iterate lam):
-  - dual feasibility: lam_k in K_k, exact by construction (the iterate is a projection);
-  - primal feasibility: y_k = g_k + B_k u in K_k^* = {y_n >= mu ||y_t|| + mu_r ||y_r||}:
-    max_k (mu ||y_t|| + mu_r ||y_r|| - y_n)_+ / L;
-  - complementarity: sum_k |lam_k . y_k| / ((sum_k p_k + m F0) L);
-where L is a length that does not depend on N: the root-mean-square free-flight displacement
-(v dt + g dt^2), but at least 1e-6 of the mean radius, and F0 = mean(m_i) L / dt^2 is a force
-floor (about the weight of a mean particle at rest), so that a step whose contacts all open
-(p -> 0) still converges in this measure. Both must fall below `tolerance`. Not reaching it within `max_iter` iterations raises :class:`SolverError`.
+Stopping (checked every `check_every` iterations, at the current iterate lam): the relative
+primal infeasibility and complementarity of :func:`colsim.cones.relative_residuals` must both fall
+below `tolerance`; dual feasibility (lam_k in K_k) is exact by construction (the iterate is a
+projection). Not reaching it within `max_iter` iterations raises :class:`SolverError`.
 
 Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
-contacts). :class:`WarmStart` carries a step's forces by contact pair key, in the global frame,
-and re-expresses them in the next step's contact frames (:meth:`WarmStart.match`).
+contacts). :class:`colsim.solvers.WarmStart` carries a step's forces by contact pair key, in the
+global frame, and re-expresses them in the next step's contact frames.
 """
 from __future__ import annotations
 
@@ -42,139 +37,19 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .program import ROWS_PER_CONTACT, ConeProgram
-from .solvers import ClarabelSolver, ConeSolution, Solver, SolverError, WarmStart, at_step  # noqa: F401
+from .cones import (HAVE_NUMBA, force_floor, length_scale, project_coupled_cone, project_point,
+                    relative_residuals, row_scaling, scaled_coefficients)
+from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+
+if HAVE_NUMBA:
+    import numba
 
 log = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------------------------
-# The exact projection onto the coupled cone
-# --------------------------------------------------------------------------------------------
-
-def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
-    """Euclidean projection of points lam (m, 5) = (p, q1, q2, r1, r2) onto
-    {||q|| <= mu p, ||r|| <= mu_r p} (mu, mu_r (m,) >= 0; 0 forces q or r to zero).
-
-    For a fixed p the nearest q and r are radial clips of q0, r0 to radii mu p and mu_r p, so the
-    squared distance is phi(p) = (p - p0)^2 + (||q0|| - mu p)_+^2 + (||r0|| - mu_r p)_+^2, a convex
-    piecewise quadratic on p >= 0 with breakpoints ||q0||/mu and ||r0||/mu_r. Its minimiser is found
-    exactly: the minimiser of each piece clipped to its interval, the best of the three.
-    """
-    lam = np.asarray(lam, dtype=float)
-    p0 = lam[:, 0]
-    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
-    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
-    a = np.asarray(mu, dtype=float)
-    b = np.asarray(mu_r, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bq = np.where(a > 0, nq / np.where(a > 0, a, 1.0), np.inf)  # q clipped iff p < bq
-        br = np.where(b > 0, nr / np.where(b > 0, b, 1.0), np.inf)
-    t1 = np.minimum(bq, br)
-    t2 = np.maximum(bq, br)
-    q_first = bq <= br  # on (t1, t2) only the larger breakpoint's term is still active
-    a2, b2 = a * a, b * b
-    # piece [0, t1]: both active
-    p_both = (p0 + a * nq + b * nr) / (1.0 + a2 + b2)
-    # piece [t1, t2]: only the term whose breakpoint is t2 is active
-    p_mid = np.where(q_first, (p0 + b * nr) / (1.0 + b2), (p0 + a * nq) / (1.0 + a2))
-    # piece [t2, inf): none active
-    cands = (np.clip(p_both, 0.0, t1),
-             np.clip(p_mid, np.minimum(t1, t2), t2),
-             np.maximum(p0, np.where(np.isfinite(t2), t2, np.inf)))
-    best = None
-    best_phi = None
-    for p in cands:
-        pf = np.where(np.isfinite(p), p, 0.0)
-        phi = ((pf - p0) ** 2 + np.maximum(nq - a * pf, 0.0) ** 2
-               + np.maximum(nr - b * pf, 0.0) ** 2)
-        phi = np.where(np.isfinite(p), phi, np.inf)
-        if best is None:
-            best, best_phi = pf, phi
-        else:
-            better = phi < best_phi
-            best = np.where(better, pf, best)
-            best_phi = np.where(better, phi, best_phi)
-    p = np.maximum(best, 0.0)
-    out = np.empty_like(lam)
-    out[:, 0] = p
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fq = np.where(nq > a * p, a * p / np.where(nq > 0, nq, 1.0), 1.0)
-        fr = np.where(nr > b * p, b * p / np.where(nr > 0, nr, 1.0), 1.0)
-    out[:, 1:3] = lam[:, 1:3] * fq[:, None]
-    out[:, 3:5] = lam[:, 3:5] * fr[:, None]
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# The solver
-# --------------------------------------------------------------------------------------------
-
-def length_scale(program: ConeProgram) -> float:
-    """The length L that makes the residuals dimensionless (see the module docstring)."""
-    n = program.n_unknowns // 6
-    mass = program.mass
-    trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
-    rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
-    # the free-flight displacement v dt + g dt^2 (its gravity part cannot be told apart from v in
-    # fbar), bounded below by a small fraction of the mean radius (R from I = 2/5 m R^2)
-    radius = np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3])) if n else np.ones(1)
-    return max(rms, 1e-6 * float(np.mean(radius)))
-
-
-# --------------------------------------------------------------------------------------------
 # The iterations: fused numba kernels, or the same steps in numpy
 # --------------------------------------------------------------------------------------------
-
-try:
-    import numba
-except ImportError:  # pragma: no cover - numba is a dependency; numpy is the fallback
-    numba = None
-_NUMBA = numba is not None
-
-
-def _project_point(p0, q1, q2, r1, r2, a, b):
-    """The projection of project_coupled_cone for one point (scalar code, compiled by numba)."""
-    nq = np.sqrt(q1 * q1 + q2 * q2)
-    nr = np.sqrt(r1 * r1 + r2 * r2)
-    if p0 >= 0.0 and nq <= a * p0 and nr <= b * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
-        return p0, q1, q2, r1, r2
-    bq = nq / a if a > 0 else np.inf
-    br = nr / b if b > 0 else np.inf
-    t1 = min(bq, br)
-    t2 = max(bq, br)
-    # the three pieces' minimisers, clipped to their intervals; phi is convex so the best wins
-    best = -1.0
-    best_phi = np.inf
-    for piece in range(3):
-        if piece == 0:
-            p = (p0 + a * nq + b * nr) / (1.0 + a * a + b * b)
-            p = min(max(p, 0.0), t1)
-        elif piece == 1:
-            if not t1 < np.inf:
-                continue
-            if bq <= br:
-                p = (p0 + b * nr) / (1.0 + b * b)
-            else:
-                p = (p0 + a * nq) / (1.0 + a * a)
-            p = min(max(p, t1), t2)
-        else:
-            if not t2 < np.inf:
-                continue
-            p = max(p0, t2)
-        if not p < np.inf:
-            continue
-        dq = max(nq - a * p, 0.0)
-        dr = max(nr - b * p, 0.0)
-        phi = (p - p0) * (p - p0) + dq * dq + dr * dr
-        if phi < best_phi:
-            best_phi = phi
-            best = p
-    p = max(best, 0.0)
-    fq = a * p / nq if nq > a * p else 1.0
-    fr = b * p / nr if nr > b * p else 1.0
-    return p, q1 * fq, q2 * fq, r1 * fr, r2 * fr
-
 
 def _csr_matvec(indptr, indices, data, x, out):
     for row in range(len(indptr) - 1):
@@ -202,7 +77,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
             dd = 0.0
             for k in range(m):
                 o = 5 * k
-                pp, q1, q2, r1, r2 = _project_point(
+                pp, q1, q2, r1, r2 = project_point(
                     y[o] - step * g[o], y[o + 1] - step * g[o + 1], y[o + 2] - step * g[o + 2],
                     y[o + 3] - step * g[o + 3], y[o + 4] - step * g[o + 4], a[k], b[k])
                 x_new[o] = pp
@@ -245,19 +120,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip,
     return theta, lip, backtracks, restarts
 
 
-def _project_all(lam, a, b):
-    """project_coupled_cone by the scalar kernel (compiled with numba; for tests)."""
-    out = np.empty_like(lam)
-    for k in range(lam.shape[0]):
-        p, q1, q2, r1, r2 = _project_point(lam[k, 0], lam[k, 1], lam[k, 2], lam[k, 3], lam[k, 4],
-                                           a[k], b[k])
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4] = p, q1, q2, r1, r2
-    return out
-
-
-if _NUMBA:
-    _project_point = numba.njit(cache=True, inline="always")(_project_point)
-    _project_all = numba.njit(cache=True)(_project_all)
+if HAVE_NUMBA:
     _csr_matvec = numba.njit(cache=True)(_csr_matvec)
     _iterate_compiled = numba.njit(cache=True)(_iterate)
 
@@ -327,12 +190,6 @@ def _dot(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.einsum("i,i->", a, b))
 
 
-def _force_floor(program: ConeProgram, scale: float) -> float:
-    """F0 = mean particle mass L / dt^2 (force): about the weight of a mean particle at rest."""
-    n = program.n_unknowns // 6
-    return float(np.mean(program.mass[:3 * n])) * scale if n else 1.0
-
-
 class ApgdSolver(Solver):
     """Accelerated projected gradient on the contact forces (see the module docstring).
 
@@ -356,10 +213,10 @@ class ApgdSolver(Solver):
         if max_iter < 1 or check_every < 1:
             raise ValueError("max_iter and check_every must be >= 1")
         if kernel is None:
-            kernel = "numba" if _NUMBA else "numpy"
+            kernel = "numba" if HAVE_NUMBA else "numpy"
         if kernel not in ("numba", "numpy"):
             raise ValueError(f"APGD kernel must be 'numba' or 'numpy', got {kernel!r}")
-        if kernel == "numba" and not _NUMBA:
+        if kernel == "numba" and not HAVE_NUMBA:
             raise ValueError("APGD kernel 'numba' needs numba installed")
         self.tolerance = float(tolerance)
         self.max_iter = int(max_iter)
@@ -371,43 +228,18 @@ class ApgdSolver(Solver):
         self.lipschitz_decay = float(lipschitz_decay)
         self.verbose = verbose
 
-    # -- pieces ----------------------------------------------------------------------------
-    @staticmethod
-    def _scaling(program: ConeProgram, B: sp.csr_matrix, inv_mass: np.ndarray) -> np.ndarray:
-        """(m, 5) per-row scales s = diag(W)^-1/2, shared by the two rows of a tangent pair."""
-        m = program.m
-        diag = (B.multiply(B) @ inv_mass).reshape(m, ROWS_PER_CONTACT)
-        s = np.empty_like(diag)
-        s[:, 0] = diag[:, 0]
-        s[:, 1:3] = 0.5 * (diag[:, 1] + diag[:, 2])[:, None]
-        s[:, 3:5] = 0.5 * (diag[:, 3] + diag[:, 4])[:, None]
-        positive = s > 0
-        s[positive] = 1.0 / np.sqrt(s[positive])
-        s[~positive] = 1.0
-        return s
-
-    def residuals(self, program: ConeProgram, forces: np.ndarray, u: np.ndarray | None = None,
-                  scale: float | None = None) -> dict[str, float]:
-        """Relative primal infeasibility, dual infeasibility and complementarity of `forces`."""
-        if u is None:
-            u = program.increments(forces)
-        scale = scale or length_scale(program)
-        y = program.end_of_step_gaps(u)
-        return _residuals(y, forces, program.mu, program.mu_r, scale, _force_floor(program, scale))
-
     # -- the iteration ---------------------------------------------------------------------
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None) -> ConeSolution:
         if program.m == 0:
-            return self._no_contacts(program)
+            return self.no_contacts(program)
         start = time.perf_counter()
         m = program.m
         B = program.jacobian.tocsr()
         inv_mass = 1.0 / program.mass
-        s = self._scaling(program, B, inv_mass) if self.precondition else np.ones((m, 5))
+        s = row_scaling(B, inv_mass) if self.precondition else np.ones((m, 5))
         s_flat = s.ravel()
-        a = program.mu * s[:, 0] / s[:, 1]
-        b = program.mu_r * s[:, 0] / s[:, 3]
+        a, b = scaled_coefficients(program, s)
         # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
         # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic).
         SB = sp.diags(s_flat) @ B
@@ -417,7 +249,7 @@ class ApgdSolver(Solver):
         c[::ROWS_PER_CONTACT] += program.gap
         c *= s_flat
         scale = length_scale(program)
-        force_floor = _force_floor(program, scale)
+        floor = force_floor(program, scale)
 
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
             x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
@@ -448,8 +280,8 @@ class ApgdSolver(Solver):
             run.iterate(n)
             k += n
             yloc = (run.gradient_at_x() / s_flat).reshape(m, 5)
-            res = _residuals(yloc, (s_flat * run.x).reshape(m, 5), program.mu, program.mu_r,
-                             scale, force_floor)
+            res = relative_residuals(yloc, (s_flat * run.x).reshape(m, 5), program.mu, program.mu_r,
+                                     scale, floor)
             if self.verbose:
                 log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
                          res["complementarity"], run.lip)
@@ -467,59 +299,3 @@ class ApgdSolver(Solver):
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
         return ConeSolution(program.increments(forces), forces, "Solved", k, setup_time, solve_time, info)
-
-
-def _residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,
-               force_floor: float) -> dict[str, float]:
-    """Relative residuals from end-of-step gaps y (m, 5) and forces lam (m, 5); see the docstring."""
-    nyt = np.sqrt(y[:, 1] ** 2 + y[:, 2] ** 2)
-    nyr = np.sqrt(y[:, 3] ** 2 + y[:, 4] ** 2)
-    primal = float(np.max(np.maximum(mu * nyt + mu_r * nyr - y[:, 0], 0.0), initial=0.0)) / scale
-    p = lam[:, 0]
-    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
-    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
-    dual_abs = np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p])
-    total = float(np.sum(np.maximum(p, 0.0)))
-    force_scale = max(total / max(len(p), 1), force_floor)
-    dual = float(np.max(dual_abs, initial=0.0)) / force_scale
-    comp = float(np.sum(np.abs(np.einsum("ij,ij->i", lam, y))))
-    comp = comp / ((total + len(p) * force_floor) * scale)
-    return {"primal": primal, "dual": max(dual, 0.0), "complementarity": comp}
-
-
-class AutoSolver(Solver):
-    """Clarabel for programs with fewer than `threshold` contacts, APGD from there on.
-
-    Clarabel was faster at every size measured on the project's 2-core machine (one step of a
-    settled packing, tolerance 1e-8 vs APGD's 1e-5): 1k spheres / 3.3k contacts 1.6 s vs 6.2 s,
-    4k / 13k 12 s vs 28 s, 16k / 53k 79 s CPU vs 154 s. What APGD saves is memory: 98 MB against
-    Clarabel's 890 MB at 16k, and Clarabel's factor grows faster than N. The default threshold,
-    150,000 contacts (about 45,000 spheres), is where Clarabel's factor is expected to pass several
-    GB (an extrapolation: 64k spheres were not run).
-
-    fallback: if APGD does not converge, log a warning and solve the step with Clarabel (the step
-    is then exact but slow); with fallback=False the :class:`SolverError` propagates.
-    """
-
-    name = "auto"
-    uses_warm_start = True
-
-    def __init__(self, threshold: int = 150_000, fallback: bool = True, clarabel: dict | None = None,
-                 apgd: dict | None = None):
-        self.threshold = int(threshold)
-        self.fallback = fallback
-        self.clarabel = ClarabelSolver(**(clarabel or {}))
-        self.apgd = ApgdSolver(**(apgd or {}))
-
-    def solve(self, program, warm_start=None, step=None):
-        if program.m < self.threshold:
-            return self.clarabel.solve(program, warm_start=warm_start, step=step)
-        try:
-            return self.apgd.solve(program, warm_start=warm_start, step=step)
-        except SolverError as error:
-            if not self.fallback:
-                raise
-            log.warning("%s; solving this step with Clarabel instead", error)
-            solution = self.clarabel.solve(program, step=step)
-            solution.status = f"{solution.status} (APGD fallback)"
-            return solution

@@ -18,16 +18,17 @@ import json
 import logging
 import pickle
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
 from .analysis import measure_deposit
 from .io import atomic_path
-from .solvers import Solver, WarmStart, make_solver
+from .solvers import Solver
 from .state import ContactLaw, ParticleState, StepSettings, Walls
-from .stepper import StepDiagnostics, base_margin, next_margin, step
+from .stepper import Carry, StepDiagnostics, run
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +47,6 @@ class CollapseSettings:
     n_steps: int = 100
     frame_every: int = 5
     gravity: float = 9.81
-    solver: str = "clarabel"
-    solver_options: dict = field(default_factory=dict)
     checkpoint_every: int = 10
     max_duration: float | None = None   # None: stop at `duration` (the paper)
     rest_window: float = 1.0             # t / sqrt(h0/g)
@@ -118,49 +117,42 @@ def _deposit(state: ParticleState, time_scale: float) -> tuple[float, float, flo
     return state.time / time_scale, deposit.h_inf, deposit.r_inf
 
 
-def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float) -> str:
+def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, solver: Solver) -> str:
     digest = hashlib.sha256()
     for array in (column.position, column.velocity, column.angular_velocity, column.radius):
         digest.update(np.ascontiguousarray(array).tobytes())
-    digest.update(json.dumps([asdict(settings), h0], sort_keys=True, default=str).encode())
+    digest.update(json.dumps([asdict(settings), h0, solver.describe()], sort_keys=True, default=str).encode())
     return digest.hexdigest()
 
 
-def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
-             checkpoint: str | Path | None = None, solver: Solver | None = None,
-             progress=None, stop_after: int | None = None) -> CollapseRun:
-    """Release `column` (height h0) and integrate it; see the module docstring.
+def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solver: Solver,
+             checkpoint: str | Path | None = None, progress=None,
+             stop_after: int | None = None) -> CollapseRun:
+    """Release `column` (height h0) and integrate it with `solver`; see the module docstring.
 
     progress: optional callable(diagnostics) after each step.
     stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
     """
-    solver = solver or make_solver(settings.solver, **settings.solver_options)
     dt = settings.time_step(h0)
     step_settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -settings.gravity),
                                  walls=Walls(floor=True, cylinder_radius=None), law=settings.law())
-    fingerprint = _fingerprint(column, settings, h0)
+    fingerprint = _fingerprint(column, settings, h0, solver)
     saved = _load_checkpoint(checkpoint, fingerprint)
     if saved:
-        state, frames, diagnostics, warm, elapsed = (saved[k] for k in
-                                                     ("state", "frames", "diagnostics", "warm", "elapsed"))
+        state, frames, diagnostics, carry, elapsed = (saved[k] for k in
+                                                      ("state", "frames", "diagnostics", "carry", "elapsed"))
         log.info("resuming from the checkpoint at step %d", len(diagnostics))
     else:
-        state, frames, diagnostics, warm, elapsed = column.copy(), [(0, column.copy())], [], None, 0.0
+        state, frames, diagnostics, carry, elapsed = column.copy(), [(0, column.copy())], [], Carry(), 0.0
     resumed_from = len(diagnostics)
     start = time.perf_counter() - elapsed
-    base = base_margin(column, step_settings)
-    margin = next_margin(diagnostics[-1], base) if diagnostics else None
     rest_check = settings.max_duration is not None
     time_scale = np.sqrt(h0 / settings.gravity)
     history = [_deposit(s, time_scale) for _, s in frames] if rest_check else []
     at_rest = None
     last = settings.max_steps
-    for k in range(resumed_from + 1, last + 1):
-        result = step(state, step_settings, solver, step_number=k, warm_start=warm, margin=margin)
-        margin = next_margin(result.diagnostics, base)
-        state = result.state
-        if solver.uses_warm_start:
-            warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
+    for result in run(state, step_settings, last - resumed_from, solver, resumed_from, carry):
+        k, state = result.diagnostics.step, result.state
         diagnostics.append(result.diagnostics)
         is_frame = k % settings.frame_every == 0 or k in (settings.n_steps, last)
         if is_frame:
@@ -173,7 +165,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings,
             if at_rest:
                 break
         if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
-            _save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, warm,
+            _save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
                              time.perf_counter() - start)
         if stop_after is not None and k - resumed_from >= stop_after:
             break
@@ -189,9 +181,9 @@ def _at_rest(history, diagnostics, column, settings) -> bool:
                            settings.rest_tolerance * 2.0 * float(column.radius.mean()))
 
 
-def _save_checkpoint(path, fingerprint, state, frames, diagnostics, warm, elapsed):
+def _save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed):
     payload = {"fingerprint": fingerprint, "state": state, "frames": frames,
-               "diagnostics": diagnostics, "warm": warm, "elapsed": elapsed}
+               "diagnostics": diagnostics, "carry": carry, "elapsed": elapsed}
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
             pickle.dump(payload, handle, protocol=pickle.HIGHEST_PROTOCOL)
@@ -214,8 +206,6 @@ def _load_checkpoint(path, fingerprint):
 
 def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
     """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
-    import xarray as xr
-
     steps = np.array([k for k, _ in run.frames])
     frames = [s for _, s in run.frames]
     t_scale = np.sqrt(h0 / settings.gravity)

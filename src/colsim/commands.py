@@ -49,8 +49,8 @@ def pack(args):
     if args.diameter_min > args.diameter_max:
         raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
     rng = np.random.default_rng([args.seed, args.root_seed])
-    result = run_pack(args.r0, args.height, rng, (args.diameter_min, args.diameter_max), args.density,
-                      args.gravity, args.dt, args.rest_energy, args.max_steps, _solver(args))
+    result = run_pack(args.r0, args.height, rng, _solver(args), (args.diameter_min, args.diameter_max),
+                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})
@@ -83,14 +83,13 @@ def collapse(args):
     settings = CollapseSettings(
         mu=args.mu, mu_r=args.mu_r, floor_mu=args.floor_mu, floor_mu_r=args.floor_mu_r,
         duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
-        gravity=float(source.attrs.get("gravity", 9.81)), solver=args.solver,
+        gravity=float(source.attrs.get("gravity", 9.81)),
         checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
-        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy,
-        solver_options={} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance})
+        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
     try:
-        run = run_collapse(column, h0, settings, checkpoint=checkpoint, progress=progress)
+        run = run_collapse(column, h0, settings, _solver(args), checkpoint=checkpoint, progress=progress)
     finally:
         progress.close()
     attrs = io.global_attributes(io.TRAJECTORY_KIND, "colsim collapse",

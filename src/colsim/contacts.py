@@ -211,10 +211,6 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Over
     return Overlaps(pairs, max(0.0, float(overlap.max(initial=0.0))), largest_floor, cylinder)
 
 
-def largest_overlap(state: ParticleState, walls: Walls) -> float:
-    """Largest overlap (length, >= 0) between any two particles or a particle and a wall."""
-    return overlaps(state, walls).largest
-
 def touching_pairs(state: ParticleState, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
     """Particle pairs (i, j) whose gap is below tolerance (length): the contact graph's edges."""
     pi, pj, _ = particle_pairs(state, tolerance)

@@ -94,10 +94,11 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
     return slow.mean() >= rest_fraction and supported.mean() >= 0.99
 
 
-def pack(r0: float, height: float, rng: np.random.Generator, diameter_range=(0.25, 0.5),
+def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
          density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
-         max_steps: int = 5000, solver: Solver | None = None, progress=None) -> PackingResult:
-    """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length)."""
+         max_steps: int = 5000, progress=None) -> PackingResult:
+    """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
+    solving each step with `solver`."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")

@@ -16,10 +16,15 @@ Its Lagrange dual (force form) is
 and u = Mbar^-1 (fbar + B' lam). The multipliers are the contact forces: normal p, sliding q and
 rolling r; the rolling moment is R_eff r. This is the associated friction law of the paper: a
 sliding contact opens by mu ||du_t|| per step.
+
+A back-end solves a program behind one contract (:class:`Solver`): it returns a
+:class:`ConeSolution` or raises :class:`SolverError`, never an unconverged result. The back-ends
+are :mod:`colsim.clarabel`, :mod:`colsim.apgd` and :mod:`colsim.admm`; :mod:`colsim.solvers` picks
+them by name.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -135,11 +140,6 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
     )
 
 
-def objective(program: ConeProgram, u: np.ndarray) -> float:
-    """Primal objective 1/2 u' Mbar u - fbar' u."""
-    return float(0.5 * u @ (program.mass * u) - program.fbar @ u)
-
-
 def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> dict[str, float]:
     """How far a solution is from the cones, in length (primal) and force (dual) units.
 
@@ -163,3 +163,57 @@ def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> d
         "dual": float(np.max(dual)),
         "complementarity": float(np.max(np.abs(p * slack))),
     }
+
+
+@dataclass
+class ConeSolution:
+    """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units.
+    setup_time, solve_time: seconds; info: the back-end's residuals and counters."""
+
+    increments: np.ndarray
+    forces: np.ndarray
+    status: str
+    iterations: int
+    setup_time: float
+    solve_time: float
+    info: dict = field(default_factory=dict)
+
+
+class SolverError(RuntimeError):
+    """A cone program that was not solved to tolerance."""
+
+    def __init__(self, message: str, status: str = "", step: int | None = None, residuals=None):
+        self.status = status
+        self.step = step
+        self.residuals = residuals or {}
+        super().__init__(message)
+
+
+def at_step(step: int | None) -> str:
+    """' at step N' for an error message, or '' when the step is not known."""
+    return f" at step {step}" if step is not None else ""
+
+
+class Solver:
+    """A back-end: `solve(program, warm_start=None, step=None) -> ConeSolution`.
+
+    warm_start: forces (m, 5) aligned with the program's contacts, or None.
+    step: the step number, for error messages."""
+
+    name = "base"
+    #: whether solve() uses `warm_start` (the stepper then passes the previous step's forces)
+    uses_warm_start = False
+
+    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
+              step: int | None = None) -> ConeSolution:
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        """The back-end's name and settings (JSON-able), for output attributes and checkpoints."""
+        settings = {k: v for k, v in vars(self).items() if isinstance(v, (bool, int, float, str))}
+        return {"name": self.name, **settings}
+
+    @staticmethod
+    def no_contacts(program: ConeProgram) -> ConeSolution:
+        """The solution of a program without contacts: free motion."""
+        return ConeSolution(program.free_motion(), np.zeros((0, ROWS_PER_CONTACT)), "Solved", 0, 0.0, 0.0)

@@ -11,7 +11,6 @@ import numpy as np
 
 #: Contact families, used to pick friction coefficients per contact.
 PARTICLE, FLOOR, CYLINDER = 0, 1, 2
-FAMILY_NAMES = ("particle-particle", "particle-floor", "particle-cylinder")
 
 
 @dataclass
@@ -129,8 +128,8 @@ class StepSettings:
 
     dt: time step (time). gravity: (3,) acceleration (length/time^2), -z by default.
     overlap_tolerance: largest overlap accepted after a step, as a fraction of the smallest diameter.
-    detection_margin: gap beyond the predicted motion within which a pair is a potential contact,
-    as a fraction of the smallest diameter. detection_slack: fraction of a pair's predicted relative
+    detection_margin_fraction: gap beyond the predicted motion within which a pair is a potential
+    contact, as a fraction of the smallest diameter (the stepper's margins are lengths). detection_slack: fraction of a pair's predicted relative
     displacement added to that margin (see :func:`colsim.contacts.detect`).
     max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.stepper`).
     margin_growth: factor by which a redone step's detection margin grows.
@@ -141,7 +140,7 @@ class StepSettings:
     walls: Walls = field(default_factory=Walls)
     law: ContactLaw = field(default_factory=ContactLaw)
     overlap_tolerance: float = 0.01
-    detection_margin: float = 0.05
+    detection_margin_fraction: float = 0.05
     detection_slack: float = 0.5
     max_redo: int = 4
     margin_growth: float = 2.0
@@ -151,7 +150,7 @@ class StepSettings:
             raise ValueError(f"time step dt must be positive, got {self.dt}")
         if self.margin_growth <= 1:
             raise ValueError(f"margin_growth must be > 1, got {self.margin_growth}")
-        if self.overlap_tolerance <= 0 or self.detection_margin < 0 or self.detection_slack < 0:
-            raise ValueError("overlap_tolerance must be > 0, detection_margin and detection_slack >= 0")
+        if self.overlap_tolerance <= 0 or self.detection_margin_fraction < 0 or self.detection_slack < 0:
+            raise ValueError("overlap_tolerance must be > 0, detection_margin_fraction and detection_slack >= 0")
         if self.walls.cylinder_radius is not None and self.walls.cylinder_radius <= 0:
             raise ValueError(f"cylinder radius must be positive, got {self.walls.cylinder_radius}")

@@ -22,7 +22,7 @@ import numpy as np
 
 from . import contacts as contact_detection
 from .program import assemble
-from .solvers import ClarabelSolver, ConeSolution, Solver, WarmStart
+from .solvers import ConeSolution, Solver, WarmStart
 from .state import ParticleState, StepSettings
 
 log = logging.getLogger(__name__)
@@ -59,13 +59,24 @@ class StepDiagnostics:
 
 
 @dataclass
+class Carry:
+    """What one step hands to the next: the contact forces by pair (None when the solver takes no
+    warm start) and the detection margin to start from (length; None: :func:`base_margin`)."""
+
+    warm_start: WarmStart | None = None
+    margin: float | None = None
+
+
+@dataclass
 class StepResult:
-    """The new state, the contacts with their forces (m, 5) and the step's diagnostics."""
+    """The new state, the contacts with their forces (m, 5), the step's diagnostics and, from
+    :func:`run`, what the next step starts from."""
 
     state: ParticleState
     contacts: contact_detection.Contacts
     solution: ConeSolution
     diagnostics: StepDiagnostics
+    carry: Carry | None = None
 
 
 def predicted_displacement(state: ParticleState, settings: StepSettings) -> np.ndarray:
@@ -74,8 +85,9 @@ def predicted_displacement(state: ParticleState, settings: StepSettings) -> np.n
 
 
 def base_margin(state: ParticleState, settings: StepSettings) -> float:
-    """The detection margin of a step with no history: detection_margin times the smallest diameter."""
-    return settings.detection_margin * 2.0 * float(np.min(state.radius, initial=0.5))
+    """The detection margin (length) of a step with no history: detection_margin_fraction times the
+    smallest diameter."""
+    return settings.detection_margin_fraction * 2.0 * float(np.min(state.radius, initial=0.5))
 
 
 CARRIED_MARGIN_LIMIT = 4.0  # the margin carried to the next step is at most this times the base
@@ -93,14 +105,12 @@ def next_margin(diagnostics: StepDiagnostics, base: float) -> float:
     return max(base, 0.5 * diagnostics.detection_margin)
 
 
-def step(state: ParticleState, settings: StepSettings, solver: Solver | None = None,
-         step_number: int = 0, warm_start=None, margin: float | None = None) -> StepResult:
+def step(state: ParticleState, settings: StepSettings, solver: Solver, step_number: int = 0,
+         warm_start: WarmStart | None = None, margin: float | None = None) -> StepResult:
     """Advance `state` by one step of settings.dt; see the module docstring for the checks.
 
-    warm_start: None, forces (m, 5) for the solver, or a :class:`colsim.apgd.WarmStart` (forces by
-    contact pair key, matched to each attempt's contacts).
+    warm_start: forces by contact pair, matched to each attempt's contacts (None: a cold start).
     margin: detection margin of the first attempt (length); None: :func:`base_margin`."""
-    solver = solver or ClarabelSolver()
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     tolerance = settings.overlap_tolerance * smallest_diameter
     margin = base_margin(state, settings) if margin is None else margin
@@ -115,7 +125,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver | None = N
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
-        guess = warm_start.match(found, state.n) if hasattr(warm_start, "match") else warm_start
+        guess = None if warm_start is None else warm_start.match(found, state.n)
         solution = solver.solve(program, warm_start=guess, step=step_number)
         new_state = _advance(state, solution.increments, settings.dt)
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance)
@@ -169,15 +179,18 @@ def _advance(state: ParticleState, u: np.ndarray, dt: float) -> ParticleState:
                    angular_velocity=dth / dt, time=state.time + dt)
 
 
-def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solver | None = None,
-        first_step: int = 0) -> Iterator[StepResult]:
-    """Yield the result of each of n_steps steps from `state` (step numbers from first_step + 1)."""
-    solver = solver or ClarabelSolver()
-    warm, margin, base = None, None, base_margin(state, settings)
+def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solver,
+        first_step: int = 0, carry: Carry | None = None) -> Iterator[StepResult]:
+    """Yield the result of each of n_steps steps from `state` (step numbers from first_step + 1).
+
+    carry: what the first step starts from (a resumed run's last :attr:`StepResult.carry`, or a
+    warm start from an earlier stage); each result carries what the next step starts from."""
+    carry = carry or Carry()
+    base = base_margin(state, settings)
     for k in range(first_step + 1, first_step + n_steps + 1):
-        result = step(state, settings, solver, step_number=k, warm_start=warm, margin=margin)
-        margin = next_margin(result.diagnostics, base)
-        if solver.uses_warm_start:  # the step's forces by contact pair, for the next step
-            warm = WarmStart.from_step(result.contacts, result.solution.forces, state.n)
+        result = step(state, settings, solver, k, carry.warm_start, carry.margin)
+        warm = (WarmStart.from_step(result.contacts, result.solution.forces, state.n)
+                if solver.uses_warm_start else None)
+        carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
         state = result.state
         yield result

@@ -1,0 +1,190 @@
+"""The cone toolkit shared by the iterative back-ends: projections, row scalings and residuals.
+
+Every contact k has the force cone K_k = {(p, q, r): ||q|| <= mu_k p, ||r|| <= mu_r,k p} (the
+multipliers lam_k = (p, q1, q2, r1, r2) of :mod:`colsim.program`) and its dual, the cone of
+admissible end-of-step gaps C_k = {y: y_n >= mu_k ||y_t|| + mu_r,k ||y_r||}. This module projects
+onto both exactly, scales a contact's rows so that the two cones keep their form, and measures how
+far forces and gaps are from a solution in dimensionless terms. It knows nothing of any solver.
+
+Residuals (relative, the stopping rule of :mod:`colsim.apgd` and :mod:`colsim.admm`):
+  - primal: max_k (mu ||y_t|| + mu_r ||y_r|| - y_n)_+ / L;
+  - dual: max_k max(||q|| - mu p, ||r|| - mu_r p, -p)_+ / F;
+  - complementarity: sum_k |lam_k . y_k| / ((sum_k p_k + m F0) L);
+with L the length of :func:`length_scale`, F0 = :func:`force_floor` (about the weight of a mean
+particle at rest) and F = max(mean p, F0), so that a step whose contacts all open still converges.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .program import ROWS_PER_CONTACT, ConeProgram
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - numba is a dependency; numpy is the fallback
+    numba = None
+HAVE_NUMBA = numba is not None
+
+
+# --------------------------------------------------------------------------------------------
+# The exact projection onto the coupled force cone
+# --------------------------------------------------------------------------------------------
+
+def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
+    """Euclidean projection of points lam (m, 5) = (p, q1, q2, r1, r2) onto
+    {||q|| <= mu p, ||r|| <= mu_r p} (mu, mu_r (m,) >= 0; 0 forces q or r to zero).
+
+    For a fixed p the nearest q and r are radial clips of q0, r0 to radii mu p and mu_r p, so the
+    squared distance is phi(p) = (p - p0)^2 + (||q0|| - mu p)_+^2 + (||r0|| - mu_r p)_+^2, a convex
+    piecewise quadratic on p >= 0 with breakpoints ||q0||/mu and ||r0||/mu_r. The piece holding the
+    minimiser is chosen by the sign of the monotone derivative phi' at the breakpoints (exact: no
+    comparison of nearly equal phi values), and the minimiser of that piece is clipped to it.
+    """
+    lam = np.asarray(lam, dtype=float)
+    p0 = lam[:, 0]
+    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
+    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
+    a = np.broadcast_to(np.asarray(mu, dtype=float), p0.shape)
+    b = np.broadcast_to(np.asarray(mu_r, dtype=float), p0.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bq = np.where(a > 0, nq / np.where(a > 0, a, 1.0), np.inf)  # q clipped iff p < bq
+        br = np.where(b > 0, nr / np.where(b > 0, b, 1.0), np.inf)
+    q_first = bq <= br
+    t1 = np.where(q_first, bq, br)
+    t2 = np.where(q_first, br, bq)
+    c2 = np.where(q_first, b, a)          # the term whose breakpoint is t2: coefficient, norm
+    n2 = np.where(q_first, nr, nq)
+    finite1, finite2 = np.isfinite(t1), np.isfinite(t2)
+    t1f, t2f = np.where(finite1, t1, 0.0), np.where(finite2, t2, 0.0)
+    # phi'/2 at t1 (only the t2 term active) and at t2 (none active)
+    slope1 = t1f - p0 - c2 * np.maximum(n2 - c2 * t1f, 0.0)
+    slope2 = t2f - p0
+    p_both = np.clip((p0 + a * nq + b * nr) / (1.0 + a * a + b * b), 0.0, t1)
+    p_mid = np.clip((p0 + c2 * n2) / (1.0 + c2 * c2), t1f, t2)
+    p = np.where(~finite1 | (slope1 >= 0), p_both,
+                 np.where(~finite2 | (slope2 >= 0), p_mid, np.maximum(p0, t2f)))
+    p = np.maximum(p, 0.0)
+    out = np.empty_like(lam)
+    out[:, 0] = p
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fq = np.where(nq > a * p, a * p / np.where(nq > 0, nq, 1.0), 1.0)
+        fr = np.where(nr > b * p, b * p / np.where(nr > 0, nr, 1.0), 1.0)
+    out[:, 1:3] = lam[:, 1:3] * fq[:, None]
+    out[:, 3:5] = lam[:, 3:5] * fr[:, None]
+    return out
+
+
+def project_point(p0, q1, q2, r1, r2, a, b):
+    """:func:`project_coupled_cone` of one point (scalar code; compiled by numba when installed)."""
+    nq = np.sqrt(q1 * q1 + q2 * q2)
+    nr = np.sqrt(r1 * r1 + r2 * r2)
+    if p0 >= 0.0 and nq <= a * p0 and nr <= b * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
+        return p0, q1, q2, r1, r2
+    bq = nq / a if a > 0 else np.inf
+    br = nr / b if b > 0 else np.inf
+    if bq <= br:
+        t1, t2, c2, n2 = bq, br, b, nr
+    else:
+        t1, t2, c2, n2 = br, bq, a, nq
+    if t1 < np.inf and t1 - p0 - c2 * max(n2 - c2 * t1, 0.0) < 0.0:
+        if t2 < np.inf and t2 - p0 < 0.0:
+            p = max(p0, t2)                                   # no term active
+        else:
+            p = min(max((p0 + c2 * n2) / (1.0 + c2 * c2), t1), t2)  # only the t2 term active
+    else:
+        p = min(max((p0 + a * nq + b * nr) / (1.0 + a * a + b * b), 0.0), t1)  # both active
+    p = max(p, 0.0)
+    fq = a * p / nq if nq > a * p else 1.0
+    fr = b * p / nr if nr > b * p else 1.0
+    return p, q1 * fq, q2 * fq, r1 * fr, r2 * fr
+
+
+def _project_rows(lam, a, b):
+    out = np.empty_like(lam)
+    for k in range(lam.shape[0]):
+        p, q1, q2, r1, r2 = project_point(lam[k, 0], lam[k, 1], lam[k, 2], lam[k, 3], lam[k, 4],
+                                          a[k], b[k])
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4] = p, q1, q2, r1, r2
+    return out
+
+
+if HAVE_NUMBA:
+    project_point = numba.njit(cache=True, inline="always")(project_point)
+    _project_rows = numba.njit(cache=True)(_project_rows)
+
+
+def project_compiled(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
+    """:func:`project_coupled_cone` by the scalar kernel, compiled (numpy without numba)."""
+    if not HAVE_NUMBA:
+        return project_coupled_cone(lam, mu, mu_r)
+    return _project_rows(np.ascontiguousarray(lam, dtype=float), np.ascontiguousarray(mu, dtype=float),
+                         np.ascontiguousarray(mu_r, dtype=float))
+
+
+def project_gap_cone(y: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
+    """Euclidean projection of y (m, 5) onto C = {y_n >= mu ||y_t|| + mu_r ||y_r||}, the dual cone
+    of the force cone: by Moreau's decomposition Proj_C(y) = y + Proj_K(-y), K = C*."""
+    return y + project_compiled(-y, mu, mu_r)
+
+
+# --------------------------------------------------------------------------------------------
+# Scaling and residuals
+# --------------------------------------------------------------------------------------------
+
+def row_scaling(B: sp.csr_matrix, inv_mass: np.ndarray) -> np.ndarray:
+    """(m, 5) per-row scales s = diag(B Mbar^-1 B')^-1/2, shared by the two rows of a tangent pair.
+
+    With lam = S z the scaled cone is again a coupled cone, with mu' = mu s_n/s_t and
+    mu_r' = mu_r s_n/s_r (:func:`scaled_coefficients`), so its projection stays exact."""
+    diag = (B.multiply(B) @ inv_mass).reshape(-1, ROWS_PER_CONTACT)
+    s = np.empty_like(diag)
+    s[:, 0] = diag[:, 0]
+    s[:, 1:3] = 0.5 * (diag[:, 1] + diag[:, 2])[:, None]
+    s[:, 3:5] = 0.5 * (diag[:, 3] + diag[:, 4])[:, None]
+    positive = s > 0
+    s[positive] = 1.0 / np.sqrt(s[positive])
+    s[~positive] = 1.0
+    return s
+
+
+def scaled_coefficients(program: ConeProgram, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m,), (m,): the cone's mu and mu_r after the row scaling s (m, 5)."""
+    return program.mu * s[:, 0] / s[:, 1], program.mu_r * s[:, 0] / s[:, 3]
+
+
+def length_scale(program: ConeProgram) -> float:
+    """L (length): the root-mean-square free-flight displacement (v dt + g dt^2) of the step, but at
+    least 1e-6 of the mean radius; the length that makes the residuals dimensionless."""
+    n = program.n_unknowns // 6
+    mass = program.mass
+    trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
+    rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
+    # the gravity part of the free flight cannot be told apart from v in fbar; R from I = 2/5 m R^2
+    radius = np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3])) if n else np.ones(1)
+    return max(rms, 1e-6 * float(np.mean(radius)))
+
+
+def force_floor(program: ConeProgram, scale: float) -> float:
+    """F0 = mean particle mass L / dt^2 (force): about the weight of a mean particle at rest."""
+    n = program.n_unknowns // 6
+    return float(np.mean(program.mass[:3 * n])) * scale if n else 1.0
+
+
+def relative_residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,
+                       floor: float) -> dict[str, float]:
+    """Relative primal, dual and complementarity residuals (module docstring) of end-of-step gaps
+    y (m, 5) and forces lam (m, 5), with L = scale (length) and F0 = floor (force)."""
+    nyt = np.sqrt(y[:, 1] ** 2 + y[:, 2] ** 2)
+    nyr = np.sqrt(y[:, 3] ** 2 + y[:, 4] ** 2)
+    primal = float(np.max(np.maximum(mu * nyt + mu_r * nyr - y[:, 0], 0.0), initial=0.0)) / scale
+    p = lam[:, 0]
+    nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
+    nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
+    dual_abs = np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p])
+    total = float(np.sum(np.maximum(p, 0.0)))
+    force_scale = max(total / max(len(p), 1), floor)
+    dual = float(np.max(dual_abs, initial=0.0)) / force_scale
+    comp = float(np.sum(np.abs(np.einsum("ij,ij->i", lam, y))))
+    comp = comp / ((total + len(p) * floor) * scale)
+    return {"primal": primal, "dual": max(dual, 0.0), "complementarity": comp}
