@@ -126,10 +126,12 @@ if HAVE_NUMBA:
 
 
 class _Iteration:
-    """The APGD state between residual checks; iterate(n) runs n iterations (compiled or numpy)."""
+    """The APGD state between residual checks, in scaled forces z (lam = S z); iterate(n) runs n
+    iterations (compiled or numpy)."""
 
-    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, lip_decay=1.0, compiled=True):
+    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, scaling, lip_decay=1.0, compiled=True):
         self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
+        self.scaling = scaling  # (m, 5) S: lam = S z
         self.x, self.hx = x.copy(), hx.copy()
         self.y, self.hy = x.copy(), hx.copy()
         self.g = G @ self.hy + c
@@ -229,36 +231,25 @@ class ApgdSolver(Solver):
         self.verbose = verbose
 
     # -- the iteration ---------------------------------------------------------------------
-    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
-              step: int | None = None) -> ConeSolution:
-        if program.m == 0:
-            return self.no_contacts(program)
-        start = time.perf_counter()
+    def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None) -> "_Iteration":
+        """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""
         m = program.m
         B = program.jacobian.tocsr()
         inv_mass = 1.0 / program.mass
         s = row_scaling(B, inv_mass) if self.precondition else np.ones((m, 5))
-        s_flat = s.ravel()
         a, b = scaled_coefficients(program, s)
         # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
         # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic).
-        SB = sp.diags(s_flat) @ B
+        SB = sp.diags(s.ravel()) @ B
         T = SB.T.tocsr()
         G = (SB @ sp.diags(inv_mass)).tocsr()
         c = B @ (program.fbar * inv_mass)
         c[::ROWS_PER_CONTACT] += program.gap
-        c *= s_flat
-        scale = length_scale(program)
-        floor = force_floor(program, scale)
-
+        c *= s.ravel()
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
             x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
-            started = "warm"
         else:
             x = np.zeros(5 * m)
-            started = "cold"
-        hx = T @ x
-
         # Lipschitz constant of S W S: a few power iterations; backtracking keeps the step safe.
         v = np.random.default_rng(0).standard_normal(5 * m)
         lip = 1.0
@@ -267,16 +258,30 @@ class ApgdSolver(Solver):
             wv = G @ (T @ v)
             lip = _dot(v, wv)
             v = wv
-        lip = max(lip, 1e-12)
-        run = _Iteration(G, T, c, a, b, inv_mass, x, hx, lip, self.lipschitz_decay,
-                         compiled=self.kernel == "numba")
+        return _Iteration(G, T, c, a, b, inv_mass, x, T @ x, max(lip, 1e-12), s, self.lipschitz_decay,
+                          compiled=self.kernel == "numba")
+
+    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
+              step: int | None = None, max_iter: int | None = None) -> ConeSolution:
+        """Solve `program` from `warm_start` ((m, 5) forces or None); max_iter: this call's cap
+        (default: the solver's)."""
+        if program.m == 0:
+            return self.no_contacts(program)
+        start = time.perf_counter()
+        m = program.m
+        max_iter = self.max_iter if max_iter is None else int(max_iter)
+        run = self.prepare(program, warm_start)
+        s_flat = run.scaling.ravel()
+        started = "warm" if np.any(run.x) else "cold"
+        scale = length_scale(program)
+        floor = force_floor(program, scale)
         setup_time = time.perf_counter() - start
 
         res = {"primal": np.inf, "dual": 0.0, "complementarity": np.inf}
         k = 0
         converged = False
-        while k < self.max_iter:
-            n = min(self.check_every, self.max_iter - k)
+        while k < max_iter:
+            n = min(self.check_every, max_iter - k)
             run.iterate(n)
             k += n
             yloc = (run.gradient_at_x() / s_flat).reshape(m, 5)
@@ -294,7 +299,7 @@ class ApgdSolver(Solver):
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:
             raise SolverError(
-                f"APGD did not converge{at_step(step)} within {self.max_iter} iterations "
+                f"APGD did not converge{at_step(step)} within {max_iter} iterations "
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import __version__
 from .state import ParticleState
+from .warm_start import WarmStart
 
 STATE_KIND = "particle-state"
 TRAJECTORY_KIND = "collapse-trajectory"
@@ -141,3 +142,32 @@ def read_state(path) -> tuple[ParticleState, object]:
     """(state, dataset) of a particle-state file."""
     dataset = open_dataset(path, STATE_KIND)
     return state_from_dataset(dataset), dataset
+
+
+def contact_force_variables(forces: WarmStart) -> dict:
+    """The variables (over dims contact, xyz) that store a stage's last contact forces, as `extra`
+    for :func:`state_dataset`."""
+    def variable(dims, values, units, long_name, **more):
+        return (dims, values, {"units": units, "long_name": long_name, **more})
+
+    return {
+        "contact_first": variable("contact", forces.i, "1", "first particle of the contact pair"),
+        "contact_second": variable("contact", forces.j, "1", "second particle of the contact pair",
+                                   comment="-1: a wall (see contact_family)"),
+        "contact_family": variable("contact", forces.family, "1", "kind of contact",
+                                   flag_values=np.array([0, 1, 2]), flag_meanings="particle floor cylinder"),
+        "contact_force": variable(("contact", "xyz"), forces.force, "mass length/time^2",
+                                  "contact force of the pair (normal from the first to the second body)"),
+        "contact_rolling_force": variable(("contact", "xyz"), forces.rolling, "mass length/time^2",
+                                          "rolling resistance of the pair (moment over the rolling radius)"),
+    }
+
+
+def contact_forces_of(dataset) -> WarmStart | None:
+    """The contact forces stored by :func:`contact_force_variables`, or None (older files)."""
+    if "contact_force" not in dataset:
+        return None
+    return WarmStart(dataset["contact_first"].values.astype(np.int64),
+                     dataset["contact_second"].values.astype(np.int64),
+                     dataset["contact_family"].values.astype(np.int64),
+                     dataset["contact_force"].values, dataset["contact_rolling_force"].values)

@@ -168,7 +168,8 @@ def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> d
 @dataclass
 class ConeSolution:
     """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units.
-    setup_time, solve_time: seconds; info: the back-end's residuals and counters."""
+    setup_time, solve_time: seconds; info: the back-end's residuals and counters; backend: the
+    name of the back-end that solved it, where a solver delegates (''; the solver's own name)."""
 
     increments: np.ndarray
     forces: np.ndarray
@@ -177,6 +178,7 @@ class ConeSolution:
     setup_time: float
     solve_time: float
     info: dict = field(default_factory=dict)
+    backend: str = ""
 
 
 class SolverError(RuntimeError):
