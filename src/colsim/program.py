@@ -43,6 +43,8 @@ class ConeProgram:
     fbar: (6n,) fbar, force (and moment) units
     jacobian: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns)
     gap: (m,) length; mu, mu_r: (m,) coefficients
+    contacts: the contacts B was built from (their frames and radii give B without the matrix:
+    :mod:`colsim.apgd`'s compiled kernels use them); None for a program given by B alone
     """
 
     mass: np.ndarray
@@ -51,6 +53,7 @@ class ConeProgram:
     gap: np.ndarray
     mu: np.ndarray
     mu_r: np.ndarray
+    contacts: Contacts | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -136,7 +139,7 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
     ])
     return ConeProgram(
         mass=mass, fbar=fbar, jacobian=contact_jacobian(contacts, state.n),
-        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(),
+        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(), contacts=contacts,
     )
 
 
