@@ -245,6 +245,16 @@ def test_all_stages_through_the_cli(tmp_path):
     frames = list((tmp_path / "vtk").glob("*.vtu"))
     assert len(frames) == trajectory.sizes["time"]
     assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob("*.checkpoint"))
+    # the packing's forces went through trim into the column file; at a small step `auto` starts
+    # from them with APGD, and every step's back-end is in the trajectory
+    column = io.open_dataset(tmp_path / "column.nc", io.STATE_KIND)
+    assert column.sizes["contact"] > 0 and column["contact_first"].max() < column.sizes["particle"]
+    done = _run_cli("collapse", "--input", "column.nc", "--steps", "50", "--duration", "0.5",
+                    "--solver", "auto", "--output", "fast.nc", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    backends = io.open_dataset(tmp_path / "fast.nc", io.TRAJECTORY_KIND)["step_solver_backend"].values
+    assert backends[0] == "apgd" and set(backends) <= {"apgd", "clarabel", "clarabel-fallback"}
+    assert set(trajectory["step_solver_backend"].values) == {"clarabel"}
 
 
 def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):
