@@ -22,9 +22,8 @@ def _settings(args) -> dict:
 def _solver(args, scaled_time_step: float):
     """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
     options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
-    if args.solver == "auto":
-        options = {"scaled_time_step": scaled_time_step,
-                   "apgd": options}
+    if args.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
+        options = {"scaled_time_step": scaled_time_step, "apgd": options}
     return make_solver(args.solver, **options)
 
 
@@ -53,7 +52,8 @@ def pack(args):
     if args.diameter_min > args.diameter_max:
         raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
     rng = np.random.default_rng([args.seed, args.root_seed])
-    result = run_pack(args.r0, args.height, rng, _solver(args, args.dt / np.sqrt(args.height / args.gravity)), (args.diameter_min, args.diameter_max),
+    solver = _solver(args, args.dt / np.sqrt(args.height / args.gravity))
+    result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,

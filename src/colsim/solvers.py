@@ -57,7 +57,7 @@ class AutoSolver(Solver):
     uses_warm_start = True
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.01,
-                 max_iter: int = 5000, clarabel: dict | None = None, apgd: dict | None = None):
+                 max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
         if max_iter < 1:
             raise ValueError(f"the APGD iteration cap must be >= 1, got {max_iter}")
         self.scaled_time_step = None if scaled_time_step is None else float(scaled_time_step)
