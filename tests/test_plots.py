@@ -49,7 +49,7 @@ def test_all_figures_writes_every_png(tmp_path):
     analyses = [analysis(a, m, s) for a in (0.5, 1.0, 2.0) for m in (0.0, 0.12) for s in (1, 2)]
     trajectories = [trajectory(a, 0.12, 1) for a in (0.5, 1.0, 2.0)]
     paths = plots.all_figures(summary(), analyses, trajectories, tmp_path / "figures")
-    assert [p.name for p in paths] == list(plots.FIGURES)
+    assert [p.name for p in paths] == [f"{name}.png" for name in plots.FIGURES]
     for path in paths:
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert path.stat().st_size > 5000
