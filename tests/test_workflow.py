@@ -7,7 +7,7 @@ schedules only the new jobs, and that a wrong configuration stops snakemake nami
 import numpy as np
 import pytest
 
-from helpers import FIGURES, SUMMARY_VARIABLES, TINY, copy_workflow, planned_outputs, snakemake
+from helpers import FIGURES, ROOT, SUMMARY_VARIABLES, TINY, copy_workflow, planned_outputs, snakemake
 
 
 @pytest.fixture(scope="module")
@@ -156,6 +156,23 @@ def test_a_wrong_configuration_stops_the_run_naming_it(tmp_path, setting, culpri
     assert result.returncode != 0
     assert culprit in result.stdout + result.stderr
     assert not (directory / "results").exists()
+
+
+def test_the_schema_the_cli_and_the_readme_offer_the_same_solvers():
+    """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the README's
+    table of back-ends hold the same names."""
+    yaml = pytest.importorskip("yaml")
+    from colsim.cli import build_parser
+    from colsim.solvers import SOLVERS
+
+    schema = yaml.safe_load((ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    assert tuple(schema["properties"]["solver"]["enum"]) == SOLVERS
+    subcommands = next(a for a in build_parser()._actions if a.dest == "command").choices
+    for command in ("pack", "collapse"):
+        solver = next(a for a in subcommands[command]._actions if a.dest == "solver")
+        assert tuple(solver.choices) == SOLVERS
+    table = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| `")]
+    assert {line.split("`")[1] for line in table} >= set(SOLVERS)
 
 
 def test_a_misspelt_nested_key_stops_the_run(tmp_path):

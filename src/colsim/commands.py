@@ -19,6 +19,16 @@ def _settings(args) -> dict:
     return {k: v for k, v in vars(args).items() if k not in ("verbose",)}
 
 
+def check_outputs(args) -> None:
+    """Before any work: InputError (one line) unless every output of the command can be written
+    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder)."""
+    for name in ("output", "csv", "markdown", "figure", "checkpoint"):
+        if getattr(args, name, None):
+            io.check_writable(getattr(args, name))
+    if getattr(args, "output_dir", None):
+        io.check_writable(args.output_dir, directory=True)
+
+
 def _solver(args):
     options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
     return make_solver(args.solver, **options)
@@ -64,6 +74,7 @@ def trim(args):
     r0 = float(source.attrs["r0"])
     h0 = args.aspect_ratio * r0
     column = run_trim(state, h0)
+    _require_a_layer(state, column, h0)
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
                                  {**_settings(args), "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
@@ -73,6 +84,17 @@ def trim(args):
                   "packing_wall_time": float(source.attrs.get("wall_time", np.nan))})
     io.write_state(args.output, column, attrs)
     log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
+
+
+def _require_a_layer(packing, column, h0: float) -> None:
+    """ValueError unless the column holds at least half as many spheres as the packing's bottom
+    layer (those within half the smallest diameter of the floor): below that it is not a column."""
+    d_min, d_max = 2.0 * float(packing.radius.min()), 2.0 * float(packing.radius.max())
+    layer = int(np.count_nonzero(packing.position[:, 2] - packing.radius < 0.5 * d_min))
+    if column.n == 0 or 2 * column.n < layer:
+        raise ValueError(f"h0 = {h0:g} leaves {column.n} spheres, less than half a layer ({layer} lie on the "
+                         f"packing's floor; smallest diameter {d_min:.3g}, largest {d_max:.3g}): cut at h0 >= "
+                         f"the largest diameter")
 
 
 def collapse(args):
@@ -172,7 +194,7 @@ def analyse(args):
 
 
 def collect(args):
-    from .summary import collect_analyses, one_row_per_run
+    from .summary import collect_analyses, lube_markdown, one_row_per_run
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
@@ -180,8 +202,6 @@ def collect(args):
     if args.csv:
         _write_csv(args.csv, one_row_per_run(summary))
     if args.markdown:
-        from .convergence import lube_markdown
-
         _write_text(args.markdown, lube_markdown(summary))
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .convergence import means_per_size
+from .summary import means_per_size
 from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_runout
 
 log = logging.getLogger(__name__)
