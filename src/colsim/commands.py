@@ -128,69 +128,16 @@ def collapse(args):
 
 
 def analyse(args):
-    import xarray as xr
-
     trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
-    r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
-    initial = io.state_from_dataset(trajectory, 0)
-    final = io.state_from_dataset(trajectory, -1)
-    tolerance = analysis.contact_tolerance(final, args.contact_tolerance)
-    history = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance)
-               for k in range(trajectory.sizes["time"])]
-    deposit = history[-1]
-    fronts = [d.r_inf for d in history]
-    fractions = sorted(set(args.check_tolerances) | {args.contact_tolerance})
-    checks = [analysis.measure_deposit(final, analysis.contact_tolerance(final, f)) for f in fractions]
-    shares = sorted(set(args.mass_shares))
-    bin_width = args.bin_width or 2.0 * float(final.radius.max())
-    centres, height = analysis.deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
-    energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
-    top_radius = analysis.undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
-    scalar = lambda value, units, name: ((), value, {"units": units, "long_name": name})  # noqa: E731
-    data = {
-        "h_inf": scalar(deposit.h_inf, "length", "final height of the main mass"),
-        "r_inf": scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
-        "h_inf_over_r0": scalar(deposit.h_inf / r0, "1", "final height over initial radius"),
-        "runout_over_r0": scalar((deposit.r_inf - r0) / r0, "1", "run-out (r_inf - r0) over initial radius"),
-        "n_particles": scalar(final.n, "1", "number of particles"),
-        "n_main_mass": scalar(int(deposit.main_mass.sum()), "1", "number of particles in the main mass"),
-        "solid_fraction": scalar(float(trajectory.attrs["column_solid_fraction"]), "1",
-                                 "solid fraction of the column before release"),
-        "final_to_peak_kinetic_energy": scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
-                                               "kinetic energy at the end over its peak"),
-        "wall_time": scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
-        "undisturbed_top_radius": scalar(top_radius / r0, "1",
-                                         "radius of the top disc that did not move, over r0"),
-        "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
-        "front_position": ("time", (np.array(fronts) - r0) / r0,
-                           {"units": "1", "long_name": "front (r_front - r0) over r0"}),
-        "height_history": ("time", np.array([d.h_inf for d in history]),
-                           {"units": "length", "long_name": "height of the main mass"}),
-        "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
-                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at each "
-                                                                    "contact tolerance"}),
-        "mass_front_over_r0": ("mass_share", [(analysis.mass_front(final, share) - r0) / r0 for share in shares],
-                               {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
-        "mean_diameter": scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
-        "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
-        "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
-    }
-    coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
-              "step": trajectory["step"],
-              "contact_tolerance": ("contact_tolerance", fractions,
-                                    {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),
-              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"})}
+    settings = analysis.AnalysisSettings(args.contact_tolerance, tuple(args.check_tolerances),
+                                         tuple(args.mass_shares), args.bin_width)
     attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
                                  {**_settings(args), "input_config": io.config_of(trajectory)},
                                  trajectory.attrs.get("seed"))
-    for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration"):
-        attrs[key] = float(trajectory.attrs[key])
-    attrs["n_steps"] = int(trajectory.attrs["n_steps"])
-    if "at_rest" in trajectory.attrs:
-        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
-    io.write_dataset(xr.Dataset(data, coords=coords, attrs=attrs), args.output)
-    log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f",
-             attrs["aspect_ratio"], attrs["mu_r"], deposit.h_inf / r0, (deposit.r_inf - r0) / r0)
+    result = analysis.analyse_trajectory(trajectory, settings, attrs)
+    io.write_dataset(result, args.output)
+    log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f", result.attrs["aspect_ratio"],
+             result.attrs["mu_r"], float(result.h_inf_over_r0), float(result.runout_over_r0))
 
 
 def collect(args):
