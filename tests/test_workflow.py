@@ -231,6 +231,17 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 
+def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
+    """pi/24 names its folder mu_r_0.1309 but reaches `colsim collapse` with all its digits."""
+    directory = copy_workflow(tmp_path)
+    (directory / "hexagon.yaml").write_text("mu_r: [0.1308996938995747]\n")
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "hexagon.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
+    assert len(commands) == 2 and all("--mu-r 0.1308996938995747 " in c for c in commands), commands
+    assert all("mu_r_0.1309/collapse.nc" in c for c in commands)
+
+
 TINY_CONVERGENCE = """
 convergence:
   mu_r: 0.12

@@ -119,6 +119,13 @@ def pack_height(wildcards):
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
 
 
+def mu_r_value(wildcards):
+    """The configured mu_r whose path string is {mu_r}, at full precision (pi/24 stays
+    0.1308996938995747; its path is mu_r_0.1309)."""
+    values = list(config["mu_r"]) + ([config["convergence"]["mu_r"]] if config.get("convergence") else [])
+    return next((m for m in values if fmt(m) == wildcards.mu_r), float(wildcards.mu_r))
+
+
 def collapse_steps(wildcards):
     """Steps of a collapse: its own (a convergence variant's {steps}) or the study's."""
     return wildcards.get("steps", config["collapse"]["steps"])
