@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from .solvers import SOLVERS
 
@@ -192,8 +193,6 @@ def _interrupted(args) -> str:
     """What an interrupted command leaves behind, and how to go on."""
     if args.command != "collapse":
         return "no output was written"
-    from pathlib import Path
-
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     if not checkpoint.is_file():
         return "no checkpoint was written yet: run the same command again to start over"
