@@ -35,7 +35,7 @@ from colsim.admm import AdmmSolver
 from colsim.apgd import ApgdSolver
 from colsim.contacts import detect
 from colsim.program import assemble
-from colsim.solvers import AutoSolver, ClarabelSolver, SolverError, WarmStart
+from colsim.solvers import ClarabelSolver, SolverError, WarmStart
 from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.stepper import predicted_displacement, run, step
 
@@ -56,7 +56,7 @@ def pour(n: int, seed: int = 0, max_steps: int = 2000, verbose=True) -> Particle
     state = ParticleState.at_rest(position[:n], radius[:n])
     settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=r0))
     weight_scale = float(np.mean(state.mass)) * 9.81 * 2 * float(np.mean(state.radius))
-    solver = AutoSolver(threshold=0, apgd={"tolerance": 1e-4})
+    solver = ApgdSolver(tolerance=1e-4)
     for result in run(state, settings, max_steps, solver):
         state = result.state
         d = result.diagnostics
@@ -157,7 +157,7 @@ def main(argv=None):
         mid, warm = state, None
         for k in range(args.mid_steps):
             result = step(mid, COLLAPSE, stepper, k, warm_start=warm)
-            warm = WarmStart.from_step(result.contacts, result.solution.forces, mid.n)
+            warm = WarmStart.from_step(result.contacts, result.solution.forces)
             mid = result.state
         for stage, current in (("release", state), ("mid", mid)):
             program, found = program_of(current)

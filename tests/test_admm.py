@@ -75,7 +75,7 @@ def test_warm_start_from_the_solution_converges_at_once(pile):
     program, found = collapse_program(pile)
     solver = AdmmSolver()
     cold = solver.solve(program)
-    guess = WarmStart.from_step(found, cold.forces, pile.n).match(found, pile.n)
+    guess = WarmStart.from_step(found, cold.forces).match(found, pile.n)
     warm = solver.solve(program, warm_start=guess)
     assert warm.info["start"] == "warm" and warm.iterations < cold.iterations
     assert solver.uses_warm_start

@@ -7,7 +7,7 @@ from scipy.optimize import minimize_scalar
 from colsim.apgd import ApgdSolver
 from colsim.cones import project_compiled, project_coupled_cone
 from colsim.program import cone_violation
-from colsim.solvers import AutoSolver, SolverError, WarmStart, make_solver
+from colsim.solvers import AutoSolver, ClarabelSolver, SolverError, WarmStart, make_solver
 from colsim.state import StepSettings
 from colsim.stepper import run
 from solver_cases import COLLAPSE, against_clarabel, collapse_program, mid_collapse, small_pile
@@ -157,33 +157,66 @@ def test_non_convergence_is_an_error(pile):
 def test_warm_start_by_pair(pile):
     program, found = collapse_program(pile)
     cold = ApgdSolver().solve(program)
-    warm = WarmStart.from_step(found, cold.forces, pile.n)
+    warm = WarmStart.from_step(found, cold.forces)
     # the stored forces come back in the same frames, and a restart from them is immediate
     np.testing.assert_allclose(warm.match(found, pile.n), cold.forces, atol=1e-12 * np.abs(cold.forces).max())
     again = ApgdSolver().solve(program, warm_start=warm.match(found, pile.n))
     assert again.info["start"] == "warm" and again.iterations < cold.iterations / 3
     # contacts that were not there before start from zero
-    shuffled = WarmStart(warm.keys[:-5], warm.force[:-5], warm.rolling[:-5])
-    guess = shuffled.match(found, pile.n)
+    fewer = WarmStart(warm.i[:-5], warm.j[:-5], warm.family[:-5], warm.force[:-5], warm.rolling[:-5])
+    guess = fewer.match(found, pile.n)
     assert np.count_nonzero(np.all(guess == 0, axis=1)) >= 5
 
 
-def test_stepper_warm_starts_and_auto_delegates(pile):
-    solver = make_solver("apgd")
-    results = list(run(pile, COLLAPSE, 3, solver))
-    assert [r.solution.info["start"] for r in results] == ["cold", "warm", "warm"]
-    program, _ = collapse_program(pile)
-    assert make_solver("auto", threshold=program.m + 1).solve(program).info.get("start") is None
-    assert make_solver("auto", threshold=program.m).solve(program).info["start"] == "cold"
+def test_warm_start_survives_renumbering(pile):
+    """Removing particles (as trim does) keeps the forces of the pairs that stay, in the new numbers."""
+    _, found = collapse_program(pile)
+    forces = np.random.default_rng(3).uniform(0.5, 1.0, (found.m, 5)) * [1, 0.1, 0.1, 0.01, 0.01]  # in the cones
+    warm = WarmStart.from_step(found, forces)
+    keep = np.ones(pile.n, dtype=bool)
+    keep[::3] = False
+    column = pile.subset(keep)
+    _, found_after = collapse_program(column)
+    guess = warm.subset(keep).match(found_after, column.n)
+    # the same pair before and after, by the particles' old numbers
+    old = np.flatnonzero(keep)
+    before = {(i, j, f): row for i, j, f, row in zip(found.i, found.j, found.family, forces)}
+    compared = 0
+    for k in range(found_after.m):
+        j = old[found_after.j[k]] if found_after.j[k] >= 0 else -1
+        row = before.get((old[found_after.i[k]], j, found_after.family[k]))
+        if row is not None:
+            np.testing.assert_allclose(guess[k], row, rtol=0, atol=1e-12)  # same positions, same frames
+            compared += 1
+    assert compared > found_after.m // 2
+    # pairs with a removed particle are gone
+    assert warm.subset(keep).m < warm.m
+
+
+def test_auto_picks_apgd_only_for_warm_small_steps(pile):
+    program, found = collapse_program(pile)
+    reference = ClarabelSolver().solve(program)
+    warm = WarmStart.from_step(found, reference.forces).match(found, pile.n)
+    assert AutoSolver().solve(program).backend == "clarabel"                 # no warm start
+    assert AutoSolver().solve(program, warm_start=warm).backend == "apgd"
+    assert AutoSolver(scaled_time_step=0.004).solve(program, warm_start=warm).backend == "apgd"
+    assert AutoSolver(scaled_time_step=0.04).solve(program, warm_start=warm).backend == "clarabel"
+    assert AutoSolver().solve(program, warm_start=np.zeros_like(warm)).backend == "clarabel"
     assert isinstance(make_solver("auto"), AutoSolver)
 
 
-def test_auto_falls_back_to_clarabel(pile):
-    program, _ = collapse_program(pile)
-    solver = AutoSolver(threshold=1, apgd={"max_iter": 3})
-    assert "APGD fallback" in solver.solve(program, step=2).status
-    with pytest.raises(SolverError):
-        AutoSolver(threshold=1, fallback=False, apgd={"max_iter": 3}).solve(program)
+def test_stepper_records_the_backend_of_each_step(pile):
+    results = list(run(pile, COLLAPSE, 3, make_solver("apgd")))
+    assert [r.solution.info["start"] for r in results] == ["cold", "warm", "warm"]
+    backends = [r.diagnostics.solver_backend for r in run(pile, COLLAPSE, 3, AutoSolver())]
+    assert backends == ["clarabel", "apgd", "apgd"]
+
+
+def test_auto_falls_back_to_clarabel_at_the_iteration_cap(pile):
+    """A warm-started step that APGD cannot finish within the cap is solved by Clarabel, and the
+    step's diagnostics say so."""
+    backends = [r.diagnostics.solver_backend for r in run(pile, COLLAPSE, 3, AutoSolver(max_iter=3))]
+    assert backends == ["clarabel", "clarabel-fallback", "clarabel-fallback"]
 
 
 def test_numba_and_numpy_kernels_agree(pile):

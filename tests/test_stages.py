@@ -16,7 +16,7 @@ from colsim.calibration import polygon_rolling_coefficient
 from colsim.cli import main
 from colsim.collapse import CollapseSettings, collapse
 from colsim.packing import column_height, pack, solid_fraction, trim
-from colsim.solvers import ClarabelSolver
+from colsim.solvers import AutoSolver, ClarabelSolver
 from colsim.state import ParticleState
 from colsim.summary import SUMMARY_VARIABLES
 
@@ -52,6 +52,33 @@ def test_trim_keeps_spheres_below_h0_and_fails_loudly_when_too_short(packing):
     assert top.max() > h0 - 0.25
     with pytest.raises(ValueError, match="too short"):
         trim(packing.state, 10.0)
+
+
+def test_the_packing_forces_reach_the_first_collapse_step(packing, tmp_path):
+    """Pack -> file -> trim -> file -> collapse: the column's contact forces before release are
+    the packing's (they carry its weight), and the first step of an `auto` collapse at a small step
+    starts from them with APGD (no cold first step)."""
+    forces = packing.contact_forces
+    weight = float(np.sum(packing.state.mass)) * 9.81
+    on_floor = forces.family == 1
+    # n points from the sphere to the floor; 1 %: the last step still decelerates a few grains
+    assert forces.force[on_floor, 2].sum() == pytest.approx(-weight, rel=1e-2)
+    path = tmp_path / "packing.nc"
+    io.write_state(path, packing.state, io.global_attributes(io.STATE_KIND, "test", {}),
+                   io.contact_force_variables(forces))
+    state, dataset = io.read_state(path)
+    stored = io.contact_forces_of(dataset)
+    np.testing.assert_array_equal(stored.j, forces.j)
+    np.testing.assert_array_equal(stored.force, forces.force)
+    h0 = 1.0 * R0
+    kept = state.position[:, 2] + state.radius <= h0
+    column = trim(state, h0)
+    settings = CollapseSettings(mu_r=0.12, n_steps=1000, checkpoint_every=10**6)
+    auto = AutoSolver(scaled_time_step=settings.duration / settings.n_steps)
+    run = collapse(column, h0, settings, auto, warm_start=stored.subset(kept), stop_after=3)
+    assert [d.solver_backend for d in run.diagnostics] == ["apgd"] * 3
+    cold = collapse(column, h0, settings, auto, stop_after=1)
+    assert cold.diagnostics[0].solver_backend == "clarabel"
 
 
 def _chain_state():
@@ -227,6 +254,16 @@ def test_all_stages_through_the_cli(tmp_path):
     frames = list((tmp_path / "vtk").glob("*.vtu"))
     assert len(frames) == trajectory.sizes["time"]
     assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob("*.checkpoint"))
+    # the packing's forces went through trim into the column file; at a small step `auto` starts
+    # from them with APGD, and every step's back-end is in the trajectory
+    column = io.open_dataset(tmp_path / "column.nc", io.STATE_KIND)
+    assert column.sizes["contact"] > 0 and column["contact_first"].max() < column.sizes["particle"]
+    done = _run_cli("collapse", "--input", "column.nc", "--steps", "50", "--duration", "0.5",
+                    "--solver", "auto", "--output", "fast.nc", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    backends = io.open_dataset(tmp_path / "fast.nc", io.TRAJECTORY_KIND)["step_solver_backend"].values
+    assert backends[0] == "apgd" and set(backends) <= {"apgd", "clarabel", "clarabel-fallback"}
+    assert set(trajectory["step_solver_backend"].values) == {"clarabel"}
 
 
 def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):

@@ -26,13 +26,15 @@ import xarray as xr
 
 from .analysis import measure_deposit
 from .io import atomic_path
-from .solvers import Solver
+from .solvers import Solver, WarmStart
 from .state import ContactLaw, ParticleState, StepSettings, Walls
 from .stepper import Carry, StepDiagnostics, run
 
 log = logging.getLogger(__name__)
 
-DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f != "solver_status"]
+TEXT_DIAGNOSTICS = {"solver_status": "solver status per step",
+                    "solver_backend": "back-end that solved the step (apgd, clarabel or clarabel-fallback)"}
+DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in TEXT_DIAGNOSTICS]
 
 
 @dataclass
@@ -117,33 +119,39 @@ def _deposit(state: ParticleState, time_scale: float) -> tuple[float, float, flo
     return state.time / time_scale, deposit.h_inf, deposit.r_inf
 
 
-def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, solver: Solver) -> str:
+def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, solver: Solver,
+                 warm_start: WarmStart | None) -> str:
     digest = hashlib.sha256()
-    for array in (column.position, column.velocity, column.angular_velocity, column.radius):
+    arrays = [column.position, column.velocity, column.angular_velocity, column.radius]
+    if warm_start is not None:
+        arrays += [warm_start.i, warm_start.j, warm_start.family, warm_start.force, warm_start.rolling]
+    for array in arrays:
         digest.update(np.ascontiguousarray(array).tobytes())
     digest.update(json.dumps([asdict(settings), h0, solver.describe()], sort_keys=True, default=str).encode())
     return digest.hexdigest()
 
 
 def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solver: Solver,
-             checkpoint: str | Path | None = None, progress=None,
+             warm_start: WarmStart | None = None, checkpoint: str | Path | None = None, progress=None,
              stop_after: int | None = None) -> CollapseRun:
     """Release `column` (height h0) and integrate it with `solver`; see the module docstring.
 
+    warm_start: the column's contact forces before release (from its packing), for the first step.
     progress: optional callable(diagnostics) after each step.
     stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
     """
     dt = settings.time_step(h0)
     step_settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -settings.gravity),
                                  walls=Walls(floor=True, cylinder_radius=None), law=settings.law())
-    fingerprint = _fingerprint(column, settings, h0, solver)
+    fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
     saved = _load_checkpoint(checkpoint, fingerprint)
     if saved:
         state, frames, diagnostics, carry, elapsed = (saved[k] for k in
                                                       ("state", "frames", "diagnostics", "carry", "elapsed"))
         log.info("resuming from the checkpoint at step %d", len(diagnostics))
     else:
-        state, frames, diagnostics, carry, elapsed = column.copy(), [(0, column.copy())], [], Carry(), 0.0
+        state, frames, diagnostics, elapsed = column.copy(), [(0, column.copy())], [], 0.0
+        carry = Carry(warm_start if solver.uses_warm_start else None)
     resumed_from = len(diagnostics)
     start = time.perf_counter() - elapsed
     rest_check = settings.max_duration is not None
@@ -233,8 +241,9 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
         values = np.array([getattr(d, name) for d in run.diagnostics])
         data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
                                                   "long_name": name.replace("_", " ") + " per step"})
-    data["step_solver_status"] = ("step", np.array([d.solver_status for d in run.diagnostics], dtype=object),
-                                  {"long_name": "solver status per step"})
+    for name, long_name in TEXT_DIAGNOSTICS.items():
+        data[f"step_{name}"] = ("step", np.array([getattr(d, name) for d in run.diagnostics], dtype=object),
+                                {"long_name": long_name})
     coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
               "step": ("step", np.array([d.step for d in run.diagnostics]),
                        {"units": "1", "long_name": "step number"}),

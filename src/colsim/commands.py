@@ -8,7 +8,7 @@ import numpy as np
 
 from . import analysis, io
 from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
-from .packing import pack as run_pack, solid_fraction, trim as run_trim
+from .packing import kept_by_trim, pack as run_pack, solid_fraction
 from .solvers import make_solver
 
 log = logging.getLogger("colsim")
@@ -29,8 +29,12 @@ def check_outputs(args) -> None:
         io.check_writable(args.output_dir, directory=True)
 
 
-def _solver(args):
+def _solver(args, scaled_time_step: float):
+    """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
     options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
+    if args.solver == "auto":
+        options = {"scaled_time_step": scaled_time_step,
+                   "apgd": options}
     return make_solver(args.solver, **options)
 
 
@@ -59,12 +63,12 @@ def pack(args):
     if args.diameter_min > args.diameter_max:
         raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
     rng = np.random.default_rng([args.seed, args.root_seed])
-    result = run_pack(args.r0, args.height, rng, _solver(args), (args.diameter_min, args.diameter_max),
+    result = run_pack(args.r0, args.height, rng, _solver(args, args.dt / np.sqrt(args.height / args.gravity)), (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})
-    io.write_state(args.output, result.state, attrs)
+    io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
     log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s",
              result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time)
 
@@ -73,8 +77,10 @@ def trim(args):
     state, source = io.read_state(args.input)
     r0 = float(source.attrs["r0"])
     h0 = args.aspect_ratio * r0
-    column = run_trim(state, h0)
+    kept = kept_by_trim(state, h0)
+    column = state.subset(kept)
     _require_a_layer(state, column, h0)
+    forces = io.contact_forces_of(source)
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
                                  {**_settings(args), "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
@@ -82,7 +88,8 @@ def trim(args):
     attrs.update({"r0": r0, "h0": h0, "aspect_ratio": args.aspect_ratio, "solid_fraction": fraction,
                   "gravity": float(source.attrs.get("gravity", 9.81)),
                   "packing_wall_time": float(source.attrs.get("wall_time", np.nan))})
-    io.write_state(args.output, column, attrs)
+    extra = {} if forces is None else io.contact_force_variables(forces.subset(kept))
+    io.write_state(args.output, column, attrs, extra)
     log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
 
 
@@ -111,7 +118,8 @@ def collapse(args):
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
     try:
-        run = run_collapse(column, h0, settings, _solver(args), checkpoint=checkpoint, progress=progress)
+        run = run_collapse(column, h0, settings, _solver(args, settings.duration / settings.n_steps),
+                           io.contact_forces_of(source), checkpoint=checkpoint, progress=progress)
     finally:
         progress.close()
     attrs = io.global_attributes(io.TRAJECTORY_KIND, "colsim collapse",

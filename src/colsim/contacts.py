@@ -48,11 +48,6 @@ class Contacts:
     def m(self) -> int:
         return len(self.i)
 
-    def pair_keys(self, n_particles: int) -> np.ndarray:
-        """(m,) int64 key unique to each (i, j, family), to match contacts across steps."""
-        j = np.where(self.j < 0, n_particles + self.family, self.j)
-        return self.i.astype(np.int64) * (n_particles + 3) + j
-
 
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (m, 3) with (t1, t2, n) right-handed, for unit normals (m, 3)."""

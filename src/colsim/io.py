@@ -4,7 +4,8 @@ Every file is CF-style: global `Conventions`, `title`, `source` ("colsim X.Y"), 
 versions of colsim, Clarabel and numpy, the run's configuration as JSON in `config` and its `seed`;
 every variable has `units` and `long_name`. The simulation's lengths, times and masses are numbers
 in the paper's unit system (`unit_system`), which UDUNITS cannot name: such variables have units
-"1" and a `comment` naming their dimension (e.g. "length in the paper's units"); wall times are "s". Files are written to a temporary name beside the target and renamed
+"1" and a `comment` naming their dimension (e.g. "length in the paper's units"); wall times are "s".
+Files are written to a temporary name beside the target and renamed
 when complete, so a killed run never leaves a file that looks finished.
 """
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from . import __version__
 from .state import ParticleState
+from .warm_start import WarmStart
 
 STATE_KIND = "particle-state"
 TRAJECTORY_KIND = "collapse-trajectory"
@@ -35,7 +37,7 @@ PARTICLE_VARIABLES = {
 
 #: dimensions that the stages write as units; :func:`write_dataset` turns each into units "1" and a comment
 PAPER_DIMENSIONS = ("length", "time", "length/time", "rad/time", "length/time^2", "mass", "mass/length^3",
-                    "mass length^2/time^2")
+                    "mass length/time^2", "mass length^2/time^2")
 UNIT_SYSTEM = ("the paper's: dimensionless numbers in one consistent system of length, time and mass in "
                "which the particle diameters are 0.25-0.5, gravity 9.81 and the density 1 (by default); "
                "variables in it have units '1' and a comment naming their dimension")
@@ -116,7 +118,8 @@ def cf_units(dataset):
         dimension = variable.attrs.get("units")
         if dimension in PAPER_DIMENSIONS:
             variable.attrs["units"] = "1"
-            variable.attrs["comment"] = f"{dimension} in the paper's units (global attribute unit_system)"
+            note = f"{dimension} in the paper's units (global attribute unit_system)"
+            variable.attrs["comment"] = "; ".join(filter(None, (note, variable.attrs.get("comment"))))
     dataset.attrs.setdefault("unit_system", UNIT_SYSTEM)
     return dataset
 
@@ -196,3 +199,32 @@ def read_state(path) -> tuple[ParticleState, object]:
     """(state, dataset) of a particle-state file."""
     dataset = open_dataset(path, STATE_KIND)
     return state_from_dataset(dataset), dataset
+
+
+def contact_force_variables(forces: WarmStart) -> dict:
+    """The variables (over dims contact, xyz) that store a stage's last contact forces, as `extra`
+    for :func:`state_dataset`."""
+    def variable(dims, values, units, long_name, **more):
+        return (dims, values, {"units": units, "long_name": long_name, **more})
+
+    return {
+        "contact_first": variable("contact", forces.i, "1", "first particle of the contact pair"),
+        "contact_second": variable("contact", forces.j, "1", "second particle of the contact pair",
+                                   comment="-1: a wall (see contact_family)"),
+        "contact_family": variable("contact", forces.family, "1", "kind of contact",
+                                   flag_values=np.array([0, 1, 2]), flag_meanings="particle floor cylinder"),
+        "contact_force": variable(("contact", "xyz"), forces.force, "mass length/time^2",
+                                  "contact force of the pair (normal from the first to the second body)"),
+        "contact_rolling_force": variable(("contact", "xyz"), forces.rolling, "mass length/time^2",
+                                          "rolling resistance of the pair (moment over the rolling radius)"),
+    }
+
+
+def contact_forces_of(dataset) -> WarmStart | None:
+    """The contact forces stored by :func:`contact_force_variables`, or None (older files)."""
+    if "contact_force" not in dataset:
+        return None
+    return WarmStart(dataset["contact_first"].values.astype(np.int64),
+                     dataset["contact_second"].values.astype(np.int64),
+                     dataset["contact_family"].values.astype(np.int64),
+                     dataset["contact_force"].values, dataset["contact_rolling_force"].values)

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .solvers import Solver
+from .solvers import Solver, WarmStart
 from .state import ContactLaw, ParticleState, StepSettings, Walls
-from .stepper import run
+from .stepper import Carry, run
 
 log = logging.getLogger(__name__)
 
@@ -30,13 +30,15 @@ SOLID_FRACTION_GUESS = 0.58
 
 @dataclass
 class PackingResult:
-    """The settled packing and what it took. solid_fraction: of the column up to `height`."""
+    """The settled packing and what it took. solid_fraction: of the column up to `height`.
+    contact_forces: the last step's contact forces (to warm-start what comes next)."""
 
     state: ParticleState
     height: float
     solid_fraction: float
     steps: int
     wall_time: float
+    contact_forces: WarmStart
 
 
 def lattice_cloud(r0: float, n_target: int, z_bottom: float, diameter_range, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -110,7 +112,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                             law=ContactLaw())
     mean_volume = np.pi / 6.0 * (d_max**4 - d_min**4) / (4.0 * (d_max - d_min)) if d_max > d_min else np.pi / 6 * d_max**3
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
-    start, steps = time.perf_counter(), 0
+    start, steps, carry, result = time.perf_counter(), 0, Carry(), None
     while column_height(state) < height:
         missing = height + 2 * d_max - column_height(state)
         n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * missing / mean_volume))
@@ -118,7 +120,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
         position, radius = lattice_cloud(r0, n_new, z_bottom, diameter_range, rng)
         state = _add(state, position, radius)
         log.info("pouring %d spheres (%d in all) from z = %.2f", len(radius), state.n, z_bottom)
-        for result in run(state, settings, max_steps - steps, solver, first_step=steps):
+        for result in run(state, settings, max_steps - steps, solver, first_step=steps, carry=carry):
             state, steps = result.state, steps + 1
             if progress is not None:
                 progress(result.diagnostics, state)
@@ -130,11 +132,13 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                 break
         else:
             raise RuntimeError(f"packing not at rest after {max_steps} steps (raise max_steps or dt)")
+        carry = Carry(result.carry.warm_start)  # the poured spheres keep their numbers: keep the forces
     state.velocity[:] = 0.0
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
-                         steps, time.perf_counter() - start)
+                         steps, time.perf_counter() - start,
+                         WarmStart.from_step(result.contacts, result.solution.forces))
 
 
 def _add(state: ParticleState, position, radius) -> ParticleState:
@@ -148,10 +152,15 @@ def _add(state: ParticleState, position, radius) -> ParticleState:
 
 def trim(state: ParticleState, h0: float) -> ParticleState:
     """Keep the spheres that stay below h0 (z + R <= h0): the column's top then reads at most h0."""
+    return state.subset(kept_by_trim(state, h0))
+
+
+def kept_by_trim(state: ParticleState, h0: float) -> np.ndarray:
+    """(n,) bool: the spheres of the packing `state` that a column of height h0 keeps."""
     if h0 <= 0:
         raise ValueError(f"column height h0 must be positive, got {h0}")
     top = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
     if column_height(state) < h0:
         raise ValueError(f"the packing (height {column_height(state):.3f}, top {top:.3f}) is too short "
                          f"for a column of height h0 = {h0:.3f}")
-    return state.subset(state.position[:, 2] + state.radius <= h0)
+    return state.position[:, 2] + state.radius <= h0

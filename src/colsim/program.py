@@ -43,6 +43,8 @@ class ConeProgram:
     fbar: (6n,) fbar, force (and moment) units
     jacobian: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns)
     gap: (m,) length; mu, mu_r: (m,) coefficients
+    contacts: the contacts B was built from (their frames and radii give B without the matrix:
+    :mod:`colsim.apgd`'s compiled kernels use them); None for a program given by B alone
     """
 
     mass: np.ndarray
@@ -51,6 +53,7 @@ class ConeProgram:
     gap: np.ndarray
     mu: np.ndarray
     mu_r: np.ndarray
+    contacts: Contacts | None = None
 
     @property
     def n_unknowns(self) -> int:
@@ -136,7 +139,7 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
     ])
     return ConeProgram(
         mass=mass, fbar=fbar, jacobian=contact_jacobian(contacts, state.n),
-        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(),
+        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(), contacts=contacts,
     )
 
 
@@ -168,7 +171,8 @@ def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> d
 @dataclass
 class ConeSolution:
     """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units.
-    setup_time, solve_time: seconds; info: the back-end's residuals and counters."""
+    setup_time, solve_time: seconds; info: the back-end's residuals and counters; backend: the
+    name of the back-end that solved it, where a solver delegates (''; the solver's own name)."""
 
     increments: np.ndarray
     forces: np.ndarray
@@ -177,6 +181,7 @@ class ConeSolution:
     setup_time: float
     solve_time: float
     info: dict = field(default_factory=dict)
+    backend: str = ""
 
 
 class SolverError(RuntimeError):

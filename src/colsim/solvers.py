@@ -1,4 +1,4 @@
-"""The solver layer: the back-ends by name, warm starts across steps, and the automatic choice.
+"""The solver layer: the back-ends by name and the automatic choice between them.
 
 Every back-end solves a step's :class:`~colsim.program.ConeProgram` behind the contract of
 :class:`~colsim.program.Solver` and returns a :class:`~colsim.program.ConeSolution`: the increments
@@ -10,15 +10,14 @@ Imports flow one way: program -> cones -> back-ends (clarabel, apgd, admm) -> so
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
 from .admm import AdmmSolver
 from .apgd import ApgdSolver
 from .clarabel import ClarabelSolver
-from .cones import project_coupled_cone
-from .program import ROWS_PER_CONTACT, ConeSolution, Solver, SolverError, at_step
+from .program import ConeSolution, Solver, SolverError, at_step
+from .warm_start import WarmStart
 
 __all__ = ["SOLVERS", "AdmmSolver", "ApgdSolver", "AutoSolver", "ClarabelSolver", "ConeSolution",
            "Solver", "SolverError", "WarmStart", "at_step", "make_solver"]
@@ -27,45 +26,6 @@ __all__ = ["SOLVERS", "AdmmSolver", "ApgdSolver", "AutoSolver", "ClarabelSolver"
 SOLVERS = ("clarabel", "clarabel-force", "apgd", "admm", "auto")
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class WarmStart:
-    """A step's contact forces by pair key, in the global frame.
-
-    keys: (m,) int64 (:meth:`colsim.contacts.Contacts.pair_keys`), sorted
-    force: (m, 3) p n + q1 t1 + q2 t2; rolling: (m, 3) r1 t1 + r2 t2 (force units)
-    """
-
-    keys: np.ndarray
-    force: np.ndarray
-    rolling: np.ndarray
-
-    @classmethod
-    def from_step(cls, contacts, forces: np.ndarray, n_particles: int) -> "WarmStart":
-        keys = contacts.pair_keys(n_particles)
-        order = np.argsort(keys, kind="stable")
-        f = (forces[:, :1] * contacts.normal + forces[:, 1:2] * contacts.tangent1
-             + forces[:, 2:3] * contacts.tangent2)
-        r = forces[:, 3:4] * contacts.tangent1 + forces[:, 4:5] * contacts.tangent2
-        return cls(keys[order], f[order], r[order])
-
-    def match(self, contacts, n_particles: int) -> np.ndarray:
-        """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
-        keys = contacts.pair_keys(n_particles)
-        out = np.zeros((contacts.m, ROWS_PER_CONTACT))
-        if len(self.keys) == 0 or contacts.m == 0:
-            return out
-        pos = np.clip(np.searchsorted(self.keys, keys), 0, len(self.keys) - 1)
-        found = self.keys[pos] == keys
-        f, r = self.force[pos[found]], self.rolling[pos[found]]
-        n, t1, t2 = contacts.normal[found], contacts.tangent1[found], contacts.tangent2[found]
-        out[found, 0] = np.einsum("ij,ij->i", f, n)
-        out[found, 1] = np.einsum("ij,ij->i", f, t1)
-        out[found, 2] = np.einsum("ij,ij->i", f, t2)
-        out[found, 3] = np.einsum("ij,ij->i", r, t1)
-        out[found, 4] = np.einsum("ij,ij->i", r, t2)
-        return project_coupled_cone(out, contacts.mu, contacts.mu_r)
 
 
 def make_solver(name: str = "clarabel", **options) -> Solver:
@@ -80,38 +40,53 @@ def make_solver(name: str = "clarabel", **options) -> Solver:
 
 
 class AutoSolver(Solver):
-    """Clarabel for programs with fewer than `threshold` contacts, APGD from there on.
+    """APGD where it is the faster back-end, Clarabel elsewhere, decided step by step.
 
-    Clarabel was faster at every size measured on the project's 2-core machine (one step of a
-    settled packing, tolerance 1e-8 vs APGD's 1e-5): 1k spheres / 3.3k contacts 1.6 s vs 6.2 s,
-    4k / 13k 12 s vs 28 s, 16k / 53k 79 s CPU vs 154 s. What APGD saves is memory: 98 MB against
-    Clarabel's 890 MB at 16k, and Clarabel's factor grows faster than N. The default threshold,
-    150,000 contacts (about 45,000 spheres), is where Clarabel's factor is expected to pass several
-    GB (an extrapolation: 64k spheres were not run).
+    The rule (measured; the README's "Choosing the solver" gives the numbers): APGD solves a step
+    when the step has a warm start that carries load (the previous step's forces, or the packing's
+    at the first step of a collapse) and the stage's time step dt / sqrt(h0/g), `scaled_time_step`,
+    is at most `apgd_below`. APGD then has `max_iter` iterations; a step that reaches them is solved
+    again by Clarabel. Every other step goes to Clarabel. The solution's `backend` says which
+    back-end solved the step: 'apgd', 'clarabel', or 'clarabel-fallback' (APGD reached its cap).
 
-    fallback: if APGD does not converge, log a warning and solve the step with Clarabel (the step
-    is then exact but slow); with fallback=False the :class:`SolverError` propagates.
+    scaled_time_step: None when the stage has no such scale (then only the warm start decides).
+    apgd, clarabel: options of the two back-ends (:class:`ApgdSolver`, :class:`ClarabelSolver`).
     """
 
     name = "auto"
     uses_warm_start = True
 
-    def __init__(self, threshold: int = 150_000, fallback: bool = True, clarabel: dict | None = None,
-                 apgd: dict | None = None):
-        self.threshold = int(threshold)
-        self.fallback = fallback
+    def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.01,
+                 max_iter: int = 5000, clarabel: dict | None = None, apgd: dict | None = None):
+        if max_iter < 1:
+            raise ValueError(f"the APGD iteration cap must be >= 1, got {max_iter}")
+        self.scaled_time_step = None if scaled_time_step is None else float(scaled_time_step)
+        self.apgd_below = float(apgd_below)
+        self.max_iter = int(max_iter)
         self.clarabel = ClarabelSolver(**(clarabel or {}))
-        self.apgd = ApgdSolver(**(apgd or {}))
+        self.apgd = ApgdSolver(**{"max_iter": self.max_iter, **(apgd or {})})
+
+    def describe(self) -> dict:
+        return {**super().describe(), "apgd": self.apgd.describe(), "clarabel": self.clarabel.describe()}
+
+    def apgd_allowed(self) -> bool:
+        """Whether the time step is small enough for APGD (the first half of the rule)."""
+        return self.scaled_time_step is None or self.scaled_time_step <= self.apgd_below
 
     def solve(self, program, warm_start=None, step=None):
-        if program.m < self.threshold:
-            return self.clarabel.solve(program, warm_start=warm_start, step=step)
+        warm = warm_start is not None and bool(np.any(np.asarray(warm_start)[:, 0] > 0.0))
+        if not (warm and self.apgd_allowed()):
+            return _by(self.clarabel, self.clarabel.solve(program, step=step))
         try:
-            return self.apgd.solve(program, warm_start=warm_start, step=step)
+            return _by(self.apgd, self.apgd.solve(program, warm_start=warm_start, step=step))
         except SolverError as error:
-            if not self.fallback:
-                raise
-            log.warning("%s; solving this step with Clarabel instead", error)
+            log.info("%s; solving this step with Clarabel", error)
             solution = self.clarabel.solve(program, step=step)
-            solution.status = f"{solution.status} (APGD fallback)"
+            solution.backend = "clarabel-fallback"
+            solution.info["apgd_iterations"] = self.apgd.max_iter
             return solution
+
+
+def _by(solver: Solver, solution: ConeSolution) -> ConeSolution:
+    solution.backend = solver.name
+    return solution

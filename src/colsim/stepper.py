@@ -37,7 +37,8 @@ class StepDiagnostics:
     """What one step reports. Times in seconds (wall clock); energies in mass length^2/time^2.
 
     The detection, assembly, setup and solve times are those of the accepted attempt; step_time is
-    the whole step, redone attempts included. detection_margin: of the accepted attempt (length)."""
+    the whole step, redone attempts included. detection_margin: of the accepted attempt (length).
+    solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`)."""
 
     step: int
     time: float
@@ -47,6 +48,7 @@ class StepDiagnostics:
     kinetic_energy: float
     rotational_energy: float
     solver_status: str
+    solver_backend: str
     solver_iterations: int
     detection_time: float
     assembly_time: float
@@ -146,7 +148,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         step=step_number, time=new_state.time, n_contacts=found.m,
         n_active=_count_active(solution.forces), largest_overlap=overlap.largest,
         kinetic_energy=trans, rotational_energy=rot, solver_status=solution.status,
-        solver_iterations=solution.iterations, detection_time=t1 - t0, assembly_time=t2 - t1,
+        solver_backend=solution.backend or solver.name, solver_iterations=solution.iterations, detection_time=t1 - t0, assembly_time=t2 - t1,
         setup_time=solution.setup_time, solve_time=solution.solve_time, redone=attempt,
         missed_contacts=missed,
         detection_margin=margin, step_time=time.perf_counter() - started,
@@ -189,7 +191,7 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
     base = base_margin(state, settings)
     for k in range(first_step + 1, first_step + n_steps + 1):
         result = step(state, settings, solver, k, carry.warm_start, carry.margin)
-        warm = (WarmStart.from_step(result.contacts, result.solution.forces, state.n)
+        warm = (WarmStart.from_step(result.contacts, result.solution.forces)
                 if solver.uses_warm_start else None)
         carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
         state = result.state

@@ -1,0 +1,77 @@
+"""The cost of one APGD iteration against the number of contacts: fused numba kernel vs numpy.
+
+    python benchmarks/apgd_iteration.py COLUMN.nc [COLUMN.nc ...]   # columns from colsim trim
+    python benchmarks/apgd_iteration.py                             # the columns benchmarks/collapse.py cached
+
+The program is the first step of each column's collapse (mu = 0.577, mu_r = 0.12, dt/sqrt(h0/g) =
+0.004), warm-started from the packing's forces. Each kernel runs 10 iterations to compile and warm
+up, then the best of 3 timings of `--iterations` iterations (CPU time of this process) is printed in
+ms per iteration, with the time of one residual check (done every 10 iterations) beside it.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from colsim import io
+from colsim.apgd import ApgdSolver
+from colsim.collapse import CollapseSettings
+from colsim.contacts import detect
+from colsim.program import assemble
+from colsim.state import StepSettings, Walls
+from colsim.stepper import base_margin, predicted_displacement
+
+CACHE = Path(__file__).resolve().parent / ".cache"
+
+
+def first_step(column: Path):
+    """(program, warm start (m, 5)) of the first collapse step of a column file."""
+    state, source = io.read_state(column)
+    h0 = float(source.attrs["h0"])
+    collapse = CollapseSettings(mu_r=0.12, n_steps=1000)
+    settings = StepSettings(dt=collapse.time_step(h0), gravity=(0, 0, -9.81),
+                            walls=Walls(floor=True, cylinder_radius=None), law=collapse.law())
+    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
+                   base_margin(state, settings), settings.detection_slack)
+    forces = io.contact_forces_of(source)
+    guess = None if forces is None else forces.match(found, state.n)
+    return assemble(state, found, settings.dt, settings.gravity), guess, state.n
+
+
+def per_iteration(program, guess, kernel: str, iterations: int) -> tuple[float, float]:
+    """(ms per iteration, ms per residual check), best of 3, CPU time."""
+    solver = ApgdSolver(kernel=kernel)
+    best = np.inf
+    for _ in range(3):
+        run = solver.prepare(program, guess)
+        run.iterate(10)
+        start = time.process_time()
+        run.iterate(iterations)
+        best = min(best, (time.process_time() - start) / iterations)
+    start = time.process_time()
+    for _ in range(10):
+        run.gradient_at_x()
+    check = (time.process_time() - start) / 10
+    return 1e3 * best, 1e3 * check
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("columns", nargs="*", type=Path)
+    parser.add_argument("--iterations", type=int, default=200)
+    args = parser.parse_args(argv)
+    columns = args.columns or sorted(CACHE.glob("column_*.nc"))
+    print("| spheres | contacts | numba ms/iteration | numpy ms/iteration | numba speed-up | gradient check ms |")
+    print("|---|---|---|---|---|---|")
+    for column in columns:
+        program, guess, n = first_step(column)
+        fast, check = per_iteration(program, guess, "numba", args.iterations)
+        plain, _ = per_iteration(program, guess, "numpy", max(20, args.iterations // 5))
+        print(f"| {n} | {program.m} | {fast:.2f} | {plain:.2f} | {plain / fast:.1f} | {check:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,136 @@
+"""Whole collapses of real columns: Clarabel at the paper's 100 steps against the small-step fast path.
+
+    python benchmarks/collapse.py --r0 2 3 4                 # a = 5, seed 1, the three runs below
+    python benchmarks/collapse.py --r0 2 --runs auto-1000    # one run
+
+Columns are made as a user makes them: `colsim pack` (cached under benchmarks/.cache/, with its
+wall and CPU time in a .json beside it) and `colsim trim`. Each run is a separate process (so peak
+memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`colsim.collapse.collapse`:
+
+- clarabel-100: Clarabel, 100 steps (the paper's dt/sqrt(h0/g) = 0.04);
+- auto-1000: `solver: auto`, 1,000 steps (0.004), warm-started from the packing's forces;
+- clarabel-1000: Clarabel at 1,000 steps, timed over its first 20 steps and extrapolated (x 50).
+
+Printed per run: CPU time of the collapse (user + system, imports excluded), wall time, peak resident memory, the
+steps solved by each back-end, and iterations per step by phase: fast flow (kinetic energy above
+half its peak), slowing (after the peak, 1-50 % of it) and rest (below 1 %). The table at the end
+is markdown, for the README. Time benchmarks on a quiet machine.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+CACHE = HERE / ".cache"
+RUNS = {"clarabel-100": ("clarabel", 100, None), "auto-1000": ("auto", 1000, None),
+        "clarabel-1000": ("clarabel", 1000, 20)}
+
+
+def column_file(r0: float, aspect_ratio: float, seed: int, pack_solver: str, pack_dt: float) -> Path:
+    """The trimmed column (made once with the colsim CLI and cached)."""
+    CACHE.mkdir(exist_ok=True)
+    stem = f"r0_{r0:g}_seed_{seed}_{pack_solver}_dt{pack_dt:g}"
+    packing = CACHE / f"packing_{stem}_h{aspect_ratio * r0:g}.nc"
+    if not packing.exists():
+        start, cpu = time.perf_counter(), _children_cpu()
+        subprocess.run(["colsim", "pack", "--r0", f"{r0:g}", "--height", f"{aspect_ratio * r0:g}",
+                        "--seed", str(seed), "--root-seed", "2024", "--dt", f"{pack_dt:g}",
+                        "--solver", pack_solver, "--max-steps", "20000", "--output", str(packing)],
+                       check=True)
+        record = {"wall_s": time.perf_counter() - start, "cpu_s": _children_cpu() - cpu,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}
+        packing.with_suffix(".json").write_text(json.dumps(record))
+    column = CACHE / f"column_{stem}_a{aspect_ratio:g}.nc"
+    if not column.exists():
+        subprocess.run(["colsim", "trim", "--input", str(packing), "--aspect-ratio", f"{aspect_ratio:g}",
+                        "--output", str(column)], check=True)
+    return column
+
+
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_one(column: Path, name: str) -> dict:
+    """One run in this process; returns its record."""
+    from colsim import io
+    from colsim.collapse import CollapseSettings, collapse
+    from colsim.solvers import make_solver
+
+    solver_name, n_steps, timed_steps = RUNS[name]
+    state, source = io.read_state(column)
+    h0 = float(source.attrs["h0"])
+    settings = CollapseSettings(mu_r=0.12, n_steps=n_steps, checkpoint_every=10**9)
+    options = {"scaled_time_step": settings.duration / n_steps} if solver_name == "auto" else {}
+    solver = make_solver(solver_name, **options)
+    start, cpu = time.perf_counter(), time.process_time()
+    run = collapse(state, h0, settings, solver, warm_start=io.contact_forces_of(source), stop_after=timed_steps)
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    d = run.diagnostics
+    energy = np.array([x.kinetic_energy + x.rotational_energy for x in d])
+    iterations = np.array([x.solver_iterations for x in d])
+    backends = [x.solver_backend for x in d]
+    return {"run": name, "spheres": state.n, "steps": len(d), "n_steps": n_steps,
+            "cpu_s": cpu, "wall_s": wall,
+            "peak_mb": usage.ru_maxrss / 1024, "contacts": int(np.mean([x.n_contacts for x in d])),
+            "backends": {b: backends.count(b) for b in sorted(set(backends))},
+            "phases": phase_iterations(energy, iterations),
+            "largest_overlap_over_dmin": float(max(x.largest_overlap for x in d) / (2 * state.radius.min()))}
+
+
+def phase_iterations(energy: np.ndarray, iterations: np.ndarray) -> dict:
+    """Mean iterations per step in the fast flow (energy above half its peak), slowing (after the
+    peak, 1-50 % of it) and rest (below 1 % after the peak)."""
+    peak = int(np.argmax(energy))
+    share = energy / max(energy.max(), 1e-300)
+    after = np.arange(len(energy)) > peak
+    phases = {"fast": share > 0.5, "slowing": after & (share <= 0.5) & (share > 0.01),
+              "rest": after & (share <= 0.01)}
+    return {k: (float(iterations[v].mean()) if v.any() else None) for k, v in phases.items()}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--r0", type=float, nargs="+", default=[2.0, 3.0, 4.0])
+    parser.add_argument("--aspect-ratio", type=float, default=5.0)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--runs", nargs="+", choices=list(RUNS), default=list(RUNS))
+    parser.add_argument("--pack-solver", default="clarabel")
+    parser.add_argument("--pack-dt", type=float, default=0.02)
+    parser.add_argument("--one", nargs=2, metavar=("COLUMN", "RUN"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.one:
+        print(json.dumps(run_one(Path(args.one[0]), args.one[1])))
+        return
+    records = []
+    for r0 in args.r0:
+        column = column_file(r0, args.aspect_ratio, args.seed, args.pack_solver, args.pack_dt)
+        for name in args.runs:
+            out = subprocess.run([sys.executable, __file__, "--one", str(column), name],
+                                 check=True, capture_output=True, text=True).stdout
+            record = json.loads(out.strip().splitlines()[-1])
+            record["r0"] = r0
+            records.append(record)
+            print(json.dumps(record), flush=True)
+    print("\n| r0 | spheres | run | steps timed | CPU s (whole collapse) | wall s | peak MB | iterations fast / slowing / rest | back-ends |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in records:
+        whole = r["cpu_s"] * r["n_steps"] / r["steps"]
+        phases = " / ".join("-" if v is None else f"{v:.0f}" for v in r["phases"].values())
+        print(f"| {r['r0']:g} | {r['spheres']} | {r['run']} | {r['steps']} | {whole:.0f}"
+              f"{' (extrapolated)' if r['steps'] < r['n_steps'] else ''} | {r['wall_s']:.0f} | "
+              f"{r['peak_mb']:.0f} | {phases} | {r['backends']} |")
+
+
+if __name__ == "__main__":
+    main()

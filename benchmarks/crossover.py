@@ -1,0 +1,53 @@
+"""Where APGD overtakes Clarabel: cost per step against the time step, for `solver: auto`'s rule.
+
+    python benchmarks/crossover.py COLUMN.nc [--scaled-dt 0.04 0.02 0.01 0.005] [--steps 40]
+
+For each dt / sqrt(h0/g), the column's collapse (mu = 0.577, mu_r = 0.12) runs its first `--steps`
+steps twice from the same start: with Clarabel, and with APGD warm-started from the previous step
+(the first step from the packing's forces; iteration cap 50,000 so that no step falls back). Printed:
+CPU seconds per step (this process), mean and largest APGD iterations, and the ratio. AutoSolver's
+`apgd_below` is the largest scaled step at which APGD is cheaper.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from colsim import io
+from colsim.collapse import CollapseSettings, collapse
+from colsim.solvers import ApgdSolver, ClarabelSolver
+
+
+def cost_per_step(column: Path, solver, scaled_dt: float, steps: int) -> tuple[float, list]:
+    """(CPU s per step, per-step iterations) of the first `steps` steps."""
+    state, source = io.read_state(column)
+    h0 = float(source.attrs["h0"])
+    settings = CollapseSettings(mu_r=0.12, duration=scaled_dt * steps, n_steps=steps, checkpoint_every=10**9)
+    start = time.process_time()
+    run = collapse(state, h0, settings, solver, warm_start=io.contact_forces_of(source))
+    return (time.process_time() - start) / steps, [d.solver_iterations for d in run.diagnostics]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("column", type=Path)
+    parser.add_argument("--scaled-dt", type=float, nargs="+", default=[0.04, 0.02, 0.01, 0.005])
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--tolerance", type=float, default=None, help="APGD tolerance (default: its own)")
+    args = parser.parse_args(argv)
+    apgd = ApgdSolver(max_iter=50_000, **({} if args.tolerance is None else {"tolerance": args.tolerance}))
+    print(f"{args.column.name}: first {args.steps} steps, APGD tolerance {apgd.tolerance:g}")
+    print("| dt/sqrt(h0/g) | Clarabel s/step | iterations | APGD s/step | iterations mean (max) | APGD / Clarabel |")
+    print("|---|---|---|---|---|---|")
+    for scaled_dt in args.scaled_dt:
+        reference, ref_iterations = cost_per_step(args.column, ClarabelSolver(), scaled_dt, args.steps)
+        fast, iterations = cost_per_step(args.column, apgd, scaled_dt, args.steps)
+        print(f"| {scaled_dt:g} | {reference:.2f} | {np.mean(ref_iterations):.0f} | {fast:.2f} | "
+              f"{np.mean(iterations):.0f} ({max(iterations)}) | {fast / reference:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

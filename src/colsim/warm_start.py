@@ -1,0 +1,85 @@
+"""Contact forces carried from one step (or stage) to the next, by contact pair.
+
+A warm start stores each contact's force and rolling force in the global frame, with the pair that
+carries it: particle i, and particle j or a wall (j = -1 with the wall's family). The next step's
+contacts are matched by pair and get the stored forces re-expressed in their own frames, projected
+onto their cones (zeros for new pairs). The pairs survive a change of the particle set: pouring
+more spheres keeps the indices, and trimming renumbers them (:meth:`WarmStart.subset`). So a packing's
+final forces can start the first step of its column's collapse.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cones import project_coupled_cone
+from .program import ROWS_PER_CONTACT
+
+
+@dataclass
+class WarmStart:
+    """Forces of m contact pairs, in the global frame.
+
+    i: (m,) int particle; j: (m,) int particle, or -1 for a wall; family: (m,) int (state.PARTICLE,
+    FLOOR or CYLINDER). force: (m, 3) p n + q1 t1 + q2 t2; rolling: (m, 3) r1 t1 + r2 t2 (force units).
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    family: np.ndarray
+    force: np.ndarray
+    rolling: np.ndarray
+
+    @property
+    def m(self) -> int:
+        return len(self.i)
+
+    @classmethod
+    def from_step(cls, contacts, forces: np.ndarray) -> "WarmStart":
+        """The forces (m, 5) = (p, q1, q2, r1, r2) of a step's `contacts`, in the global frame."""
+        f = (forces[:, :1] * contacts.normal + forces[:, 1:2] * contacts.tangent1
+             + forces[:, 2:3] * contacts.tangent2)
+        r = forces[:, 3:4] * contacts.tangent1 + forces[:, 4:5] * contacts.tangent2
+        return cls(contacts.i.copy(), contacts.j.copy(), contacts.family.copy(), f, r)
+
+    def carries_load(self) -> bool:
+        """Whether any stored pair pushes (a start worth warming from)."""
+        return bool(np.any(np.einsum("ij,ij->i", self.force, self.force) > 0.0))
+
+    def match(self, contacts, n_particles: int) -> np.ndarray:
+        """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
+        out = np.zeros((contacts.m, ROWS_PER_CONTACT))
+        if self.m == 0 or contacts.m == 0:
+            return out
+        stored = _pair_keys(self.i, self.j, self.family, n_particles)
+        order = np.argsort(stored, kind="stable")
+        stored = stored[order]
+        keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
+        pos = np.clip(np.searchsorted(stored, keys), 0, len(stored) - 1)
+        found = stored[pos] == keys
+        f, r = self.force[order[pos[found]]], self.rolling[order[pos[found]]]
+        n, t1, t2 = contacts.normal[found], contacts.tangent1[found], contacts.tangent2[found]
+        out[found, 0] = np.einsum("ij,ij->i", f, n)
+        out[found, 1] = np.einsum("ij,ij->i", f, t1)
+        out[found, 2] = np.einsum("ij,ij->i", f, t2)
+        out[found, 3] = np.einsum("ij,ij->i", r, t1)
+        out[found, 4] = np.einsum("ij,ij->i", r, t2)
+        return project_coupled_cone(out, contacts.mu, contacts.mu_r)
+
+    def subset(self, keep: np.ndarray) -> "WarmStart":
+        """The pairs whose particles are all in `keep` ((n,) bool mask of the old particles),
+        renumbered as :meth:`colsim.state.ParticleState.subset` renumbers the particles."""
+        keep = np.asarray(keep, dtype=bool)
+        new_index = np.full(len(keep), -1, dtype=np.int64)
+        new_index[keep] = np.arange(np.count_nonzero(keep))
+        stays = keep[self.i] & ((self.j < 0) | keep[np.maximum(self.j, 0)])
+        j = np.where(self.j < 0, -1, new_index[np.maximum(self.j, 0)])
+        return WarmStart(new_index[self.i[stays]], j[stays], self.family[stays].copy(),
+                         self.force[stays].copy(), self.rolling[stays].copy())
+
+
+def _pair_keys(i, j, family, n_particles: int) -> np.ndarray:
+    """(m,) int64 key unique to each (i, j or wall family) among n_particles particles."""
+    other = np.where(j < 0, n_particles + family, j)
+    return np.asarray(i, dtype=np.int64) * (n_particles + 3) + other
