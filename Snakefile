@@ -8,13 +8,14 @@ min_version("8.0")
 configfile: "config.yaml"
 
 
-report: "workflow/report/workflow.rst"
-
-
 include: "workflow/rules/common.smk"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/summarise.smk"
 include: "workflow/rules/convergence.smk"
+
+
+# the study's own description (written with its summary), so a report describes the files it shows
+report: report_description()
 
 
 rule all:

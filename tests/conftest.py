@@ -21,16 +21,14 @@ from colsim.contacts import overlaps
 from colsim.solvers import ClarabelSolver
 from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.stepper import step
+from helpers import COLLAPSE_LAW, DT, G, max_speed
 
-G = 9.81
 CYLINDER_RADIUS = 1.5
 N_SPHERES = 200
-DT = 0.02
 POUR_STEPS = 150
-COLLAPSE_LAW = ContactLaw.uniform(0.577, 0.12)
 
 
-def lattice_cloud(n: int, cylinder_radius: float, seed: int = 0, spacing: float = 0.52) -> ParticleState:
+def pile_cloud(n: int, cylinder_radius: float, seed: int = 0, spacing: float = 0.52) -> ParticleState:
     """n spheres at rest on a jittered cubic lattice in the cylinder; no two overlap.
 
     Radii uniform in [0.125, 0.25]; jitter up to 0.005 per axis, so neighbours keep a gap >= 0.003.
@@ -46,11 +44,6 @@ def lattice_cloud(n: int, cylinder_radius: float, seed: int = 0, spacing: float 
     points = np.concatenate([np.column_stack([xy, np.full(len(xy), zk)]) for zk in z])[:n]
     points = points + rng.uniform(-0.005, 0.005, points.shape)
     return ParticleState.at_rest(points, rng.uniform(0.125, 0.25, n))
-
-
-def max_speed(state: ParticleState) -> float:
-    """Largest translational speed (length/time)."""
-    return float(np.linalg.norm(state.velocity, axis=1).max(initial=0.0))
 
 
 def energy_per_particle(state: ParticleState) -> float:
@@ -88,7 +81,7 @@ class Pile:
 
 @pytest.fixture(scope="session")
 def pile() -> Pile:
-    cloud = lattice_cloud(N_SPHERES, CYLINDER_RADIUS)
+    cloud = pile_cloud(N_SPHERES, CYLINDER_RADIUS)
     walls = Walls(floor=True, cylinder_radius=CYLINDER_RADIUS)
     pour = StepSettings(dt=DT, walls=walls, law=ContactLaw.uniform(0.0, 0.0))
     tolerance = pour.overlap_tolerance * 2.0 * cloud.radius.min()

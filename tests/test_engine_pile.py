@@ -1,4 +1,4 @@
-"""Engine tests on the session's poured pile (conftest.pile): rest, cones, balance, forms, overlaps."""
+"""Engine tests on the session's poured pile (the conftest fixture `pile`): rest, cones, balance, forms, overlaps."""
 from __future__ import annotations
 
 
@@ -11,7 +11,7 @@ from colsim.solvers import ClarabelSolver
 from colsim.state import FLOOR, StepSettings, Walls
 from colsim.stepper import predicted_displacement, run, step
 
-from conftest import COLLAPSE_LAW, DT, G, max_speed
+from helpers import COLLAPSE_LAW, DT, G, max_speed
 
 
 def collapse_settings(pile, cylinder=True) -> StepSettings:

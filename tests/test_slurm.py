@@ -8,7 +8,7 @@ the module and stopped, by pid, at its end. In a copy of the workflow the tests 
         --configfile config/tiny.yaml \
         --slurm-status-command squeue --slurm-init-seconds-before-status-checks 2
 
-and check that every job but the local rules ran as a SLURM job, that results/summary.nc holds the
+and check that every job but the local rules ran as a SLURM job, that results/tiny/summary.nc holds the
 same numbers as a local run of the tiny study (`snakemake -j2 all --configfile config/tiny.yaml`)
 and that the figures come out; and that a job that fails on the cluster (a packing allowed one
 step, so `colsim pack` stops with "not at rest") fails the run, names the job's log and leaves no
@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 
 from slurm_cluster import PACKAGES, ClusterError, SlurmCluster, missing_programs
-from test_workflow import FIGURES, SUMMARY_VARIABLES, copy_workflow
+from helpers import FIGURES, SUMMARY_VARIABLES, TINY, copy_workflow
 
 pytestmark = pytest.mark.slurm
 
@@ -123,8 +123,8 @@ def test_every_job_but_the_local_rules_ran_on_slurm(cluster, slurm_study):
 def test_summary_matches_a_local_run(slurm_study, local_study):
     xr = pytest.importorskip("xarray")
     directory, _ = slurm_study
-    on_slurm = xr.load_dataset(directory / "results" / "summary.nc")
-    local = xr.load_dataset(local_study / "results" / "summary.nc")
+    on_slurm = xr.load_dataset(directory / TINY / "summary.nc")
+    local = xr.load_dataset(local_study / TINY / "summary.nc")
     assert dict(on_slurm.sizes) == dict(local.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1,
                                                          "contact_tolerance": 4, "mass_share": 3}
     assert set(on_slurm.data_vars) == set(local.data_vars)
@@ -136,16 +136,16 @@ def test_summary_matches_a_local_run(slurm_study, local_study):
                                    err_msg=name)
     for name in SUMMARY_VARIABLES:
         assert np.all(np.isfinite(on_slurm[name].values)), name
-    table = (directory / "results" / "summary.csv").read_text().splitlines()
-    assert len(table) == len((local_study / "results" / "summary.csv").read_text().splitlines())
+    table = (directory / TINY / "summary.csv").read_text().splitlines()
+    assert len(table) == len((local_study / TINY / "summary.csv").read_text().splitlines())
 
 
 def test_figures_logs_and_benchmarks_as_in_a_local_run(slurm_study, local_study):
     directory, _ = slurm_study
     for name in FIGURES:
-        path = directory / "results" / "figures" / f"{name}.png"
+        path = directory / TINY / "figures" / f"{name}.png"
         assert path.is_file() and path.stat().st_size > 1000, name
-    assert (directory / "results" / "study_config.yaml").is_file()
+    assert (directory / TINY / "study_config.yaml").is_file()
 
     def listing(root: Path, pattern: str) -> list[str]:
         return sorted(str(p.relative_to(root)) for p in (root / "results").rglob(pattern))

@@ -1,10 +1,12 @@
-"""The summary's CSV form: one row per run, whatever extra dimensions the checks have."""
+"""The summary: collecting analyses (one run per swept value, the rest equal), its CSV form with one
+row per run, and its tables against Lube's laws."""
 import numpy as np
 import pytest
 
 xr = pytest.importorskip("xarray")
 
-from colsim.summary import one_row_per_run  # noqa: E402
+from colsim.laws import lube_height, lube_runout  # noqa: E402
+from colsim.summary import lube_markdown, one_row_per_run  # noqa: E402
 
 
 def test_check_variables_become_one_column_per_value():
@@ -21,3 +23,31 @@ def test_check_variables_become_one_column_per_value():
                                    "runout_over_r0_by_tolerance_0.5", "mass_front_over_r0_0.95"]
     assert table["runout_over_r0_by_tolerance_0.5"].tolist() == [1.5, 2.5]
     assert one_row_per_run(summary)["mass_front_over_r0_0.95"].attrs["units"] == "1"
+
+
+def test_lube_table_reports_zero_error_on_the_law_itself():
+    ratios = np.array([0.5, 2.0, 5.0])
+    h = np.stack([lube_height(ratios)] * 2, axis=-1)[:, None, :]
+    r = np.stack([lube_runout(ratios)] * 2, axis=-1)[:, None, :]
+    dims = ("aspect_ratio", "mu_r", "seed")
+    summary = xr.Dataset({"h_inf_over_r0": (dims, h), "runout_over_r0": (dims, r)},
+                         coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1, 2]})
+    text = lube_markdown(summary)
+    assert "mean of 2 seeds" in text
+    assert text.count("+0 %") == 6
+    assert "| 0.5 | 0.500 | 0.000 | 0.500 | +0 % | 0.620 |" in text
+
+
+def test_other_runout_measures_are_tabled_against_lube():
+    ratios = np.array([2.0])
+    runout = lube_runout(ratios)[0]
+    dims = ("aspect_ratio", "mu_r", "seed")
+    summary = xr.Dataset(
+        {"h_inf_over_r0": (dims, [[[1.0]]]), "runout_over_r0": (dims, [[[runout]]]),
+         "runout_over_r0_by_tolerance": (dims + ("contact_tolerance",), [[[[runout, 1.1 * runout]]]]),
+         "mass_front_over_r0": (dims + ("mass_share",), [[[[0.9 * runout]]]])},
+        coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1], "contact_tolerance": [0.01, 0.5],
+                "mass_share": [0.95]})
+    text = lube_markdown(summary)
+    assert "| mu_r | a | Lube | connected, gap <= 1 % d_min | connected, gap <= 50 % d_min | 95 % of the mass |" in text
+    assert f"| 0.12 | 2 | {runout:.2f} | {runout:.2f} (+0 %) | {1.1 * runout:.2f} (+10 %) | {0.9 * runout:.2f} (-10 %) |" in text

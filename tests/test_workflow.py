@@ -1,52 +1,13 @@
 """The Snakemake study end to end: the tiny configuration (config/tiny.yaml) in a copy of the workflow.
 
 Runs `snakemake -j2 all --configfile config/tiny.yaml` as a user would (a minute or two on 2 cores),
-then checks results/summary.nc, the figures and the report, that adding a seed or a mu_r value
+then checks results/tiny/summary.nc, the figures and the report, that adding a seed or a mu_r value
 schedules only the new jobs, and that a wrong configuration stops snakemake naming the culprit.
 """
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow")
-FIGURES = ("final_height", "runout", "mu_r_effect", "deposit_profiles", "side_views", "front_position")
-SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles", "solid_fraction",
-                     "final_to_peak_kinetic_energy", "wall_time")
-
-
-def copy_workflow(directory: Path) -> Path:
-    for name in WORKFLOW_FILES:
-        source = ROOT / name
-        if source.is_dir():
-            shutil.copytree(source, directory / name)
-        else:
-            shutil.copy2(source, directory / name)
-    return directory
-
-
-def snakemake(directory: Path, *arguments, timeout=600) -> subprocess.CompletedProcess:
-    """Run snakemake in `directory` with the interpreter's bin directory first on PATH (for `colsim`)."""
-    env = dict(os.environ)
-    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    env.setdefault("MPLBACKEND", "Agg")
-    return subprocess.run([sys.executable, "-m", "snakemake", *arguments], cwd=directory, env=env,
-                          capture_output=True, text=True, timeout=timeout)
-
-
-def planned_outputs(result: subprocess.CompletedProcess) -> list[str]:
-    """Output files of the jobs a dry run (snakemake -n) would run."""
-    outputs = []
-    for line in result.stdout.splitlines() + result.stderr.splitlines():
-        line = line.strip()
-        if line.startswith("output:"):
-            outputs += [p.strip() for p in line[len("output:"):].split(",")]
-    return outputs
+from helpers import FIGURES, ROOT, SUMMARY_VARIABLES, TINY, copy_workflow, planned_outputs, snakemake
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +21,7 @@ def tiny_study(tmp_path_factory):
 @pytest.mark.slow
 def test_summary_holds_finite_numbers_with_units(tiny_study):
     xr = pytest.importorskip("xarray")
-    summary = xr.load_dataset(tiny_study / "results" / "summary.nc")
+    summary = xr.load_dataset(tiny_study / TINY / "summary.nc")
     assert dict(summary.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1, "contact_tolerance": 4,
                                    "mass_share": 3}
     assert summary.runout_over_r0_by_tolerance.dims == ("aspect_ratio", "mu_r", "seed", "contact_tolerance")
@@ -74,7 +35,7 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
     assert np.all(summary["h_inf_over_r0"].values > 0)
     assert np.all(summary["n_particles"].values > 0)
     assert "config" in summary.attrs and "run_configs" in summary.attrs
-    table = (tiny_study / "results" / "summary.csv").read_text().splitlines()
+    table = (tiny_study / TINY / "summary.csv").read_text().splitlines()
     assert len(table) == 1 + 4 and "h_inf_over_r0" in table[0]
     assert "runout_over_r0_by_tolerance_0.5" in table[0] and "mass_front_over_r0_0.95" in table[0]
 
@@ -82,11 +43,11 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
 @pytest.mark.slow
 def test_figures_logs_and_benchmarks_exist(tiny_study):
     for name in FIGURES:
-        path = tiny_study / "results" / "figures" / f"{name}.png"
+        path = tiny_study / TINY / "figures" / f"{name}.png"
         assert path.is_file() and path.stat().st_size > 1000, name
-    assert (tiny_study / "results" / "study_config.yaml").is_file()
-    logs = list((tiny_study / "results" / "logs").rglob("*.log"))
-    benchmarks = list((tiny_study / "results" / "benchmarks").rglob("*.tsv"))
+    assert (tiny_study / TINY / "study_config.yaml").is_file()
+    logs = list((tiny_study / "results").rglob("*.log"))             # runs' in results/logs, the study's
+    benchmarks = list((tiny_study / "results").rglob("*.tsv"))       # in results/tiny/logs
     # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config
     assert len(logs) == 14 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))
@@ -109,30 +70,101 @@ def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
     assert "results/r0_1/seed_2/packing.nc" in simulated
     assert "results/r0_1/seed_1/packing.nc" not in simulated
     assert not any(p.startswith("results/r0_1/seed_1/") and p.endswith("column.nc") for p in simulated)
-    assert "results/summary.nc" in planned
+    assert f"{TINY}/summary.nc" in planned
 
 
 @pytest.mark.slow
-def test_report_builds(tiny_study):
-    result = snakemake(tiny_study, "--report", "report.html", "--configfile", "config/tiny.yaml")
+def test_report_describes_the_study_it_shows(tiny_study):
+    """Issue 16, defect 1: the report's text comes from the tiny study's own files, also when the
+    configuration that builds the report says otherwise; no Docutils error box."""
+    (tiny_study / "other.yaml").write_text("r0: 2\ncollapse: {steps: 77}\nmu_r: [0.3]\n")
+    for name, extra in (("report.html", ()), ("other.html", ("other.yaml",))):
+        result = snakemake(tiny_study, "--report", name, "--configfile", "config/tiny.yaml", *extra)
+        assert result.returncode == 0, result.stderr[-3000:]
+        html = (tiny_study / name).read_text(errors="replace")
+        assert len(html) > 10000 and "final_height.png" in html
+        for text in ("r0 = 1 (diameters 0.25-0.5)", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
+                     "40 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml"):
+            assert text in html, (name, text)
+        assert "77 steps" not in html and "r0 = 2" not in html
+        assert "System Message" not in html and "Undefined substitution" not in html
+
+
+@pytest.mark.slow
+def test_the_default_study_leaves_the_tiny_study_alone(tiny_study):
+    """Each study writes its summary, tables and figures into its own folder."""
+    result = snakemake(tiny_study, "-n", "all")
     assert result.returncode == 0, result.stderr[-3000:]
-    html = (tiny_study / "report.html").read_text(errors="replace")
-    assert len(html) > 10000
-    assert "final_height.png" in html
+    planned = planned_outputs(result)
+    assert "results/summary.nc" in planned and "results/study_config.yaml" in planned
+    assert not [p for p in planned if p.startswith(f"{TINY}/")]
 
 
-@pytest.mark.parametrize("setting, culprit", [
-    ("bogus_key=1", "bogus_key"),
-    ("solver=simplex", "simplex"),
-    ("r0=-1", "r0"),
-    ("diameter_min=0.9", "diameter_min"),
-])
-def test_a_wrong_configuration_stops_the_run_naming_it(tmp_path, setting, culprit):
+def test_a_config_error_across_fields_stops_before_any_job(tmp_path):
+    """Issue 16, defect 4: r0 below the largest particle is refused when the configuration is
+    checked, with one line naming both, and results/ stays as it was."""
     directory = copy_workflow(tmp_path)
-    result = snakemake(directory, "-n", "all", "--config", setting, timeout=120)
+    earlier = directory / TINY / "study_config.yaml"
+    earlier.parent.mkdir(parents=True)
+    earlier.write_text("r0: 1\n")
+    (directory / "r.yaml").write_text("r0: 0.2\n")
+    result = snakemake(directory, "-j2", "all", "--configfile", "config/tiny.yaml", "r.yaml", timeout=120)
     assert result.returncode != 0
-    assert culprit in result.stdout + result.stderr
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.startswith("config:")]
+    assert lines == ["config: r0 0.2 is below diameter_max 0.5: the largest particle does not fit in the cylinder"]
+    assert earlier.read_text() == "r0: 1\n"
+    assert sorted(p.relative_to(directory).as_posix() for p in (directory / "results").rglob("*")) == [
+        "results/tiny", f"{TINY}/study_config.yaml"]
+
+
+def test_a_failed_run_does_not_rewrite_the_study_config(tmp_path):
+    """The study configuration is written only with the summary it describes: a pack that fails
+    at run time leaves none."""
+    directory = copy_workflow(tmp_path)
+    (directory / "fail.yaml").write_text("pack: {max_steps: 1}\n")
+    result = snakemake(directory, "-j2", "all", "--configfile", "config/tiny.yaml", "fail.yaml", timeout=300)
+    assert result.returncode != 0
+    assert not (directory / TINY / "study_config.yaml").exists()
+    assert not (directory / TINY / "report_description.rst").exists()
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("bogus_key: 1", "config: unknown key bogus_key; allowed: r0, aspect_ratios,"),
+    ("solver: simplex", "config: solver: 'simplex' is not one of"),
+    ("r0: -1", "config: r0: -1 is less than or equal to the minimum of 0"),
+    ("diameter_min: 0.9", "config: diameter_min 0.9 exceeds diameter_max 0.5"),
+    ("aspect_ratios: [0.1, 1]", "config: aspect ratio 0.1 at r0 2 gives h0 = 0.2, below diameter_max 0.5"),
+    ("pack_aspect_ratio: 1", "config: pack_aspect_ratio 1 is below the largest aspect ratio 5"),
+])
+def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, message):
+    """A wrong key or value, or settings that contradict each other, stop snakemake before any job
+    with one line naming them (not the schema's dump)."""
+    directory = copy_workflow(tmp_path)
+    (directory / "bad.yaml").write_text(setting + "\n")
+    result = snakemake(directory, "-n", "all", "--configfile", "bad.yaml", timeout=120)
+    assert result.returncode != 0
+    output = (result.stdout + result.stderr).splitlines()
+    lines = [line for line in output if line.startswith("config:")]
+    assert len(lines) == 1 and lines[0].startswith(message), result.stderr[-2000:]
+    assert len(output) < 10
     assert not (directory / "results").exists()
+
+
+def test_the_schema_the_cli_and_the_readme_offer_the_same_solvers():
+    """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the README's
+    table of back-ends hold the same names."""
+    yaml = pytest.importorskip("yaml")
+    from colsim.cli import build_parser
+    from colsim.solvers import SOLVERS
+
+    schema = yaml.safe_load((ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    assert tuple(schema["properties"]["solver"]["enum"]) == SOLVERS
+    subcommands = next(a for a in build_parser()._actions if a.dest == "command").choices
+    for command in ("pack", "collapse"):
+        solver = next(a for a in subcommands[command]._actions if a.dest == "solver")
+        assert tuple(solver.choices) == SOLVERS
+    table = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| `")]
+    assert {line.split("`")[1] for line in table} >= set(SOLVERS)
 
 
 def test_a_misspelt_nested_key_stops_the_run(tmp_path):
@@ -191,6 +223,17 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 
+def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
+    """pi/24 names its folder mu_r_0.1309 but reaches `colsim collapse` with all its digits."""
+    directory = copy_workflow(tmp_path)
+    (directory / "hexagon.yaml").write_text("mu_r: [0.1308996938995747]\n")
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "hexagon.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
+    assert len(commands) == 2 and all("--mu-r 0.1308996938995747 " in c for c in commands), commands
+    assert all("mu_r_0.1309/collapse.nc" in c for c in commands)
+
+
 TINY_CONVERGENCE = """
 convergence:
   mu_r: 0.12
@@ -210,14 +253,14 @@ def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
     arguments = ("all", "--configfile", "config/tiny.yaml", "tiny_convergence.yaml")
     result = snakemake(tiny_study, "-j2", *arguments)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
-    table = xr.load_dataset(tiny_study / "results" / "convergence.nc")
+    table = xr.load_dataset(tiny_study / TINY / "convergence.nc")
     assert sorted(set(table.study.values)) == ["column_size", "end_time", "seeds", "time_step"]
     assert table.sizes["run"] == 2 + 1 + 3 + 2
     assert np.all(np.isfinite(table.h_inf_over_r0.values)) and np.all(np.isfinite(table.runout_over_r0.values))
     end = table.where(table.study == "end_time", drop=True)
     assert np.isfinite(end.runout_over_r0_at_default_end.values).all()
-    text = (tiny_study / "results" / "convergence.md").read_text()
+    text = (tiny_study / TINY / "convergence.md").read_text()
     assert "### Time step" in text and "### Seeds" in text
-    assert (tiny_study / "results" / "figures" / "convergence.png").stat().st_size > 10000
-    lube = (tiny_study / "results" / "lube_table.md").read_text()
+    assert (tiny_study / TINY / "figures" / "convergence.png").stat().st_size > 10000
+    lube = (tiny_study / TINY / "lube_table.md").read_text()
     assert "| Lube |" in lube and "| 0.5 | " in lube and "| 1 | " in lube

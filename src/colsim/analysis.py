@@ -7,6 +7,9 @@
   measured from the column axis.
 - Normalised: h_inf / r0 and (r_inf - r0) / r0, against a = h0 / r0.
 
+:func:`analyse_trajectory` measures a whole trajectory (as :func:`colsim.collapse.trajectory_dataset`
+lays it out) into the analysis Dataset that `colsim analyse` writes.
+
 The edge of a deposit is a sparse layer of grains on the floor, a few hundredths of a diameter
 apart, so r_inf depends on the contact tolerance. Two checks come with it: r_inf at looser
 tolerances, and :func:`mass_front`, the radius that holds a given share of the mass (no contacts).
@@ -16,10 +19,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import xarray as xr
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .contacts import touching_pairs
+from .io import state_from_dataset
 from .state import ParticleState
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
@@ -89,3 +94,79 @@ def undisturbed_top_radius(initial: ParticleState, final: ParticleState, h0: flo
     if not still.any():
         return 0.0
     return float(np.percentile(np.hypot(initial.position[still, 0], initial.position[still, 1]), 95))
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """What `colsim analyse` measures: contact tolerances as fractions of the smallest diameter (the
+    study's and the checks'), mass shares (0-1], radial bin of the profile (length; None: d_max)."""
+
+    contact_tolerance: float = DEFAULT_CONTACT_TOLERANCE
+    check_tolerances: tuple = (0.1, 0.5, 1.0)
+    mass_shares: tuple = (0.9, 0.95, 0.99)
+    bin_width: float | None = None
+
+
+def _scalar(value, units: str, long_name: str):
+    return (), value, {"units": units, "long_name": long_name}
+
+
+def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> xr.Dataset:
+    """The analysis Dataset of a trajectory Dataset: deposit scalars, the run-out at every check
+    tolerance and mass share, the deposit profile over `radial_bin`, histories over `time` and the
+    kinetic energy over `step`; `attrs` plus the run's (aspect_ratio, mu_r, mu, r0, h0, duration,
+    n_steps, at_rest) as global attributes."""
+    r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
+    initial, final = state_from_dataset(trajectory, 0), state_from_dataset(trajectory, -1)
+    tolerance = contact_tolerance(final, settings.contact_tolerance)
+    history = [measure_deposit(state_from_dataset(trajectory, k), tolerance) for k in range(trajectory.sizes["time"])]
+    deposit = history[-1]
+    fractions = sorted(set(settings.check_tolerances) | {settings.contact_tolerance})
+    checks = [measure_deposit(final, contact_tolerance(final, f)) for f in fractions]
+    shares = sorted(set(settings.mass_shares))
+    bin_width = settings.bin_width or 2.0 * float(final.radius.max())
+    centres, height = deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
+    energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
+    top_radius = undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
+    data = {
+        "h_inf": _scalar(deposit.h_inf, "length", "final height of the main mass"),
+        "r_inf": _scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
+        "h_inf_over_r0": _scalar(deposit.h_inf / r0, "1", "final height over initial radius"),
+        "runout_over_r0": _scalar((deposit.r_inf - r0) / r0, "1", "run-out (r_inf - r0) over initial radius"),
+        "n_particles": _scalar(final.n, "1", "number of particles"),
+        "n_main_mass": _scalar(int(deposit.main_mass.sum()), "1", "number of particles in the main mass"),
+        "solid_fraction": _scalar(float(trajectory.attrs["column_solid_fraction"]), "1",
+                                  "solid fraction of the column before release"),
+        "final_to_peak_kinetic_energy": _scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
+                                                "kinetic energy at the end over its peak"),
+        "wall_time": _scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
+        "undisturbed_top_radius": _scalar(top_radius / r0, "1", "radius of the top disc that did not move, over r0"),
+        "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
+        "front_position": ("time", (np.array([d.r_inf for d in history]) - r0) / r0,
+                           {"units": "1", "long_name": "front (r_front - r0) over r0"}),
+        "height_history": ("time", np.array([d.h_inf for d in history]),
+                           {"units": "length", "long_name": "height of the main mass"}),
+        "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
+                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at each "
+                                                                    "contact tolerance"}),
+        "mass_front_over_r0": ("mass_share", [(mass_front(final, share) - r0) / r0 for share in shares],
+                               {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
+        "mean_diameter": _scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
+        "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
+        "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
+    }
+    coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
+              "step": trajectory["step"],
+              "contact_tolerance": ("contact_tolerance", fractions,
+                                    {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),
+              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"})}
+    return xr.Dataset(data, coords=coords, attrs={**attrs, **_run_attributes(trajectory)})
+
+
+def _run_attributes(trajectory) -> dict:
+    """The trajectory's run description that an analysis carries on."""
+    attrs = {key: float(trajectory.attrs[key]) for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration")}
+    attrs["n_steps"] = int(trajectory.attrs["n_steps"])
+    if "at_rest" in trajectory.attrs:
+        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
+    return attrs

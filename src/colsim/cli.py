@@ -18,36 +18,51 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
+
+from .solvers import SOLVERS
 
 log = logging.getLogger("colsim")
 
 LENGTH = "length units of the particles (the paper: diameters 0.25-0.5)"
 
 
+def _number(text, kind=float, what="a number"):
+    """`text` as a `kind`; argparse's one-line error naming the value otherwise."""
+    try:
+        return kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
+
+
 def _positive(text):
-    value = float(text)
+    value = _number(text)
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
     return value
 
 
 def _non_negative(text):
-    value = float(text)
+    value = _number(text)
     if not value >= 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
     return value
 
 
 def _positive_int(text):
-    value = int(text)
+    value = _number(text, int, "an integer")
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text}")
     return value
 
 
+def _integer(text):
+    return _number(text, int, "an integer")
+
+
 def _solver_arguments(parser):
-    parser.add_argument("--solver", default="clarabel",
-                        help="cone-program back-end: clarabel, clarabel-force, apgd or auto (default: %(default)s)")
+    parser.add_argument("--solver", default="clarabel", choices=SOLVERS,
+                        help="cone-program back-end (default: %(default)s)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
                         help="solver tolerance (default: the back-end's own)")
 
@@ -61,8 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--r0", type=_positive, default=2.0, help=f"cylinder radius, {LENGTH} (default: %(default)s)")
     p.add_argument("--height", type=_positive, required=True,
                    help="the settled packing must be taller than this (length); use the tallest h0 = a r0 needed")
-    p.add_argument("--seed", type=int, default=0, help="run seed (default: %(default)s)")
-    p.add_argument("--root-seed", type=int, default=0,
+    p.add_argument("--seed", type=_integer, default=0, help="run seed (default: %(default)s)")
+    p.add_argument("--root-seed", type=_integer, default=0,
                    help="study seed; the stream is numpy default_rng([seed, root_seed]) (default: %(default)s)")
     p.add_argument("--diameter-min", type=_positive, default=0.25, help="smallest diameter, length (default: %(default)s)")
     p.add_argument("--diameter-max", type=_positive, default=0.5, help="largest diameter, length (default: %(default)s)")
@@ -143,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output-dir", required=True, help="directory to write into")
 
     p = sub.add_parser("mu-r", help="rolling coefficient of a regular polygon (the paper's Eqs. 7-10)")
-    p.add_argument("--polygon", type=int, required=True, help="number of sides N >= 3")
+    p.add_argument("--polygon", type=_integer, required=True, help="number of sides N >= 3")
     p.add_argument("--method", choices=["paper", "exact"], default="paper",
                    help="paper: linear fall of the resisting moment (pi/(4N)); exact: true lever arm (default: %(default)s)")
     return parser
@@ -160,7 +175,11 @@ def main(argv=None) -> int:
     from .stepper import OverlapError
 
     try:
+        commands.check_outputs(args)
         getattr(commands, args.command.replace("-", "_"))(args)
+    except KeyboardInterrupt:
+        print(f"colsim {args.command}: interrupted; {_interrupted(args)}", file=sys.stderr)
+        return 130
     except (InputError, ValueError) as error:
         print(f"colsim {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -168,6 +187,16 @@ def main(argv=None) -> int:
         print(f"colsim {args.command}: failed: {error}", file=sys.stderr)
         return 1
     return 0
+
+
+def _interrupted(args) -> str:
+    """What an interrupted command leaves behind, and how to go on."""
+    if args.command != "collapse":
+        return "no output was written"
+    checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
+    if not checkpoint.is_file():
+        return "no checkpoint was written yet: run the same command again to start over"
+    return f"the checkpoint {checkpoint} is kept: run the same command again to resume from it"
 
 
 if __name__ == "__main__":

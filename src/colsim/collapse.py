@@ -247,7 +247,7 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
               "step": ("step", np.array([d.step for d in run.diagnostics]),
                        {"units": "1", "long_name": "step number"}),
-              "xyz": ["x", "y", "z"]}
+              "xyz": ("xyz", ["x", "y", "z"], {"long_name": "Cartesian component"})}
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "dt": settings.time_step(h0),

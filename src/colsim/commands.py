@@ -19,6 +19,16 @@ def _settings(args) -> dict:
     return {k: v for k, v in vars(args).items() if k not in ("verbose",)}
 
 
+def check_outputs(args) -> None:
+    """Before any work: InputError (one line) unless every output of the command can be written
+    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder)."""
+    for name in ("output", "csv", "markdown", "figure", "checkpoint"):
+        if getattr(args, name, None):
+            io.check_writable(getattr(args, name))
+    if getattr(args, "output_dir", None):
+        io.check_writable(args.output_dir, directory=True)
+
+
 def _solver(args, scaled_time_step: float):
     """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
     options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
@@ -69,6 +79,7 @@ def trim(args):
     h0 = args.aspect_ratio * r0
     kept = kept_by_trim(state, h0)
     column = state.subset(kept)
+    _require_a_layer(state, column, h0)
     forces = io.contact_forces_of(source)
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
                                  {**_settings(args), "input_config": io.config_of(source)},
@@ -80,6 +91,17 @@ def trim(args):
     extra = {} if forces is None else io.contact_force_variables(forces.subset(kept))
     io.write_state(args.output, column, attrs, extra)
     log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
+
+
+def _require_a_layer(packing, column, h0: float) -> None:
+    """ValueError unless the column holds at least half as many spheres as the packing's bottom
+    layer (those within half the smallest diameter of the floor): below that it is not a column."""
+    d_min, d_max = 2.0 * float(packing.radius.min()), 2.0 * float(packing.radius.max())
+    layer = int(np.count_nonzero(packing.position[:, 2] - packing.radius < 0.5 * d_min))
+    if column.n == 0 or 2 * column.n < layer:
+        raise ValueError(f"h0 = {h0:g} leaves {column.n} spheres, less than half a layer ({layer} lie on the "
+                         f"packing's floor; smallest diameter {d_min:.3g}, largest {d_max:.3g}): cut at h0 >= "
+                         f"the largest diameter")
 
 
 def collapse(args):
@@ -114,73 +136,20 @@ def collapse(args):
 
 
 def analyse(args):
-    import xarray as xr
-
     trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
-    r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
-    initial = io.state_from_dataset(trajectory, 0)
-    final = io.state_from_dataset(trajectory, -1)
-    tolerance = analysis.contact_tolerance(final, args.contact_tolerance)
-    history = [analysis.measure_deposit(io.state_from_dataset(trajectory, k), tolerance)
-               for k in range(trajectory.sizes["time"])]
-    deposit = history[-1]
-    fronts = [d.r_inf for d in history]
-    fractions = sorted(set(args.check_tolerances) | {args.contact_tolerance})
-    checks = [analysis.measure_deposit(final, analysis.contact_tolerance(final, f)) for f in fractions]
-    shares = sorted(set(args.mass_shares))
-    bin_width = args.bin_width or 2.0 * float(final.radius.max())
-    centres, height = analysis.deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
-    energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
-    top_radius = analysis.undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
-    scalar = lambda value, units, name: ((), value, {"units": units, "long_name": name})  # noqa: E731
-    data = {
-        "h_inf": scalar(deposit.h_inf, "length", "final height of the main mass"),
-        "r_inf": scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
-        "h_inf_over_r0": scalar(deposit.h_inf / r0, "1", "final height over initial radius"),
-        "runout_over_r0": scalar((deposit.r_inf - r0) / r0, "1", "run-out (r_inf - r0) over initial radius"),
-        "n_particles": scalar(final.n, "1", "number of particles"),
-        "n_main_mass": scalar(int(deposit.main_mass.sum()), "1", "number of particles in the main mass"),
-        "solid_fraction": scalar(float(trajectory.attrs["column_solid_fraction"]), "1",
-                                 "solid fraction of the column before release"),
-        "final_to_peak_kinetic_energy": scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
-                                               "kinetic energy at the end over its peak"),
-        "wall_time": scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
-        "undisturbed_top_radius": scalar(top_radius / r0, "1",
-                                         "radius of the top disc that did not move, over r0"),
-        "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
-        "front_position": ("time", (np.array(fronts) - r0) / r0,
-                           {"units": "1", "long_name": "front (r_front - r0) over r0"}),
-        "height_history": ("time", np.array([d.h_inf for d in history]),
-                           {"units": "length", "long_name": "height of the main mass"}),
-        "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
-                                        {"units": "1", "long_name": "run-out (r_inf - r0) over r0 at each "
-                                                                    "contact tolerance"}),
-        "mass_front_over_r0": ("mass_share", [(analysis.mass_front(final, share) - r0) / r0 for share in shares],
-                               {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
-        "mean_diameter": scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
-        "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
-        "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
-    }
-    coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
-              "step": trajectory["step"],
-              "contact_tolerance": ("contact_tolerance", fractions,
-                                    {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),
-              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"})}
+    settings = analysis.AnalysisSettings(args.contact_tolerance, tuple(args.check_tolerances),
+                                         tuple(args.mass_shares), args.bin_width)
     attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
                                  {**_settings(args), "input_config": io.config_of(trajectory)},
                                  trajectory.attrs.get("seed"))
-    for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration"):
-        attrs[key] = float(trajectory.attrs[key])
-    attrs["n_steps"] = int(trajectory.attrs["n_steps"])
-    if "at_rest" in trajectory.attrs:
-        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
-    io.write_dataset(xr.Dataset(data, coords=coords, attrs=attrs), args.output)
-    log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f",
-             attrs["aspect_ratio"], attrs["mu_r"], deposit.h_inf / r0, (deposit.r_inf - r0) / r0)
+    result = analysis.analyse_trajectory(trajectory, settings, attrs)
+    io.write_dataset(result, args.output)
+    log.info("a = %g, mu_r = %g: h_inf/r0 = %.3f, (r_inf - r0)/r0 = %.3f", result.attrs["aspect_ratio"],
+             result.attrs["mu_r"], float(result.h_inf_over_r0), float(result.runout_over_r0))
 
 
 def collect(args):
-    from .summary import collect_analyses, one_row_per_run
+    from .summary import collect_analyses, lube_markdown, one_row_per_run
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
@@ -188,8 +157,6 @@ def collect(args):
     if args.csv:
         _write_csv(args.csv, one_row_per_run(summary))
     if args.markdown:
-        from .convergence import lube_markdown
-
         _write_text(args.markdown, lube_markdown(summary))
 
 

@@ -9,14 +9,14 @@ Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks th
   past the default end, where it is also measured;
 - seeds: the same column from several packings.
 
-:func:`convergence_markdown` turns the table into the relative changes the README quotes, and
-:func:`lube_markdown` compares a summary (mean over seeds) with Lube et al.'s laws.
+:func:`convergence_markdown` turns the table into the relative changes the README quotes (the
+column-size runs averaged over seeds by :func:`colsim.summary.means_per_size`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .laws import lube_height, lube_runout
+from .summary import means_per_size
 
 SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
 RUN_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "final_to_peak_kinetic_energy", "n_particles",
@@ -118,24 +118,6 @@ def _end_time_lines(study) -> list[str]:
     return lines
 
 
-def means_per_size(study) -> "xarray.Dataset":  # noqa: F821
-    """The column-size runs averaged over seeds: one `run` per (aspect_ratio, r0), with the numeric
-    variables and coordinates as means, plus n_seeds and runout_spread (max - min of the run-out)."""
-    import xarray as xr
-
-    pairs = sorted({(float(a), float(r)) for a, r in zip(study.aspect_ratio.values, study.r0.values)})
-    parts = []
-    for a, r0 in pairs:
-        rows = study.isel(run=np.flatnonzero((study.aspect_ratio.values == a) & (study.r0.values == r0)))
-        numeric = rows.drop_vars([n for n in rows.coords if not np.issubdtype(rows[n].dtype, np.number)])
-        mean = numeric.reset_coords().mean("run", keep_attrs=True)
-        mean["n_seeds"] = rows.sizes["run"]
-        mean["runout_spread"] = float(rows.runout_over_r0.max() - rows.runout_over_r0.min())
-        parts.append(mean)
-    means = xr.concat(parts, dim="run")
-    return means.set_coords([n for n in ("r0", "aspect_ratio", "r0_over_mean_diameter", "duration") if n in means])
-
-
 def _column_size_lines(study) -> list[str]:
     end = study.attrs["default_end_time"]
     lines = ["### Column size (mean over seeds; spread = max - min)", "",
@@ -171,63 +153,4 @@ def convergence_markdown(table) -> str:
         study = table.where(table.study == name, drop=True)
         if study.sizes.get("run", 0):
             lines += section(study) + [""]
-    return "\n".join(lines)
-
-
-def claims_markdown(summary) -> str:
-    """Markdown table of the paper's qualitative claims, per mu_r and a (mean over seeds): the final
-    height over h0 (1 where the top is undisturbed, below 1 where it was eroded), the radius of the
-    top disc that did not move, over r0, and the share of grains in the main mass."""
-    lines = ["| mu_r | a | h_inf/h0 | undisturbed top radius/r0 | main mass / grains |", "|---|---|---|---|---|"]
-    for m in summary.mu_r.values:
-        for a in summary.aspect_ratio.values:
-            part = summary.sel(mu_r=m, aspect_ratio=a)
-            kept = np.nanmean(part.n_main_mass.values / part.n_particles.values)
-            lines.append(f"| {float(m):g} | {a:g} | {np.nanmean(part.h_inf_over_r0.values) / a:.2f} | "
-                         f"{np.nanmean(part.undisturbed_top_radius.values):.2f} | {kept:.2f} |")
-    return "\n".join(lines) + "\n"
-
-
-def runout_measures_markdown(summary) -> str:
-    """Markdown table per mu_r and a: Lube's run-out, r_inf at each contact tolerance and the radius
-    holding each share of the mass, as (r - r0)/r0, mean over seeds, with the error against Lube."""
-    tolerances = summary.contact_tolerance.values
-    shares = summary.mass_share.values
-    header = (["mu_r", "a", "Lube"] + [f"connected, gap <= {100 * t:g} % d_min" for t in tolerances]
-              + [f"{100 * s:g} % of the mass" for s in shares])
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for m in summary.mu_r.values:
-        for a in summary.aspect_ratio.values:
-            part = summary.sel(mu_r=m, aspect_ratio=a)
-            law = lube_runout(a)
-            values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
-                np.nanmean(part.mass_front_over_r0.values, axis=0))
-            cells = [f"{v:.2f} ({100 * (v - law) / law:+.0f} %)" for v in values]
-            lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
-
-
-def lube_markdown(summary) -> str:
-    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and a."""
-    lines = []
-    for m in summary.mu_r.values:
-        part = summary.sel(mu_r=m)
-        seeds = int(np.isfinite(part.h_inf_over_r0.values).sum(axis=-1).min())
-        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
-                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error |",
-                  "|---|---|---|---|---|---|---|---|---|"]
-        for a in part.aspect_ratio.values:
-            h = part.h_inf_over_r0.sel(aspect_ratio=a).values
-            r = part.runout_over_r0.sel(aspect_ratio=a).values
-            h_mean, r_mean = np.nanmean(h), np.nanmean(r)
-            h_law, r_law = lube_height(a), lube_runout(a)
-            lines.append(f"| {a:g} | {h_mean:.3f} | {np.nanmax(h) - np.nanmin(h):.3f} | {h_law:.3f} | "
-                         f"{100 * (h_mean - h_law) / h_law:+.0f} % | {r_mean:.3f} | {np.nanmax(r) - np.nanmin(r):.3f} | "
-                         f"{r_law:.3f} | {100 * (r_mean - r_law) / r_law:+.0f} % |")
-        lines.append("")
-    if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
-        lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
-                  runout_measures_markdown(summary)]
-    if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
-        lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
     return "\n".join(lines)

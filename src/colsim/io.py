@@ -1,13 +1,17 @@
 """Reading and writing colsim's netCDF files through xarray.
 
 Every file is CF-style: global `Conventions`, `title`, `source` ("colsim X.Y"), `history`, the
-run's configuration as JSON in `config` and its `seed`; every variable has `units` ("1" when
-dimensionless) and `long_name`. Files are written to a temporary name beside the target and renamed
+versions of colsim, Clarabel and numpy, the run's configuration as JSON in `config` and its `seed`;
+every variable has `units` and `long_name`. The simulation's lengths, times and masses are numbers
+in the paper's unit system (`unit_system`), which UDUNITS cannot name: such variables have units
+"1" and a `comment` naming their dimension (e.g. "length in the paper's units"); wall times are "s".
+Files are written to a temporary name beside the target and renamed
 when complete, so a killed run never leaves a file that looks finished.
 """
 from __future__ import annotations
 
 import contextlib
+import importlib.metadata
 import json
 import os
 import tempfile
@@ -29,6 +33,14 @@ PARTICLE_VARIABLES = {
     "velocity": ("length/time", "particle velocity"),
     "angular_velocity": ("rad/time", "particle angular velocity"),
 }
+
+
+#: dimensions that the stages write as units; :func:`write_dataset` turns each into units "1" and a comment
+PAPER_DIMENSIONS = ("length", "time", "length/time", "rad/time", "length/time^2", "mass", "mass/length^3",
+                    "mass length/time^2", "mass length^2/time^2")
+UNIT_SYSTEM = ("the paper's: dimensionless numbers in one consistent system of length, time and mass in "
+               "which the particle diameters are 0.25-0.5, gravity 9.81 and the density 1 (by default); "
+               "variables in it have units '1' and a comment naming their dimension")
 
 
 class InputError(ValueError):
@@ -53,6 +65,25 @@ def atomic_path(path):
             os.remove(tmp)
 
 
+def check_writable(path, directory: bool = False) -> None:
+    """InputError (one line) unless a file `path` (or files in the directory `path`) can be written:
+    the nearest existing folder on the way must take a new file. Leaves nothing behind."""
+    path = Path(path)
+    if path.is_dir() != directory and path.exists():
+        raise InputError(f"cannot write {path}: it is {'not ' if directory else ''}a directory")
+    folder = path if directory else path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"cannot write {path}: {folder} is not a directory")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+    except OSError as error:
+        raise InputError(f"cannot write {path}: {folder} takes no new files ({error.strerror})") from None
+    os.close(fd)
+    os.remove(probe)
+
+
 def global_attributes(kind: str, title: str, config: dict, seed=None) -> dict:
     """CF global attributes with colsim's version, the configuration (JSON) and the seed."""
     attrs = {
@@ -62,10 +93,35 @@ def global_attributes(kind: str, title: str, config: dict, seed=None) -> dict:
         "history": f"{datetime.now(timezone.utc).isoformat(timespec='seconds')} created by colsim {__version__}",
         "colsim_kind": kind,
         "config": json.dumps(config, sort_keys=True, default=_json_default),
+        "unit_system": UNIT_SYSTEM,
+        **versions(),
     }
     if seed is not None:
         attrs["seed"] = int(seed)
     return attrs
+
+
+def versions() -> dict:
+    """{colsim_version, clarabel_version, numpy_version} of this process (installed distributions)."""
+    found = {"colsim_version": __version__, "numpy_version": np.__version__}
+    try:
+        found["clarabel_version"] = importlib.metadata.version("clarabel")
+    except importlib.metadata.PackageNotFoundError:
+        found["clarabel_version"] = "not installed"
+    return found
+
+
+def cf_units(dataset):
+    """`dataset` with every variable in the paper's units given as units "1" and a comment naming its
+    dimension (CF: UDUNITS has no unit for them); the unit system in the global attributes."""
+    for variable in dataset.variables.values():
+        dimension = variable.attrs.get("units")
+        if dimension in PAPER_DIMENSIONS:
+            variable.attrs["units"] = "1"
+            note = f"{dimension} in the paper's units (global attribute unit_system)"
+            variable.attrs["comment"] = "; ".join(filter(None, (note, variable.attrs.get("comment"))))
+    dataset.attrs.setdefault("unit_system", UNIT_SYSTEM)
+    return dataset
 
 
 def _json_default(value):
@@ -79,9 +135,9 @@ def _json_default(value):
 
 
 def write_dataset(dataset, path) -> None:
-    """Write an xarray Dataset to netCDF4 atomically."""
+    """Write an xarray Dataset to netCDF4 atomically, its units made CF (:func:`cf_units`)."""
     with atomic_path(path) as tmp:
-        dataset.to_netcdf(tmp, engine="netcdf4")
+        cf_units(dataset.copy()).to_netcdf(tmp, engine="netcdf4")
 
 
 def open_dataset(path, kind: str):
@@ -117,7 +173,8 @@ def state_dataset(state: ParticleState, attrs: dict, extra: dict | None = None):
     data["radius"] = ("particle", state.radius, {"units": "length", "long_name": "particle radius"})
     for name, (dims, values, var_attrs) in (extra or {}).items():
         data[name] = (dims, values, var_attrs)
-    dataset = xr.Dataset(data, coords={"xyz": ["x", "y", "z"]}, attrs=dict(attrs))
+    dataset = xr.Dataset(data, coords={"xyz": ("xyz", ["x", "y", "z"], {"long_name": "Cartesian component"})},
+                         attrs=dict(attrs))
     dataset.attrs["density"] = float(state.density)
     dataset.attrs["time"] = float(state.time)
     return dataset

@@ -23,14 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .convergence import means_per_size
+from .summary import means_per_size
 from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_runout
 
 log = logging.getLogger(__name__)
 
-FIGURES = ("final_height.png", "runout.png", "mu_r_effect.png", "deposit_profiles.png",
-           "side_views.png", "front_position.png")
-"""File names that :func:`all_figures` writes, in order."""
+FIGURES = {"final_height": "Final height", "runout": "Run-out", "mu_r_effect": "Effect of rolling resistance",
+           "deposit_profiles": "Deposit profiles", "side_views": "Side views", "front_position": "Front position"}
+"""The figures :func:`all_figures` writes, in order: NAME.png -> its title (the workflow's report labels)."""
 
 MARKERS = "osD^vP*X<>"
 QUANTITY_LABELS = {"h_inf_over_r0": "$h_\\infty/r_0$", "runout_over_r0": "$(r_\\infty - r_0)/r_0$"}
@@ -264,14 +264,13 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
     output_dir = Path(output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     analyses, trajectories = list(analyses), list(trajectories)
-    return [
-        law_figure(summary, "h_inf_over_r0", output_dir / FIGURES[0]),
-        law_figure(summary, "runout_over_r0", output_dir / FIGURES[1]),
-        mu_r_figure(summary, output_dir / FIGURES[2]),
-        deposit_profile_figure(analyses, output_dir / FIGURES[3]),
-        side_view_figure(trajectories, output_dir / FIGURES[4]),
-        front_figure(analyses, output_dir / FIGURES[5]),
-    ]
+    draw = {"final_height": lambda path: law_figure(summary, "h_inf_over_r0", path),
+            "runout": lambda path: law_figure(summary, "runout_over_r0", path),
+            "mu_r_effect": lambda path: mu_r_figure(summary, path),
+            "deposit_profiles": lambda path: deposit_profile_figure(analyses, path),
+            "side_views": lambda path: side_view_figure(trajectories, path),
+            "front_position": lambda path: front_figure(analyses, path)}
+    return [draw[name](output_dir / f"{name}.png") for name in FIGURES]
 
 
 def convergence_figure(table, path: Path) -> Path:

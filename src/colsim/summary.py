@@ -1,9 +1,13 @@
-"""Stage 5: one xarray Dataset over (aspect_ratio, mu_r, seed) from many collapse analyses."""
+"""Stage 5: one xarray Dataset over (aspect_ratio, mu_r, seed) from many collapse analyses, and its
+tables: the mean over seeds against Lube et al.'s laws (:func:`lube_markdown`, with the other run-out
+measures and the paper's qualitative claims) and the means per column size (:func:`means_per_size`)."""
 from __future__ import annotations
 
 import json
 
 import numpy as np
+
+from .laws import lube_height, lube_runout
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -18,6 +22,43 @@ RUN_ATTRIBUTES = {
     "at_rest": ("at_rest", {"units": "1", "long_name": "1: the run went on to rest, 0: it stopped at "
                                                        "max_duration still moving, NaN: fixed end time"}),
 }
+
+
+# what a run's settings may differ in between the runs of one summary: the swept values, file names
+# and checkpointing (which does not change a result)
+SWEPT = ("aspect_ratio", "mu_r", "seed")
+NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command"}
+
+
+def run_settings(analysis) -> dict:
+    """A run's settings, flattened: r0 and mu, and each stage's options from the configuration
+    chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS."""
+    settings = {name: float(analysis.attrs[name]) for name in ("r0", "mu") if name in analysis.attrs}
+    config = json.loads(analysis.attrs.get("config", "{}"))
+    while config:
+        stage = config.get("command", "stage")
+        settings |= {f"{stage}.{key}": value for key, value in config.items()
+                     if key not in NOT_SETTINGS and key != "input_config"}
+        config = config.get("input_config") or {}
+    return settings
+
+
+def _run_name(analysis) -> str:
+    key = ", ".join(f"{name} {analysis.attrs.get(name, '?')}" for name in SWEPT)
+    source = analysis.encoding.get("source")
+    return f"{source} ({key})" if source else key
+
+
+def check_same_settings(analyses) -> None:
+    """ValueError naming the first setting in which two runs differ, other than the swept values."""
+    reference = run_settings(analyses[0])
+    for analysis in analyses[1:]:
+        settings = run_settings(analysis)
+        for name in sorted(set(reference) | set(settings)):
+            if reference.get(name) != settings.get(name):
+                raise ValueError(f"runs differ in {name}: {reference.get(name)} in {_run_name(analyses[0])}, "
+                                 f"{settings.get(name)} in {_run_name(analysis)}; a summary sweeps only "
+                                 f"{', '.join(SWEPT)}")
 
 
 def one_row_per_run(summary) -> "xarray.Dataset":  # noqa: F821
@@ -37,6 +78,7 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
 
     if not analyses:
         raise ValueError("no analysis files to collect")
+    check_same_settings(analyses)
     keys = [(float(a.attrs["aspect_ratio"]), float(a.attrs["mu_r"]), int(a.attrs.get("seed", 0)))
             for a in analyses]
     if len(set(keys)) != len(keys):
@@ -71,3 +113,80 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
     attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def means_per_size(study) -> "xarray.Dataset":  # noqa: F821
+    """The column-size runs averaged over seeds: one `run` per (aspect_ratio, r0), with the numeric
+    variables and coordinates as means, plus n_seeds and runout_spread (max - min of the run-out)."""
+    import xarray as xr
+
+    pairs = sorted({(float(a), float(r)) for a, r in zip(study.aspect_ratio.values, study.r0.values)})
+    parts = []
+    for a, r0 in pairs:
+        rows = study.isel(run=np.flatnonzero((study.aspect_ratio.values == a) & (study.r0.values == r0)))
+        numeric = rows.drop_vars([n for n in rows.coords if not np.issubdtype(rows[n].dtype, np.number)])
+        mean = numeric.reset_coords().mean("run", keep_attrs=True)
+        mean["n_seeds"] = rows.sizes["run"]
+        mean["runout_spread"] = float(rows.runout_over_r0.max() - rows.runout_over_r0.min())
+        parts.append(mean)
+    means = xr.concat(parts, dim="run")
+    return means.set_coords([n for n in ("r0", "aspect_ratio", "r0_over_mean_diameter", "duration") if n in means])
+
+
+def claims_markdown(summary) -> str:
+    """Markdown table of the paper's qualitative claims, per mu_r and a (mean over seeds): the final
+    height over h0 (1 where the top is undisturbed, below 1 where it was eroded), the radius of the
+    top disc that did not move, over r0, and the share of grains in the main mass."""
+    lines = ["| mu_r | a | h_inf/h0 | undisturbed top radius/r0 | main mass / grains |", "|---|---|---|---|---|"]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            kept = np.nanmean(part.n_main_mass.values / part.n_particles.values)
+            lines.append(f"| {float(m):g} | {a:g} | {np.nanmean(part.h_inf_over_r0.values) / a:.2f} | "
+                         f"{np.nanmean(part.undisturbed_top_radius.values):.2f} | {kept:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def runout_measures_markdown(summary) -> str:
+    """Markdown table per mu_r and a: Lube's run-out, r_inf at each contact tolerance and the radius
+    holding each share of the mass, as (r - r0)/r0, mean over seeds, with the error against Lube."""
+    tolerances = summary.contact_tolerance.values
+    shares = summary.mass_share.values
+    header = (["mu_r", "a", "Lube"] + [f"connected, gap <= {100 * t:g} % d_min" for t in tolerances]
+              + [f"{100 * s:g} % of the mass" for s in shares])
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            law = lube_runout(a)
+            values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
+                np.nanmean(part.mass_front_over_r0.values, axis=0))
+            cells = [f"{v:.2f} ({100 * (v - law) / law:+.0f} %)" for v in values]
+            lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def lube_markdown(summary) -> str:
+    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and a."""
+    lines = []
+    for m in summary.mu_r.values:
+        part = summary.sel(mu_r=m)
+        seeds = int(np.isfinite(part.h_inf_over_r0.values).sum(axis=-1).min())
+        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
+                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for a in part.aspect_ratio.values:
+            h = part.h_inf_over_r0.sel(aspect_ratio=a).values
+            r = part.runout_over_r0.sel(aspect_ratio=a).values
+            h_mean, r_mean = np.nanmean(h), np.nanmean(r)
+            h_law, r_law = lube_height(a), lube_runout(a)
+            lines.append(f"| {a:g} | {h_mean:.3f} | {np.nanmax(h) - np.nanmin(h):.3f} | {h_law:.3f} | "
+                         f"{100 * (h_mean - h_law) / h_law:+.0f} % | {r_mean:.3f} | {np.nanmax(r) - np.nanmin(r):.3f} | "
+                         f"{r_law:.3f} | {100 * (r_mean - r_law) / r_law:+.0f} % |")
+        lines.append("")
+    if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
+        lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
+                  runout_measures_markdown(summary)]
+    if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
+        lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    return "\n".join(lines)

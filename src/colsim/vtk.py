@@ -42,7 +42,9 @@ def write_vtu(path, position, point_data: dict) -> None:
 
 
 def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
-    """Write every frame of a trajectory dataset as .vtu plus a .pvd collection; return the .pvd path."""
+    """Write every frame of a trajectory dataset as NAME_kkkk.vtu plus NAME.pvd; return the .pvd path.
+    Frames NAME_kkkk.vtu of an earlier export into the same directory that this one did not write
+    are removed, so the directory holds exactly this export's frames."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     radius = dataset["radius"].values
@@ -59,4 +61,8 @@ def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
     with atomic_path(collection) as tmp:
         Path(tmp).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
                              '  <Collection>\n' + "".join(entries) + '  </Collection>\n</VTKFile>\n')
+    written = {f"{name}_{k:04d}.vtu" for k in range(len(entries))}
+    for stale in directory.glob(f"{name}_[0-9][0-9][0-9][0-9].vtu"):
+        if stale.name not in written:
+            stale.unlink()
     return collection

@@ -1,12 +1,61 @@
 # Configuration check and the helpers that name the study's files (no physics here).
+import jsonschema
+import yaml
+from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
-validate(config, "../schemas/config.schema.yaml")
+from colsim.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 
-if config["diameter_min"] > config["diameter_max"]:
-    raise ValueError(
-        f"config: diameter_min {config['diameter_min']} exceeds diameter_max {config['diameter_max']}"
-    )
+SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
+
+
+def schema_problem(config, schema):
+    """One line naming the first key or value of `config` that the schema rejects, or None."""
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(config), key=lambda e: list(e.path))
+    if not errors:
+        return None
+    error = errors[0]
+    where = ".".join(str(p) for p in error.path)
+    if error.validator == "additionalProperties":
+        allowed = list(error.schema.get("properties", {}))
+        unknown = sorted(set(error.instance) - set(allowed))
+        return (f"config: unknown key {', '.join(f'{where}.{k}' if where else k for k in unknown)};"
+                f" allowed{' in ' + where if where else ''}: {', '.join(allowed)}")
+    return f"config: {where or 'the configuration'}: {error.message}"
+
+
+def cross_field_problem(config):
+    """One line naming the first pair of settings that contradict each other, or None."""
+    d_min, d_max, r0 = config["diameter_min"], config["diameter_max"], config["r0"]
+    if d_min > d_max:
+        return f"config: diameter_min {d_min} exceeds diameter_max {d_max}"
+    if r0 < d_max:
+        return f"config: r0 {r0} is below diameter_max {d_max}: the largest particle does not fit in the cylinder"
+    columns = [(a, r0) for a in config["aspect_ratios"]]
+    study = config.get("convergence") or {}
+    columns += [(entry["aspect_ratio"], r) for entry in study.get("column_size", []) for r in entry["r0"]]
+    columns += [(a, r0) for a in study.get("time_step", {}).get("aspect_ratios", [])]
+    columns += [(a, r0) for a in study.get("end_time", {}).get("aspect_ratios", [])]
+    columns += [(study["seeds"]["aspect_ratio"], r0)] if "seeds" in study else []
+    for a, radius in columns:
+        if radius < d_max:
+            return f"config: convergence r0 {radius} is below diameter_max {d_max}"
+        if a * radius < d_max:
+            return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
+                    f" the column would hold less than one layer of particles (diameters {d_min}-{d_max})")
+    pack = config["pack_aspect_ratio"]
+    if pack is not None and pack < max(config["aspect_ratios"]):
+        return f"config: pack_aspect_ratio {pack} is below the largest aspect ratio {max(config['aspect_ratios'])}"
+    return None
+
+
+with open(SCHEMA) as stream:
+    problem = schema_problem(config, yaml.safe_load(stream))
+if problem is None:
+    validate(config, SCHEMA)   # fills in the defaults
+    problem = cross_field_problem(config)
+if problem:
+    raise WorkflowError(problem)
 
 
 def fmt(value):
@@ -19,27 +68,16 @@ ASPECT_RATIOS = [fmt(a) for a in config["aspect_ratios"]]
 MU_R = [fmt(m) for m in config["mu_r"]]
 SEEDS = [str(s) for s in config["seeds"]]
 PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
-if PACK_ASPECT_RATIO < max(config["aspect_ratios"]):
-    raise ValueError(
-        f"config: pack_aspect_ratio {PACK_ASPECT_RATIO} is below the largest aspect ratio "
-        f"{max(config['aspect_ratios'])}"
-    )
 
-# the figures that `colsim plot` writes (colsim.plots.FIGURES), with their report captions
-FIGURES = {
-    "final_height": "Final height",
-    "runout": "Run-out",
-    "mu_r_effect": "Effect of rolling resistance",
-    "deposit_profiles": "Deposit profiles",
-    "side_views": "Side views",
-    "front_position": "Front position",
-}
 
 RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
 # a collapse with its own number of steps and end time (the convergence study)
 VARIANT = RUN + "/steps_{steps}_t_{duration}"
 # where the study's summary, tables and figures go (runs are shared between studies)
 STUDY_DIR = f"results/{config['study']}" if config["study"] else "results"
+# the report's description of the study, written with its summary (rule study_config)
+DESCRIPTION = f"{STUDY_DIR}/report_description.rst"
+DESCRIPTION_TEMPLATE = os.path.join(workflow.basedir, "workflow", "report", "workflow.rst")
 
 wildcard_constraints:
     r0=r"[0-9][0-9.e+-]*",
@@ -79,6 +117,13 @@ def pack_height(wildcards):
     if study and wildcards.seed not in SEEDS:
         return fmt(study["seeds"]["aspect_ratio"] * float(wildcards.r0))
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
+
+
+def mu_r_value(wildcards):
+    """The configured mu_r whose path string is {mu_r}, at full precision (pi/24 stays
+    0.1308996938995747; its path is mu_r_0.1309)."""
+    values = list(config["mu_r"]) + ([config["convergence"]["mu_r"]] if config.get("convergence") else [])
+    return next((m for m in values if fmt(m) == wildcards.mu_r), float(wildcards.mu_r))
 
 
 def collapse_steps(wildcards):
@@ -148,6 +193,32 @@ def collapse_priority(wildcards):
     costliest columns run first."""
     steps = int(wildcards.get("steps", config["collapse"]["steps"]))
     return int(round(10 * float(wildcards.a) * steps / config["collapse"]["steps"]))
+
+
+def write_study_files(study, summary_path, template, config_path, description_path):
+    """Write the study's configuration (YAML) and the report's description rendered from it and from
+    the summary's attributes (r0, mu), each to a temporary name and then renamed."""
+    import jinja2
+    import xarray
+
+    with xarray.open_dataset(summary_path) as summary:
+        attrs = dict(summary.attrs)
+    with open(template) as stream:
+        text = jinja2.Template(stream.read(), undefined=jinja2.StrictUndefined, keep_trailing_newline=True).render(
+            study=study, summary=attrs, study_dir=STUDY_DIR)
+    for path, write in ((config_path, lambda s: yaml.safe_dump(study, s, sort_keys=False)),
+                        (description_path, lambda s: s.write(text))):
+        with open(f"{path}.part", "w") as stream:
+            write(stream)
+        os.replace(f"{path}.part", path)
+
+
+def report_description():
+    """The description of the report: the study's own (written with its summary), or a note that the
+    study has not been run."""
+    if os.path.exists(DESCRIPTION):
+        return os.path.abspath(DESCRIPTION)
+    return "workflow/report/not_run.rst"
 
 
 def output_directory(wildcards, output):

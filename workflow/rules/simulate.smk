@@ -57,6 +57,7 @@ rule collapse:
     priority: collapse_priority
     params:
         mu=config["mu"],
+        mu_r=mu_r_value,
         duration=collapse_duration,
         steps=collapse_steps,
         frame_every=config["collapse"]["frame_every"],
@@ -68,7 +69,7 @@ rule collapse:
     benchmark:
         "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.tsv"
     shell:
-        "colsim collapse --input {input} --mu {params.mu} --mu-r {wildcards.mu_r}"
+        "colsim collapse --input {input} --mu {params.mu} --mu-r {params.mu_r}"
         " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
         " --checkpoint-every {params.checkpoint_every} {params.to_rest} --solver {params.solver}"
         " --output {output} > {log} 2>&1"

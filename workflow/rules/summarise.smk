@@ -54,24 +54,28 @@ rule plot:
         " --trajectories {input.trajectories} --output-dir {params.directory} > {log} 2>&1"
 
 
+# The study's configuration and the report's description, written only once the summary they
+# describe exists (a failed run leaves the previous pair in place). The report shows these files,
+# so its text describes the study that made them, whatever configuration builds the report.
 rule study_config:
+    input:
+        f"{STUDY_DIR}/summary.nc",
     output:
-        report(
+        config=report(
             f"{STUDY_DIR}/study_config.yaml",
             caption="../report/study_config.rst",
             category="Configuration",
             labels={"file": "study configuration"},
         ),
+        description=DESCRIPTION,
     params:
         config=config,
+        template=DESCRIPTION_TEMPLATE,
     log:
         f"{STUDY_DIR}/logs/study_config.log",
     benchmark:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
-        import yaml
-
-        with open(output[0], "w") as stream:
-            yaml.safe_dump(dict(params.config), stream, sort_keys=False)
+        write_study_files(dict(params.config), input[0], params.template, output.config, output.description)
         with open(log[0], "w") as stream:
-            print(f"wrote {output[0]}", file=stream)
+            print(f"wrote {output.config} and {output.description}", file=stream)

@@ -1,0 +1,64 @@
+"""Helpers shared by the tests: the session pile's settings (conftest, test_engine_pile), and for the
+workflow tests (test_workflow, test_slurm) a copy of the workflow, a snakemake run in it, the jobs a
+dry run plans and the names of the tiny study's files."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from colsim.plots import FIGURES
+from colsim.state import ContactLaw, ParticleState
+from colsim.summary import SUMMARY_VARIABLES
+
+__all__ = ["COLLAPSE_LAW", "DT", "FIGURES", "G", "ROOT", "SUMMARY_VARIABLES", "TINY", "copy_workflow", "max_speed",
+           "planned_outputs", "snakemake"]
+
+# the session pile (conftest.pile): gravity, time step, and the friction that locks it and collapses it
+G = 9.81
+DT = 0.02
+COLLAPSE_LAW = ContactLaw.uniform(0.577, 0.12)
+
+ROOT = Path(__file__).resolve().parents[1]
+WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow")
+#: where the tiny study (config/tiny.yaml, study: tiny) writes its summary, tables and figures
+TINY = "results/tiny"
+
+
+def max_speed(state: ParticleState) -> float:
+    """Largest translational speed (length/time)."""
+    return float(np.linalg.norm(state.velocity, axis=1).max(initial=0.0))
+
+
+def copy_workflow(directory: Path) -> Path:
+    """Copy the workflow's files (not results/) into `directory`; return it."""
+    for name in WORKFLOW_FILES:
+        source = ROOT / name
+        if source.is_dir():
+            shutil.copytree(source, directory / name)
+        else:
+            shutil.copy2(source, directory / name)
+    return directory
+
+
+def snakemake(directory: Path, *arguments, timeout=600) -> subprocess.CompletedProcess:
+    """Run snakemake in `directory` with the interpreter's bin directory first on PATH (for `colsim`)."""
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    env.setdefault("MPLBACKEND", "Agg")
+    return subprocess.run([sys.executable, "-m", "snakemake", *arguments], cwd=directory, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def planned_outputs(result: subprocess.CompletedProcess) -> list[str]:
+    """Output files of the jobs a dry run (snakemake -n) would run."""
+    outputs = []
+    for line in result.stdout.splitlines() + result.stderr.splitlines():
+        line = line.strip()
+        if line.startswith("output:"):
+            outputs += [p.strip() for p in line[len("output:"):].split(",")]
+    return outputs
