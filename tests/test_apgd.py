@@ -199,8 +199,8 @@ def test_auto_picks_apgd_only_for_warm_small_steps(pile):
     warm = WarmStart.from_step(found, reference.forces).match(found, pile.n)
     assert AutoSolver().solve(program).backend == "clarabel"                 # no warm start
     assert AutoSolver().solve(program, warm_start=warm).backend == "apgd"
-    assert AutoSolver(scaled_time_step=0.004).solve(program, warm_start=warm).backend == "apgd"
-    assert AutoSolver(scaled_time_step=0.04).solve(program, warm_start=warm).backend == "clarabel"
+    assert AutoSolver(scaled_time_step=0.04).solve(program, warm_start=warm).backend == "apgd"
+    assert AutoSolver(scaled_time_step=0.08).solve(program, warm_start=warm).backend == "clarabel"
     assert AutoSolver().solve(program, warm_start=np.zeros_like(warm)).backend == "clarabel"
     assert isinstance(make_solver("auto"), AutoSolver)
 

@@ -61,10 +61,11 @@ def _integer(text):
 
 
 def _solver_arguments(parser):
-    parser.add_argument("--solver", default="clarabel", choices=SOLVERS,
-                        help="cone-program back-end (default: %(default)s)")
+    parser.add_argument("--solver", default="auto", choices=SOLVERS,
+                        help="cone-program back-end (default: %(default)s: APGD for warm-started steps "
+                             "up to dt/sqrt(h0/g) = 0.04, Clarabel otherwise; see the README)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
-                        help="solver tolerance (default: the back-end's own)")
+                        help="solver tolerance (default: the back-end's own; for auto, APGD's)")
 
 
 def build_parser() -> argparse.ArgumentParser:

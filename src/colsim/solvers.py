@@ -56,7 +56,7 @@ class AutoSolver(Solver):
     name = "auto"
     uses_warm_start = True
 
-    def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.01,
+    def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
                  max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
         if max_iter < 1:
             raise ValueError(f"the APGD iteration cap must be >= 1, got {max_iter}")
@@ -71,7 +71,7 @@ class AutoSolver(Solver):
 
     def apgd_allowed(self) -> bool:
         """Whether the time step is small enough for APGD (the first half of the rule)."""
-        return self.scaled_time_step is None or self.scaled_time_step <= self.apgd_below
+        return self.scaled_time_step is None or self.scaled_time_step <= self.apgd_below * (1 + 1e-9)
 
     def solve(self, program, warm_start=None, step=None):
         warm = warm_start is not None and bool(np.any(np.asarray(warm_start)[:, 0] > 0.0))
