@@ -19,6 +19,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
 from . import __version__
 from .state import ParticleState
@@ -142,8 +143,6 @@ def write_dataset(dataset, path) -> None:
 
 def open_dataset(path, kind: str):
     """Open a colsim netCDF file and check that it holds `kind`; InputError otherwise."""
-    import xarray as xr
-
     path = Path(path)
     if not path.is_file():
         raise InputError(f"input file {path} does not exist")
@@ -164,8 +163,6 @@ def config_of(dataset) -> dict:
 
 def state_dataset(state: ParticleState, attrs: dict, extra: dict | None = None):
     """An xarray Dataset holding one particle state (dims particle, xyz)."""
-    import xarray as xr
-
     data = {
         name: (("particle", "xyz"), getattr(state, name), {"units": units, "long_name": long_name})
         for name, (units, long_name) in PARTICLE_VARIABLES.items()

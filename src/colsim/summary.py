@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import xarray as xr
 
 from .laws import lube_height, lube_runout
 
@@ -61,7 +62,7 @@ def check_same_settings(analyses) -> None:
                                  f"{', '.join(SWEPT)}")
 
 
-def one_row_per_run(summary) -> "xarray.Dataset":  # noqa: F821
+def one_row_per_run(summary) -> xr.Dataset:
     """The summary over (aspect_ratio, mu_r, seed) only: each check variable becomes one variable per
     value of its own dimension, e.g. mass_front_over_r0_0.95 (for a CSV with a row per run)."""
     flat = summary.drop_vars([name for name in CHECK_VARIABLES if name in summary])
@@ -72,10 +73,8 @@ def one_row_per_run(summary) -> "xarray.Dataset":  # noqa: F821
     return flat.drop_dims([dim for dim in CHECK_VARIABLES.values() if dim in flat.dims])
 
 
-def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
+def collect_analyses(analyses) -> xr.Dataset:
     """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
-    import xarray as xr
-
     if not analyses:
         raise ValueError("no analysis files to collect")
     check_same_settings(analyses)
@@ -115,11 +114,9 @@ def collect_analyses(analyses) -> "xarray.Dataset":  # noqa: F821
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-def means_per_size(study) -> "xarray.Dataset":  # noqa: F821
+def means_per_size(study) -> xr.Dataset:
     """The column-size runs averaged over seeds: one `run` per (aspect_ratio, r0), with the numeric
     variables and coordinates as means, plus n_seeds and runout_spread (max - min of the run-out)."""
-    import xarray as xr
-
     pairs = sorted({(float(a), float(r)) for a, r in zip(study.aspect_ratio.values, study.r0.values)})
     parts = []
     for a, r0 in pairs:
