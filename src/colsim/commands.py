@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -131,7 +132,9 @@ def collapse(args):
                   "n_particles": column.n, "resumed_from_step": run.resumed_from})
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)
-    log.info("collapse done: %d steps in %.1f s", len(run.diagnostics), run.wall_time)
+    backends = Counter(d.solver_backend for d in run.diagnostics)
+    log.info("collapse done: %d steps in %.1f s (%s)", len(run.diagnostics), run.wall_time,
+             ", ".join(f"{count} by {name}" for name, count in sorted(backends.items())))
     if run.at_rest is not None:
         log.info("the deposit %s at t/sqrt(h0/g) = %g", "came to rest" if run.at_rest else "was still moving",
                  settings.scaled_time(len(run.diagnostics)))

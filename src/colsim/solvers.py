@@ -63,6 +63,8 @@ class AutoSolver(Solver):
 
     name = "auto"
     uses_warm_start = True
+    #: APGD's tolerance under auto, from the tolerance study (README, "APGD's tolerance")
+    APGD_TOLERANCE = 1e-4
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
                  max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
@@ -72,7 +74,7 @@ class AutoSolver(Solver):
         self.apgd_below = float(apgd_below)
         self.max_iter = int(max_iter)
         self.clarabel = ClarabelSolver(**(clarabel or {}))
-        self.apgd = ApgdSolver(**{"max_iter": self.max_iter, **(apgd or {})})
+        self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE, **(apgd or {})})
 
     def describe(self) -> dict:
         return {**super().describe(), "apgd": self.apgd.describe(), "clarabel": self.clarabel.describe()}
