@@ -49,10 +49,10 @@ class AutoSolver(Solver):
     Clarabel. The solution's `backend` says which back-end solved the step: 'apgd', 'clarabel',
     or 'clarabel-fallback' (APGD reached its cap).
 
-    Measured (r0 = 2, whole collapses to t/sqrt(h0/g) = 4, benchmarks/crossover.py): at the
-    paper's step, 0.04, warm-started APGD at tolerance 1e-4 cost 0.09 s a step against Clarabel's
-    0.86 s (a = 2) and 0.40 s against 4.95 s (a = 5), and less at smaller steps; larger steps were
-    not measured, so they stay Clarabel's (apgd_below = 0.04). The cap: a cold first step of a
+    Measured (r0 = 2, whole collapses to t/sqrt(h0/g) = 4, benchmarks/crossover.py and
+    tolerance.py): at the paper's step, 0.04, warm-started APGD cost 0.15 s a step against
+    Clarabel's 0.79 s (a = 2) and 0.62 s against 4.5 s (a = 5) at its tolerance 1e-5, and less at
+    smaller steps; larger steps were not measured, so they stay Clarabel's (apgd_below = 0.04). The cap: a cold first step of a
     16,000-sphere column took APGD 10,400 iterations (about 50 s) and Clarabel 816 s; at r0 = 2,
     20,000 iterations cost about 9 s, twice a Clarabel step, and no step of the measured
     collapses came near it.
@@ -64,7 +64,7 @@ class AutoSolver(Solver):
     name = "auto"
     uses_warm_start = True
     #: APGD's tolerance under auto, from the tolerance study (README, "APGD's tolerance")
-    APGD_TOLERANCE = 1e-4
+    APGD_TOLERANCE = 1e-5
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
                  max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
