@@ -128,6 +128,8 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
     centres, height = deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
     top_radius = undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
+    backends = list(trajectory["step_solver_backend"].values) if "step_solver_backend" in trajectory else []
+    count = (lambda name: float(backends.count(name)) if backends else np.nan)  # NaN: not recorded
     data = {
         "h_inf": _scalar(deposit.h_inf, "length", "final height of the main mass"),
         "r_inf": _scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
@@ -140,6 +142,9 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
         "final_to_peak_kinetic_energy": _scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
                                                 "kinetic energy at the end over its peak"),
         "wall_time": _scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
+        "apgd_steps": _scalar(count("apgd"), "1", "steps solved by APGD"),
+        "fallback_steps": _scalar(count("clarabel-fallback"), "1",
+                                  "steps solved by Clarabel after APGD reached its iteration cap"),
         "undisturbed_top_radius": _scalar(top_radius / r0, "1", "radius of the top disc that did not move, over r0"),
         "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
         "front_position": ("time", (np.array([d.r_inf for d in history]) - r0) / r0,

@@ -12,7 +12,7 @@ from .laws import lube_height, lube_runout
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
-                     "undisturbed_top_radius", "n_main_mass")
+                     "undisturbed_top_radius", "n_main_mass", "apgd_steps", "fallback_steps")
 # per-run checks with a dimension of their own (kept only when every analysis has them)
 CHECK_VARIABLES = {"runout_over_r0_by_tolerance": "contact_tolerance", "mass_front_over_r0": "mass_share"}
 
@@ -92,8 +92,10 @@ def collect_analyses(analyses) -> xr.Dataset:
             values[ratios.index(a), mu_rs.index(m), seeds.index(s)] = value(analysis)
         return values
 
-    data = {name: (dims, grid(lambda a, name=name: float(a[name].values)), dict(analyses[0][name].attrs))
-            for name in SUMMARY_VARIABLES}
+    present = [name for name in SUMMARY_VARIABLES if any(name in a for a in analyses)]  # older files lack some
+    data = {name: (dims, grid(lambda a, name=name: float(a[name].values) if name in a else np.nan),
+                   dict(next(a[name].attrs for a in analyses if name in a)))
+            for name in present}
     coords = {}
     reference = analyses[0]
     for name, dim in CHECK_VARIABLES.items():
