@@ -28,7 +28,7 @@ below `tolerance`; dual feasibility (lam_k in K_k) is exact by construction (the
 projection). Not reaching it within `max_iter` iterations raises :class:`SolverError`.
 
 Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
-contacts). :class:`colsim.solvers.WarmStart` carries a step's forces by contact pair key, in the
+contacts). :class:`colsim.warm_start.WarmStart` carries a step's forces by contact pair, in the
 global frame, and re-expresses them in the next step's contact frames.
 """
 from __future__ import annotations

@@ -82,7 +82,6 @@ def trim(args):
     h0 = args.aspect_ratio * r0
     kept = kept_by_trim(state, h0)
     column = state.subset(kept)
-    _require_a_layer(state, column, h0)
     forces = io.contact_forces_of(source)
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
                                  {**_settings(args), "input_config": io.config_of(source)},
@@ -94,17 +93,6 @@ def trim(args):
     extra = {} if forces is None else io.contact_force_variables(forces.subset(kept))
     io.write_state(args.output, column, attrs, extra)
     log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
-
-
-def _require_a_layer(packing, column, h0: float) -> None:
-    """ValueError unless the column holds at least half as many spheres as the packing's bottom
-    layer (those within half the smallest diameter of the floor): below that it is not a column."""
-    d_min, d_max = 2.0 * float(packing.radius.min()), 2.0 * float(packing.radius.max())
-    layer = int(np.count_nonzero(packing.position[:, 2] - packing.radius < 0.5 * d_min))
-    if column.n == 0 or 2 * column.n < layer:
-        raise ValueError(f"h0 = {h0:g} leaves {column.n} spheres, less than half a layer ({layer} lie on the "
-                         f"packing's floor; smallest diameter {d_min:.3g}, largest {d_max:.3g}): cut at h0 >= "
-                         f"the largest diameter")
 
 
 def collapse(args):

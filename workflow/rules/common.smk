@@ -4,6 +4,7 @@ import yaml
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
+from colsim.io import atomic_path
 from colsim.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
@@ -208,9 +209,8 @@ def write_study_files(study, summary_path, template, config_path, description_pa
             study=study, summary=attrs, study_dir=STUDY_DIR)
     for path, write in ((config_path, lambda s: yaml.safe_dump(study, s, sort_keys=False)),
                         (description_path, lambda s: s.write(text))):
-        with open(f"{path}.part", "w") as stream:
+        with atomic_path(path) as tmp, open(tmp, "w") as stream:
             write(stream)
-        os.replace(f"{path}.part", path)
 
 
 def report_description():
