@@ -9,7 +9,7 @@ import numpy as np
 
 from . import analysis, io
 from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
-from .packing import kept_by_trim, pack as run_pack, solid_fraction
+from .packing import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
 from .solvers import make_solver
 
 log = logging.getLogger("colsim")
@@ -38,6 +38,15 @@ def _solver(args, scaled_time_step: float):
     return make_solver(args.solver, **options)
 
 
+def _pack_solver(args):
+    """The packing's back-end: under auto, APGD for every warm-started step at the packing's own
+    tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest."""
+    if args.solver != "auto":
+        return _solver(args, scaled_time_step=None)
+    tolerance = APGD_TOLERANCE if args.solver_tolerance is None else args.solver_tolerance
+    return make_solver("auto", scaled_time_step=None, apgd={"tolerance": tolerance})
+
+
 def _progress_bar(total: int, description: str):
     """A tqdm bar on a terminal (off otherwise) and a log line every 10 % of the steps."""
     from tqdm import tqdm
@@ -63,9 +72,7 @@ def pack(args):
     if args.diameter_min > args.diameter_max:
         raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
     rng = np.random.default_rng([args.seed, args.root_seed])
-    # auto packs with Clarabel: a frictionless packing at rest is APGD's worst case (at r0 = 2 it
-    # did not converge within 2,000 iterations on most resting steps), so no step is small enough
-    solver = _solver(args, scaled_time_step=np.inf)
+    solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
@@ -105,9 +112,11 @@ def collapse(args):
         duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
         gravity=float(source.attrs.get("gravity", 9.81)),
         checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
-        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy)
+        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy,
+        friction_law=args.friction_law, friction_tolerance=args.friction_tolerance)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}")
+    law = "" if args.friction_law == "associated" else f" {args.friction_law}"
+    progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")
     try:
         run = run_collapse(column, h0, settings, _solver(args, settings.duration / settings.n_steps),
                            io.contact_forces_of(source), checkpoint=checkpoint, progress=progress)
@@ -123,6 +132,10 @@ def collapse(args):
     backends = Counter(d.solver_backend for d in run.diagnostics)
     log.info("collapse done: %d steps in %.1f s (%s)", len(run.diagnostics), run.wall_time,
              ", ".join(f"{count} by {name}" for name, count in sorted(backends.items())))
+    if settings.friction_law == "coulomb":
+        programs = [d.friction_iterations for d in run.diagnostics]
+        log.info("coulomb fixed point: %.2f cone programs a step on average, %d at most",
+                 float(np.mean(programs)), max(programs))
     if run.at_rest is not None:
         log.info("the deposit %s at t/sqrt(h0/g) = %g", "came to rest" if run.at_rest else "was still moving",
                  settings.scaled_time(len(run.diagnostics)))
