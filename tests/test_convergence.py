@@ -4,7 +4,7 @@ import pytest
 
 xr = pytest.importorskip("xarray")
 
-from colsim.convergence import convergence_markdown, runs_table  # noqa: E402
+from colsim.convergence import converged_steps, time_step_means, convergence_markdown, runs_table  # noqa: E402
 
 
 def analysis(a=2.0, r0=2.0, seed=1, steps=100, duration=4.0, h=1.0, runout=1.5, mean_d=0.4):
@@ -47,9 +47,28 @@ def test_markdown_gives_the_relative_change_per_refinement():
                             analysis(steps=400, h=1.1, runout=1.9)],
               "seeds": [analysis(seed=s, h=h) for s, h in ((1, 0.9), (2, 1.0), (3, 1.1))]}
     text = convergence_markdown(runs_table(groups, 4.0))
-    assert "| 2 | 200 | 0.02 | 1.100 | 10.0 % | 2.000 | 0.0 % |" in text
-    assert "| 2 | 400 | 0.01 | 1.100 | 0.0 % | 1.900 | 5.0 % |" in text
+    assert "| 2 | 2 | 200 | 0.02 | 1 | 1.100 | 0.000 | 10.0 % | +0.0 % | 2.000 | 0.000 | 0.0 % | +5.3 % |" in text
+    assert "| 2 | 2 | 400 | 0.01 | 1 | 1.100 | 0.000 | 0.0 % | +0.0 % | 1.900 | 0.000 | 5.0 % | +0.0 % |" in text
+    assert "a = 2, r0 = 2: converged at 400 steps" in text   # 200 is 5.3 % off in run-out
     assert "| 2 | 3 | 1.000 | 0.100 | 10.0 % |" in text   # sample std of 0.9, 1.0, 1.1
+
+
+def test_time_step_runs_are_averaged_over_seeds_and_the_converged_step_is_named():
+    """Three seeds per level: means, sample sd, and the fewest steps within 3 % of the finest (or a
+    third of its seed sd): 500 here, where h is 2 % off and the run-out 1 %."""
+    levels = {250: (1.00, 2.0), 500: (1.06, 2.18), 1000: (1.08, 2.2)}
+    groups = {"time_step": [analysis(steps=n, seed=seed, h=h + 0.01 * (seed - 2), runout=r)
+                            for n, (h, r) in levels.items() for seed in (1, 2, 3)]}
+    table = runs_table(groups, 4.0)
+    means = time_step_means(table.where(table.study == "time_step", drop=True))
+    assert [row["steps"] for row in means] == [250, 500, 1000]
+    assert means[0]["seeds"] == 3 and means[0]["h"] == pytest.approx(1.0) and means[0]["h_sd"] == pytest.approx(0.01)
+    rows = [dict(row) for row in means]
+    assert converged_steps(rows) == 500
+    assert converged_steps(rows[:1]) is None
+    text = convergence_markdown(table)
+    assert "| 2 | 2 | 500 | 0.008 | 3 | 1.060 | 0.010 |" in text
+    assert "a = 2, r0 = 2: converged at 500 steps" in text
 
 
 def test_column_size_is_tabled_per_aspect_ratio_at_both_end_times():

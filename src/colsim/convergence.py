@@ -93,16 +93,77 @@ def _with_changes(rows):
         previous = (h, r)
 
 
+#: the criterion of the time-step study: within this relative difference of the finest step ...
+CONVERGED_RELATIVE = 0.03
+#: ... or within this share of the seed standard deviation, when that is larger
+CONVERGED_SEED_SHARE = 1.0 / 3.0
+
+
+def time_step_means(study) -> list[dict]:
+    """The time-step runs averaged over seeds: one dict per (aspect_ratio, r0, n_steps), sorted, with
+    a, r0, steps, dt (scaled), seeds, h, h_sd, runout, runout_sd (sample sd; 0 for one seed)."""
+    keys = sorted({(float(a), float(r), int(n)) for a, r, n in
+                   zip(study.aspect_ratio.values, study.r0.values, study.n_steps.values)})
+    rows = []
+    for a, r0, n in keys:
+        pick = np.flatnonzero((study.aspect_ratio.values == a) & (study.r0.values == r0) & (study.n_steps.values == n))
+        h, r = study.h_inf_over_r0.values[pick], study.runout_over_r0.values[pick]
+        sd = (lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0)
+        rows.append({"a": a, "r0": r0, "steps": n, "dt": float(study.scaled_dt.values[pick[0]]),
+                     "seeds": len(pick), "h": float(h.mean()), "h_sd": sd(h),
+                     "runout": float(r.mean()), "runout_sd": sd(r)})
+    return rows
+
+
+def converged_steps(rows: list[dict]) -> int | None:
+    """The fewest steps of one column's refinement (`rows` of :func:`time_step_means`, one a and r0)
+    whose mean h_inf/r0 and run-out are both within 3 % of the finest step's, or within a third of
+    the finest's seed sd where that is larger; None with a single level."""
+    if len(rows) < 2:
+        return None
+    finest = max(rows, key=lambda row: row["steps"])
+    for row in sorted(rows, key=lambda row: row["steps"]):
+        if all(abs(row[q] - finest[q]) <= max(CONVERGED_RELATIVE * abs(finest[q]),
+                                              CONVERGED_SEED_SHARE * finest[f"{q}_sd"])
+               for q in ("h", "runout")):
+            return row["steps"]
+    return finest["steps"]
+
+
+def _linear_fit(rows, quantity) -> tuple[float, float]:
+    """(value at dt -> 0, slope over it) of quantity = X0 + C dt fitted to the levels (least squares)."""
+    dt = np.array([row["dt"] for row in rows])
+    values = np.array([row[quantity] for row in rows])
+    slope, intercept = np.polyfit(dt, values, 1)
+    return float(intercept), float(slope / intercept) if intercept else np.nan
+
+
 def _time_step_lines(study) -> list[str]:
-    lines = ["### Time step (same end time, more steps)", "",
-             "| a | steps | dt/sqrt(h0/g) | h_inf/r0 | change | (r_inf - r0)/r0 | change |",
-             "|---|---|---|---|---|---|---|"]
-    for a in np.unique(study.aspect_ratio.values):
-        rows = study.where(study.aspect_ratio == a, drop=True).sortby("n_steps")
-        for k, h, r, changes in _with_changes(rows):
-            lines.append(f"| {a:g} | {int(rows.n_steps[k])} | {float(rows.scaled_dt[k]):.3g} | {h:.3f} | "
-                         f"{changes[0]} | {r:.3f} | {changes[1]} |")
-    return lines
+    lines = ["### Time step (same end time, more steps; mean over seeds, sd = sample standard deviation)", "",
+             "| a | r0 | steps | dt/sqrt(h0/g) | seeds | h_inf/r0 | sd | change | vs finest "
+             "| (r_inf - r0)/r0 | sd | change | vs finest |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    means = time_step_means(study)
+    verdicts = []
+    for a, r0 in sorted({(row["a"], row["r0"]) for row in means}):
+        rows = [row for row in means if (row["a"], row["r0"]) == (a, r0)]
+        finest, previous = rows[-1], None
+        for row in rows:
+            change = ["", ""] if previous is None else [
+                f"{100 * _relative(row[q], previous[q]):.1f} %" for q in ("h", "runout")]
+            versus = [f"{100 * (row[q] - finest[q]) / max(abs(finest[q]), 1e-12):+.1f} %" for q in ("h", "runout")]
+            lines.append(f"| {a:g} | {r0:g} | {row['steps']} | {row['dt']:.3g} | {row['seeds']} | {row['h']:.3f} | "
+                         f"{row['h_sd']:.3f} | {change[0]} | {versus[0]} | {row['runout']:.3f} | "
+                         f"{row['runout_sd']:.3f} | {change[1]} | {versus[1]} |")
+            previous = row
+        steps = converged_steps(rows)
+        if steps is not None:
+            (h0, ch), (r_0, cr) = _linear_fit(rows, "h"), _linear_fit(rows, "runout")
+            verdicts.append(f"- a = {a:g}, r0 = {r0:g}: converged at {steps} steps (within "
+                            f"{100 * CONVERGED_RELATIVE:g} % of the finest, or a third of its seed sd); "
+                            f"fit X = X0 (1 + c dt/sqrt(h0/g)): h_inf/r0 X0 = {h0:.3f}, c = {ch:+.2f}; "
+                            f"run-out X0 = {r_0:.3f}, c = {cr:+.2f}")
+    return lines + ([""] + verdicts if verdicts else [])
 
 
 def _end_time_lines(study) -> list[str]:

@@ -273,6 +273,26 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
     return [draw[name](output_dir / f"{name}.png") for name in FIGURES]
 
 
+def _time_step_panel(ax, part) -> None:
+    """h_inf/r0 (filled) and the run-out (open) against dt/sqrt(h0/g), mean over seeds, sd as bars."""
+    from .convergence import time_step_means
+
+    means = time_step_means(part)
+    for k, (a, r0) in enumerate(sorted({(row["a"], row["r0"]) for row in means})):
+        rows = [row for row in means if (row["a"], row["r0"]) == (a, r0)]
+        dt = [row["dt"] for row in rows]
+        for quantity, variable, fill in (("h", "h_inf_over_r0", f"C{k}"), ("runout", "runout_over_r0", "none")):
+            ax.errorbar(dt, [row[quantity] for row in rows], yerr=[row[f"{quantity}_sd"] for row in rows],
+                        fmt="o-", color=f"C{k}", mfc=fill, capsize=3,
+                        label=f"a = {a:g}, r0 = {r0:g}, {QUANTITY_LABELS[variable]}")
+    ax.set_xscale("log")
+    ax.set_xlabel("time step dt / sqrt(h0/g)")
+    ax.set_ylabel("h_inf/r0 (filled), (r_inf - r0)/r0 (open)")
+    ax.set_title("time step (mean over seeds, bars: seed sd)", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+
+
 def convergence_figure(table, path: Path) -> Path:
     """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
     both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
@@ -292,6 +312,9 @@ def convergence_figure(table, path: Path) -> Path:
             continue
         if study == "column_size":   # the mean over seeds at each r0
             part = means_per_size(part)
+        if study == "time_step":     # the mean over seeds at each dt, the seed sd as error bars
+            _time_step_panel(ax, part)
+            continue
         for k, a in enumerate(np.unique(part.aspect_ratio.values)):
             rows = part.where(part.aspect_ratio == a, drop=True).sortby(x_name)
             x = rows[x_name].values
@@ -310,8 +333,6 @@ def convergence_figure(table, path: Path) -> Path:
                     ax.plot(x, rows.runout_over_r0_at_default_end.values, "s:", color=colour, mfc="none",
                             label=f"a = {a:g}, run-out at t/sqrt(h0/g) = {end:g}")
                 ax.axhline(float(lube_runout(a)), color=colour, lw=0.8, ls="--")
-        if study == "time_step":
-            ax.set_xscale("log")
         ax.set_xlabel(x_label)
         ax.set_ylabel("h_inf/r0 (filled), (r_inf - r0)/r0 (open)")
         ax.set_title(study.replace("_", " "), fontsize=10)

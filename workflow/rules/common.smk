@@ -115,8 +115,11 @@ def pack_height(wildcards):
              if wildcards.r0 != R0 and wildcards.r0 in [fmt(r0) for r0 in entry["r0"]]]
     if sizes:
         return fmt(max(sizes) * float(wildcards.r0))
-    if study and wildcards.seed not in SEEDS:
-        return fmt(study["seeds"]["aspect_ratio"] * float(wildcards.r0))
+    if study and wildcards.seed not in SEEDS:   # tall enough for every sub-study using the seed
+        seed = int(wildcards.seed)
+        needs = [study["seeds"]["aspect_ratio"]] if seed in study["seeds"]["seeds"] else []
+        needs += study["time_step"]["aspect_ratios"] if seed in study["time_step"].get("seeds", []) else []
+        return fmt(max(needs or [PACK_ASPECT_RATIO]) * float(wildcards.r0))
     return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
 
 
@@ -170,8 +173,9 @@ def convergence_runs(name):
         return round(steps * duration / end), duration
 
     return {
-        "time_step": [run_path(name, R0, seed, a, mu_r, n, end)
-                      for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]],
+        "time_step": [run_path(name, R0, s, a, mu_r, n, end)
+                      for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]
+                      for s in study["time_step"].get("seeds", [seed])],
         "end_time": [run_path(name, R0, seed, a, mu_r, *same_dt(longer))
                      for a in study["end_time"]["aspect_ratios"]],
         "column_size": [run_path(name, r0, s, entry["aspect_ratio"], mu_r, *same_dt(entry.get("duration", end)))
