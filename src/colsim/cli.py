@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from .solvers import SOLVERS
+from .state import FRICTION_LAWS
 
 log = logging.getLogger("colsim")
 
@@ -103,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mu-r", type=_non_negative, default=0.12, help="rolling resistance coefficient (default: %(default)s)")
     p.add_argument("--floor-mu", type=_non_negative, default=None, help="floor's mu (default: same as --mu)")
     p.add_argument("--floor-mu-r", type=_non_negative, default=None, help="floor's mu_r (default: same as --mu-r)")
+    p.add_argument("--friction-law", choices=FRICTION_LAWS, default="associated",
+                   help="associated (the paper's: a sliding contact opens by mu |du_t| a step) or coulomb "
+                        "(non-associated: it does not; a fixed point of cone programs) (default: %(default)s)")
+    p.add_argument("--friction-tolerance", type=_positive, default=1e-5,
+                   help="coulomb: stop the fixed point when its gap correction changes by less than this "
+                        "many mean diameters (default: %(default)s)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
     p.add_argument("--steps", type=_positive_int, default=100, help="number of equal steps (default: %(default)s)")
     p.add_argument("--max-duration", type=_positive, default=None,

@@ -2,6 +2,7 @@
 
 The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
 mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
+The friction law is the paper's associated one unless friction_law = 'coulomb' (:mod:`colsim.friction`).
 With max_duration set, it goes on at the same dt until the deposit is at rest or t / sqrt(h0/g)
 reaches max_duration, whichever comes first. At rest: the final height and run-out (measured as in
 :mod:`colsim.analysis`) moved less than rest_tolerance mean diameters over the last rest_window,
@@ -27,7 +28,7 @@ import xarray as xr
 from .analysis import measure_deposit
 from .io import atomic_path
 from .solvers import Solver, WarmStart
-from .state import ContactLaw, ParticleState, StepSettings, Walls
+from .state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
 from .stepper import Carry, StepDiagnostics, run
 
 log = logging.getLogger(__name__)
@@ -54,6 +55,8 @@ class CollapseSettings:
     rest_window: float = 1.0             # t / sqrt(h0/g)
     rest_tolerance: float = 0.1          # mean diameters
     rest_energy: float = 1e-2            # of the peak kinetic energy
+    friction_law: str = "associated"     # or "coulomb" (colsim.friction)
+    friction_tolerance: float = 1e-5     # coulomb's fixed point, mean diameters
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
@@ -66,9 +69,13 @@ class CollapseSettings:
             raise ValueError(f"gravity must be positive, got {self.gravity}")
         if self.max_duration is not None and self.max_duration < self.duration:
             raise ValueError(f"max_duration {self.max_duration} is below duration {self.duration}")
+        self.friction()   # checks the law's name and tolerance
         if self.rest_window <= 0 or self.rest_tolerance <= 0 or self.rest_energy <= 0:
             raise ValueError(f"need rest_window, rest_tolerance and rest_energy > 0; got "
                              f"{self.rest_window}, {self.rest_tolerance}, {self.rest_energy}")
+
+    def friction(self) -> FrictionLaw:
+        return FrictionLaw(self.friction_law, self.friction_tolerance)
 
     def law(self) -> ContactLaw:
         floor_mu = self.mu if self.floor_mu is None else self.floor_mu
@@ -142,7 +149,8 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     """
     dt = settings.time_step(h0)
     step_settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -settings.gravity),
-                                 walls=Walls(floor=True, cylinder_radius=None), law=settings.law())
+                                 walls=Walls(floor=True, cylinder_radius=None), law=settings.law(),
+                                 friction=settings.friction())
     fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
     saved = _load_checkpoint(checkpoint, fingerprint)
     if saved:
@@ -250,7 +258,8 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
               "xyz": ("xyz", ["x", "y", "z"], {"long_name": "Cartesian component"})}
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
-                          "mu_r": settings.mu_r, "dt": settings.time_step(h0),
+                          "mu_r": settings.mu_r, "friction_law": settings.friction_law,
+                          "dt": settings.time_step(h0),
                           "duration": settings.scaled_time(len(run.diagnostics)),
                           "n_steps": len(run.diagnostics),
                           "wall_time": run.wall_time, "density": float(run.initial.density)})

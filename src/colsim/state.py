@@ -122,6 +122,27 @@ class ContactLaw:
         return cls(mu=(mu, mu, cylinder_mu), mu_r=(mu_r, mu_r, 0.0))
 
 
+FRICTION_LAWS = ("associated", "coulomb")
+
+
+@dataclass(frozen=True)
+class FrictionLaw:
+    """The friction law of the contacts (:mod:`colsim.friction`): name 'associated' (the paper's) or
+    'coulomb'; for coulomb, the fixed point's tolerance (a fraction of the mean diameter) and the
+    most cone programs solved per step (max_iter)."""
+
+    name: str = "associated"
+    tolerance: float = 1e-5
+    max_iter: int = 50
+
+    def __post_init__(self):
+        if self.name not in FRICTION_LAWS:
+            raise ValueError(f"friction law must be one of {', '.join(FRICTION_LAWS)}, got {self.name!r}")
+        if not self.tolerance > 0 or self.max_iter < 1:
+            raise ValueError(f"the Coulomb fixed point needs tolerance > 0 and max_iter >= 1, got "
+                             f"{self.tolerance}, {self.max_iter}")
+
+
 @dataclass(frozen=True)
 class StepSettings:
     """Everything one time step needs besides the state.
@@ -131,6 +152,7 @@ class StepSettings:
     detection_margin_fraction: gap beyond the predicted motion within which a pair is a potential
     contact, as a fraction of the smallest diameter (the stepper's margins are lengths). detection_slack: fraction of a pair's predicted relative
     displacement added to that margin (see :func:`colsim.contacts.detect`).
+    friction: the friction law, associated (the paper's) or coulomb (:mod:`colsim.friction`).
     max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.stepper`).
     margin_growth: factor by which a redone step's detection margin grows.
     """
@@ -139,6 +161,7 @@ class StepSettings:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     walls: Walls = field(default_factory=Walls)
     law: ContactLaw = field(default_factory=ContactLaw)
+    friction: FrictionLaw = field(default_factory=FrictionLaw)
     overlap_tolerance: float = 0.01
     detection_margin_fraction: float = 0.05
     detection_slack: float = 0.5

@@ -21,6 +21,7 @@ from typing import Iterator
 import numpy as np
 
 from . import contacts as contact_detection
+from . import friction
 from .program import assemble
 from .solvers import ConeSolution, Solver, WarmStart
 from .state import ParticleState, StepSettings
@@ -38,7 +39,9 @@ class StepDiagnostics:
 
     The detection, assembly, setup and solve times are those of the accepted attempt; step_time is
     the whole step, redone attempts included. detection_margin: of the accepted attempt (length).
-    solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`)."""
+    solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`).
+    solver_iterations: summed over the cone programs of the step; friction_iterations: how many
+    cone programs the friction law solved (1, or the Coulomb fixed point's, :mod:`colsim.friction`)."""
 
     step: int
     time: float
@@ -50,6 +53,7 @@ class StepDiagnostics:
     solver_status: str
     solver_backend: str
     solver_iterations: int
+    friction_iterations: int
     detection_time: float
     assembly_time: float
     setup_time: float
@@ -114,6 +118,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     warm_start: forces by contact pair, matched to each attempt's contacts (None: a cold start).
     margin: detection margin of the first attempt (length); None: :func:`base_margin`."""
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
+    mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
     margin = base_margin(state, settings) if margin is None else margin
     started = time.perf_counter()
@@ -128,7 +133,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
         guess = None if warm_start is None else warm_start.match(found, state.n)
-        solution = solver.solve(program, warm_start=guess, step=step_number)
+        solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance)
         if overlap.largest <= tolerance:
@@ -148,7 +153,9 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         step=step_number, time=new_state.time, n_contacts=found.m,
         n_active=_count_active(solution.forces), largest_overlap=overlap.largest,
         kinetic_energy=trans, rotational_energy=rot, solver_status=solution.status,
-        solver_backend=solution.backend or solver.name, solver_iterations=solution.iterations, detection_time=t1 - t0, assembly_time=t2 - t1,
+        solver_backend=solution.backend or solver.name, solver_iterations=solution.iterations,
+        friction_iterations=solution.info.get("friction_iterations", 1),
+        detection_time=t1 - t0, assembly_time=t2 - t1,
         setup_time=solution.setup_time, solve_time=solution.solve_time, redone=attempt,
         missed_contacts=missed,
         detection_margin=margin, step_time=time.perf_counter() - started,

@@ -1,0 +1,101 @@
+"""The friction law of a step: associated (the paper's) or Coulomb (non-associated), on the same cone program.
+
+associated: one cone program (:mod:`colsim.program`), g + du_n >= mu ||du_t|| + mu_r ||dphi||.
+    Its flow rule is normal to the cone: a sliding contact opens by mu ||du_t|| (and a rolling one
+    by mu_r ||dphi||) every step, so a sliding grain hovers.
+
+coulomb: De Saxce's bipotential, solved as in Acary and Cadoux (2013) and Krabbenhoft et al.
+    (2012): the gap of each contact is corrected by the dilation of the current iterate,
+
+        g + s + du_n >= mu ||du_t|| + mu_r ||dphi||,   s = mu ||du_t'|| + mu_r ||dphi'||,
+
+    with du' the previous iterate's local displacement, and the program is solved again until s
+    stops changing (a fixed point of whole solves, each warm-started from the last forces). At the
+    fixed point a sliding contact does not open: g + du_n = 0, while its force stays on the cone
+    (||q|| = mu p) and opposes the slip. With mu = mu_r = 0 the correction is zero and the two laws
+    are the same program.
+
+Stopping rule: the largest change of the correction s between two iterates, over the contacts,
+is at most `tolerance` times the mean particle diameter (the gap error the fixed point leaves).
+A fixed point not reached in `max_iter` solves is a :class:`SolverError` naming the step.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .program import ConeProgram, ConeSolution, Solver, SolverError, at_step
+from .state import FRICTION_LAWS, FrictionLaw
+
+__all__ = ["FRICTION_LAWS", "FrictionLaw", "dilation", "solve_step"]
+
+def dilation(program: ConeProgram, increments: np.ndarray) -> np.ndarray:
+    """(m,) mu ||du_t|| + mu_r ||dphi|| of each contact for increments u (6n,) (length)."""
+    local = program.local_displacement(increments)
+    return (program.mu * np.linalg.norm(local[:, 1:3], axis=1)
+            + program.mu_r * np.linalg.norm(local[:, 3:5], axis=1))
+
+
+def solve_step(program: ConeProgram, solver: Solver, law: FrictionLaw, mean_diameter: float,
+               warm_start: np.ndarray | None = None, step: int | None = None) -> ConeSolution:
+    """The step's contact forces and increments under `law`, solved by `solver`.
+
+    For coulomb the solution's `iterations` and times add up over the fixed point's solves, and
+    its info holds 'friction_iterations' (cone programs solved) and 'correction_change' (the last
+    change of s over the mean diameter)."""
+    solution = solver.solve(program, warm_start=warm_start, step=step)
+    if law.name == "associated" or program.m == 0 or not (np.any(program.mu) or np.any(program.mu_r)):
+        solution.info["friction_iterations"] = 1
+        return solution
+    correction = np.zeros(program.m)
+    accelerate = _Anderson(ANDERSON_MEMORY)
+    iterations, setup_time, solve_time = solution.iterations, solution.setup_time, solution.solve_time
+    for solves in range(1, law.max_iter + 1):
+        residual = dilation(program, solution.increments) - correction
+        change = float(np.max(np.abs(residual))) / mean_diameter
+        if change <= law.tolerance:
+            solution.iterations, solution.setup_time, solution.solve_time = iterations, setup_time, solve_time
+            solution.info.update(friction_iterations=solves, correction_change=change)
+            return solution
+        if solves == law.max_iter:
+            break
+        correction = accelerate(correction, residual)
+        solution = solver.solve(replace(program, gap=program.gap + correction),
+                                warm_start=solution.forces, step=step)
+        iterations += solution.iterations
+        setup_time += solution.setup_time
+        solve_time += solution.solve_time
+    raise SolverError(
+        f"the Coulomb fixed point did not converge{at_step(step)} within {law.max_iter} cone programs "
+        f"(last change of the dilation correction {change:.2e} mean diameters, tolerance "
+        f"{law.tolerance:.1e}, {program.m} contacts)", status="FixedPointMaxIterations", step=step)
+
+
+#: iterates Anderson's acceleration remembers (see _Anderson)
+ANDERSON_MEMORY = 5
+
+
+class _Anderson:
+    """Anderson acceleration (type II) of the fixed point s -> s + f(s), f the residual.
+
+    The next iterate mixes the last `memory` + 1 iterates by the least-squares combination of their
+    residuals, clipped to s >= 0 (a dilation). Measured on a released 968-sphere column (r0 = 2,
+    a = 2, dt/sqrt(h0/g) = 0.004, step 50): the plain iteration reached 1e-6 d in 12 cone programs,
+    this in 9; on the first step from rest the plain iteration settles into a two-cycle 2e-5 d
+    wide (a contact carrying load one iterate and not the next), this gets below 1e-5 d.
+    """
+
+    def __init__(self, memory: int):
+        self.memory = memory
+        self.iterates, self.residuals = [], []
+
+    def __call__(self, s: np.ndarray, f: np.ndarray) -> np.ndarray:
+        self.iterates = (self.iterates + [s.copy()])[-(self.memory + 1):]
+        self.residuals = (self.residuals + [f.copy()])[-(self.memory + 1):]
+        if len(self.residuals) < 2:
+            return s + f
+        d_res = np.diff(np.array(self.residuals), axis=0).T
+        d_its = np.diff(np.array(self.iterates), axis=0).T
+        gamma = np.linalg.lstsq(d_res, f, rcond=None)[0]
+        return np.maximum(s + f - (d_its + d_res) @ gamma, 0.0)
