@@ -90,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at rest when 95%% of the particles have kinetic energy < this times m g d "
                         "and 99%% carry a contact force (default: %(default)s)")
     p.add_argument("--max-steps", type=_positive_int, default=5000, help="give up after this many steps (default: %(default)s)")
+    p.add_argument("--mu", type=_non_negative, default=0.0,
+                   help="sliding friction between spheres and with the floor while filling; the paper's "
+                        "is 0, a small value gives a looser packing (default: %(default)s)")
     _solver_arguments(p)
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
 

@@ -74,7 +74,7 @@ def pack(args):
     rng = np.random.default_rng([args.seed, args.root_seed])
     solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
-                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps)
+                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})

@@ -2,7 +2,8 @@
 
 Filling follows the paper: spheres with diameters uniform in [d_min, d_max] are created at random
 non-overlapping places uniformly across the cylinder, above what is already there, and fall under
-gravity with mu = mu_r = 0 until they are at rest. Places come from a jittered cubic lattice of
+gravity with mu = mu_r = 0 until they are at rest. (`mu` sets a sliding friction while filling,
+between the spheres and with the floor, for a looser packing than the paper's.) Places come from a jittered cubic lattice of
 spacing 1.04 d_max: each sphere moves at random inside its own lattice cell, so no two overlap.
 Clouds are added until the settled packing is taller than the requested height.
 
@@ -103,9 +104,10 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
 
 def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
          density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
-         max_steps: int = 5000, progress=None) -> PackingResult:
+         max_steps: int = 5000, progress=None, mu: float = 0.0) -> PackingResult:
     """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
-    solving each step with `solver`."""
+    solving each step with `solver`. mu: sliding friction between the spheres and with the floor
+    while filling (the paper's 0; the cylinder stays frictionless, rolling is free)."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")
@@ -114,7 +116,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     if height <= 0:
         raise ValueError(f"packing height must be positive, got {height}")
     settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -gravity), walls=Walls(cylinder_radius=r0),
-                            law=ContactLaw())
+                            law=ContactLaw.uniform(mu, 0.0))
     mean_volume = np.pi / 6.0 * (d_max**4 - d_min**4) / (4.0 * (d_max - d_min)) if d_max > d_min else np.pi / 6 * d_max**3
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
     start, steps, carry, result = time.perf_counter(), 0, Carry(), None

@@ -17,6 +17,7 @@ rule pack:
         dt=config["pack"]["dt"],
         rest_energy=config["pack"]["rest_energy"],
         max_steps=config["pack"]["max_steps"],
+        mu=config["pack"]["mu"],
         solver=config["solver"],
     log:
         "results/logs/r0_{r0}/seed_{seed}/pack.log",
@@ -26,7 +27,7 @@ rule pack:
         "colsim pack --r0 {wildcards.r0} --height {params.height} --seed {wildcards.seed}"
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
-        " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps}"
+        " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
         " --solver {params.solver} --output {output} > {log} 2>&1"
 
 
