@@ -237,7 +237,7 @@ def test_coulomb_keeps_loaded_contacts_closed_in_a_collapsing_pile(pile):
     opening = {}
     for name in FRICTION_LAWS:
         settings = StepSettings(dt=dt, walls=Walls(floor=True, cylinder_radius=None), law=COLLAPSE_LAW,
-                                friction=FrictionLaw(name))
+                                friction=FrictionLaw(name, tolerance=1e-5))
         state, largest = pile.settled, 0.0
         for result in run(state, settings, 5, ClarabelSolver()):
             program = assemble(state, result.contacts, dt, settings.gravity)

@@ -56,7 +56,7 @@ class CollapseSettings:
     rest_tolerance: float = 0.1          # mean diameters
     rest_energy: float = 1e-2            # of the peak kinetic energy
     friction_law: str = "associated"     # or "coulomb" (colsim.friction)
-    friction_tolerance: float = 1e-5     # coulomb's fixed point, mean diameters
+    friction_tolerance: float = 1e-4     # coulomb's fixed point, mean diameters
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
