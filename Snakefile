@@ -12,6 +12,7 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/summarise.smk"
 include: "workflow/rules/convergence.smk"
+include: "workflow/rules/friction_law.smk"
 
 
 # the study's own description (written with its summary), so a report describes the files it shows
@@ -26,3 +27,4 @@ rule all:
         f"{STUDY_DIR}/study_config.yaml",
         figures(),
         convergence_outputs(),
+        friction_law_outputs(),

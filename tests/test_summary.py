@@ -51,3 +51,33 @@ def test_other_runout_measures_are_tabled_against_lube():
     text = lube_markdown(summary)
     assert "| mu_r | a | Lube | connected, gap <= 1 % d_min | connected, gap <= 50 % d_min | 95 % of the mass |" in text
     assert f"| 0.12 | 2 | {runout:.2f} | {runout:.2f} (+0 %) | {1.1 * runout:.2f} (+10 %) | {0.9 * runout:.2f} (-10 %) |" in text
+
+
+def law_summary(h_shift, runout_shift, programs, wall):
+    """A summary of a = 0.5, 2, 5 (mu_r = 0.12, seeds 1-3) at Lube's laws shifted by the given
+    amounts, seed k adding 0.01 (k - 2) to both."""
+    ratios = np.array([0.5, 2.0, 5.0])
+    jitter = 0.01 * (np.arange(1, 4) - 2)
+    dims = ("aspect_ratio", "mu_r", "seed")
+    grid = lambda law, shift: (law(ratios)[:, None] + shift + jitter[None, :])[:, None, :]  # noqa: E731
+    full = np.full((3, 1, 3), 1.0)
+    return xr.Dataset({"h_inf_over_r0": (dims, grid(lube_height, h_shift)),
+                       "runout_over_r0": (dims, grid(lube_runout, runout_shift)),
+                       "n_main_mass": (dims, 80 * full), "n_particles": (dims, 100 * full),
+                       "cone_programs_per_step": (dims, programs * full), "wall_time": (dims, wall * full)},
+                      coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1, 2, 3]}, attrs={"r0": 2.0})
+
+
+def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
+    from colsim.plots import friction_law_figure
+    from colsim.summary import friction_law_comparison, friction_law_markdown
+
+    comparison = friction_law_comparison({"associated": law_summary(0.0, 0.0, 1.0, 10.0),
+                                          "coulomb": law_summary(0.0, 0.5, 15.0, 110.0)})
+    assert list(comparison.friction_law.values) == ["associated", "coulomb"]
+    assert comparison.h_inf_over_r0.dims == ("friction_law", "aspect_ratio", "mu_r", "seed")
+    text = friction_law_markdown(comparison)
+    r2 = lube_runout(2.0)
+    assert f"| 2 | associated | 3 | {lube_height(2.0):.3f} (0.010) | {lube_height(2.0):.3f} | +0 % | {r2:.3f} (0.010) |" in text
+    assert f"| 2 | coulomb | 3 |" in text and f"| {r2 + 0.5:.3f} (0.010) | {r2:.3f} | {100 * 0.5 / r2:+.0f} % | 0.80 | 15.0 | 110 |" in text
+    assert friction_law_figure(comparison, tmp_path / "friction_law.png").stat().st_size > 10_000

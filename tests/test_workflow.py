@@ -135,6 +135,9 @@ def test_a_failed_run_does_not_rewrite_the_study_config(tmp_path):
     ("diameter_min: 0.9", "config: diameter_min 0.9 exceeds diameter_max 0.5"),
     ("aspect_ratios: [0.1, 1]", "config: aspect ratio 0.1 at r0 2 gives h0 = 0.2, below diameter_max 0.5"),
     ("pack_aspect_ratio: 1", "config: pack_aspect_ratio 1 is below the largest aspect ratio 5"),
+    ("friction_law: bipotential", "config: friction_law: 'bipotential' is not one of"),
+    ("{friction_law: coulomb, friction_law_comparison: true}",
+     "config: friction_law_comparison needs friction_law: associated"),
 ])
 def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, message):
     """A wrong key or value, or settings that contradict each other, stop snakemake before any job
@@ -207,6 +210,30 @@ def test_the_paper_study_plans_its_convergence_runs(tmp_path):
     assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned
     assert {"results/paper/summary.nc", "results/paper/lube_table.md", "results/paper/convergence.nc",
             "results/paper/figures/convergence.png"} <= planned
+
+
+def test_the_friction_law_study_plans_both_laws(tmp_path):
+    """config/friction-law.yaml: each of its 9 runs under both laws (the Coulomb ones in coulomb/,
+    with --friction-law coulomb), and the comparison; a study under coulomb alone keeps its runs
+    there too, so it never overwrites an associated run."""
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/friction-law.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = set(planned_outputs(result))
+    run = "results/r0_2/seed_{s}/a_{a}/mu_r_0.12"
+    for s in "123":
+        for a in ("0.5", "2", "5"):
+            assert f"{run.format(s=s, a=a)}/collapse.nc" in planned
+            assert f"{run.format(s=s, a=a)}/coulomb/analysis.nc" in planned
+    assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
+    commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
+    assert sum("--friction-law coulomb" in c and "/coulomb/collapse.nc" in c for c in commands) == 9
+    assert sum("--friction-law associated" in c and "/coulomb/" not in c for c in commands) == 9
+    (directory / "coulomb.yaml").write_text("friction_law: coulomb\n")
+    alone = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
+    assert alone.returncode == 0, alone.stderr[-3000:]
+    collapses = [p for p in planned_outputs(alone) if p.endswith("collapse.nc")]
+    assert collapses and all(p.endswith("/coulomb/collapse.nc") for p in collapses)
 
 
 def test_run_to_rest_reaches_the_collapse_command(tmp_path):

@@ -145,6 +145,9 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
         "apgd_steps": _scalar(count("apgd"), "1", "steps solved by APGD"),
         "fallback_steps": _scalar(count("clarabel-fallback"), "1",
                                   "steps solved by Clarabel after APGD reached its iteration cap"),
+        "cone_programs_per_step": _scalar(
+            float(trajectory["step_friction_iterations"].mean()) if "step_friction_iterations" in trajectory
+            else np.nan, "1", "cone programs solved per step (1: associated law; more: Coulomb's fixed point)"),
         "undisturbed_top_radius": _scalar(top_radius / r0, "1", "radius of the top disc that did not move, over r0"),
         "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
         "front_position": ("time", (np.array([d.r_inf for d in history]) - r0) / r0,
@@ -172,6 +175,7 @@ def _run_attributes(trajectory) -> dict:
     """The trajectory's run description that an analysis carries on."""
     attrs = {key: float(trajectory.attrs[key]) for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration")}
     attrs["n_steps"] = int(trajectory.attrs["n_steps"])
+    attrs["friction_law"] = str(trajectory.attrs.get("friction_law", "associated"))
     if "at_rest" in trajectory.attrs:
         attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     return attrs

@@ -7,6 +7,7 @@
     colsim collect    gather analyses into one dataset over (aspect_ratio, mu_r, seed)
     colsim plot       the study's figures from the collected dataset and the analyses
     colsim convergence  time step, end time, column size and seed studies in one table and figure
+    colsim compare-laws the same runs under both friction laws, against Lube's laws
     colsim export-vtk a ParaView time series of a collapse
     colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
 
@@ -156,6 +157,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", required=True, help="table to write (netCDF)")
     p.add_argument("--csv", default=None, help="also write the table as CSV here")
     p.add_argument("--markdown", default=None, help="also write the relative changes as Markdown here")
+    p.add_argument("--figure", default=None, help="also draw the figure (PNG) here")
+
+    p = sub.add_parser("compare-laws", help="the same runs under the associated and the Coulomb friction law: "
+                                            "one table against Lube's laws and a figure")
+    for law in FRICTION_LAWS:
+        p.add_argument(f"--{law}", nargs="+", required=True, help=f"analysis files of the runs under the {law} law")
+    p.add_argument("--output", required=True, help="both summaries over friction_law (netCDF)")
+    p.add_argument("--markdown", default=None, help="also write the table as Markdown here")
     p.add_argument("--figure", default=None, help="also draw the figure (PNG) here")
 
     p = sub.add_parser("plot", help="the study's figures")

@@ -197,6 +197,30 @@ def convergence(args):
         convergence_figure(table, Path(args.figure))
 
 
+def compare_laws(args):
+    from .summary import collect_analyses, friction_law_comparison, friction_law_markdown
+
+    summaries = {}
+    for law in ("associated", "coulomb"):
+        analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in getattr(args, law)]
+        found = {a.attrs.get("friction_law", "associated") for a in analyses}
+        if found != {law}:
+            raise io.InputError(f"--{law} got runs of the {', '.join(sorted(found))} law")
+        summaries[law] = collect_analyses(analyses)
+    comparison = friction_law_comparison(summaries)
+    comparison.attrs.update(io.global_attributes("friction-law-comparison", "colsim friction law comparison",
+                                                 _settings(args)))
+    io.write_dataset(comparison, args.output)
+    text = friction_law_markdown(comparison)
+    log.info("friction laws:\n%s", text)
+    if args.markdown:
+        _write_text(args.markdown, text)
+    if args.figure:
+        from .plots import friction_law_figure
+
+        friction_law_figure(comparison, Path(args.figure))
+
+
 def plot(args):
     from . import plots
 

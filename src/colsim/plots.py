@@ -112,6 +112,31 @@ def law_figure(summary, variable: str, path: Path) -> Path:
     return _save(fig, path)
 
 
+def friction_law_figure(comparison, path: Path) -> Path:
+    """h_inf/r0 and the run-out against a under each friction law (mean over seeds, bars: min-max),
+    at the comparison's first mu_r, with Lube's laws drawn."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
+    ratios = comparison["aspect_ratio"].values
+    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0))
+    mu_r = float(comparison["mu_r"].values[0])
+    for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
+        ax.plot(span, LAWS[variable]["Lube et al. (2004)"](span), "-", color="0.35", lw=1.2, label="Lube et al. (2004)")
+        for k, name in enumerate(comparison["friction_law"].values):
+            data = comparison[variable].sel(friction_law=name, mu_r=mu_r).transpose("aspect_ratio", "seed")
+            mean, low, high = _seed_spread(data.values)
+            ax.errorbar(ratios + (k - 0.5) * 0.012 * span[-1], mean, yerr=[low, high],
+                        fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3, label=f"colsim, {name}")
+        ax.set_xlabel("aspect ratio a = h0/r0")
+        ax.set_ylabel(_label(comparison[variable], variable))
+        ax.set_xlim(0, span[-1])
+        ax.set_ylim(bottom=0)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"friction laws, r0 = {comparison.attrs.get('r0', float('nan')):g}, mu_r = {mu_r:g}", fontsize=10)
+    return _save(fig, path)
+
+
 def mu_r_figure(summary, path: Path) -> Path:
     """h_inf/r0 and run-out against mu_r, one line per aspect ratio (seed spread as bars)."""
     plt = _pyplot()

@@ -12,7 +12,8 @@ from .laws import lube_height, lube_runout
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
-                     "undisturbed_top_radius", "n_main_mass", "apgd_steps", "fallback_steps")
+                     "undisturbed_top_radius", "n_main_mass", "apgd_steps", "fallback_steps",
+                     "cone_programs_per_step")
 # per-run checks with a dimension of their own (kept only when every analysis has them)
 CHECK_VARIABLES = {"runout_over_r0_by_tolerance": "contact_tolerance", "mass_front_over_r0": "mass_share"}
 
@@ -112,6 +113,7 @@ def collect_analyses(analyses) -> xr.Dataset:
     }
     first = analyses[0].attrs
     attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
+             "friction_law": str(first.get("friction_law", "associated")),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
@@ -188,4 +190,45 @@ def lube_markdown(summary) -> str:
                   runout_measures_markdown(summary)]
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    return "\n".join(lines)
+
+
+def friction_law_comparison(summaries) -> xr.Dataset:
+    """Summaries of the same runs under each friction law ({law: summary}), stacked along a
+    `friction_law` dimension (NaN where a run is missing under one law)."""
+    laws = list(summaries)
+    stacked = xr.concat([summaries[law] for law in laws], dim="friction_law", join="outer",
+                        combine_attrs="drop_conflicts")
+    stacked = stacked.assign_coords(friction_law=("friction_law", laws, {"long_name": "friction law"}))
+    stacked.attrs.pop("friction_law", None)
+    return stacked
+
+
+def friction_law_markdown(comparison) -> str:
+    """Markdown table per mu_r and a: each law's h_inf/r0 and run-out (mean and sd over seeds) against
+    Lube's laws, its main-mass share, cone programs per step and wall time per collapse."""
+    lines = []
+    for m in comparison.mu_r.values:
+        lines += [f"### mu_r = {float(m):g} (mean over seeds, sd = sample standard deviation)", "",
+                  "| a | law | seeds | h_inf/r0 (sd) | Lube | error | (r_inf - r0)/r0 (sd) | Lube | error "
+                  "| main mass / grains | cone programs a step | wall s a collapse |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for a in comparison.aspect_ratio.values:
+            for law in comparison.friction_law.values:
+                part = comparison.sel(mu_r=m, aspect_ratio=a, friction_law=law)
+                h, r = part.h_inf_over_r0.values, part.runout_over_r0.values
+                seeds = int(np.isfinite(h).sum())
+                if seeds == 0:
+                    continue
+                sd = (lambda v: np.nanstd(v, ddof=1) if np.isfinite(v).sum() > 1 else np.nan)
+                h_law, r_law = lube_height(a), lube_runout(a)
+                share = np.nanmean(part.n_main_mass.values / part.n_particles.values)
+                programs = (np.nanmean(part.cone_programs_per_step.values)
+                            if "cone_programs_per_step" in part else np.nan)
+                lines.append(
+                    f"| {a:g} | {law} | {seeds} | {np.nanmean(h):.3f} ({sd(h):.3f}) | {h_law:.3f} | "
+                    f"{100 * (np.nanmean(h) - h_law) / h_law:+.0f} % | {np.nanmean(r):.3f} ({sd(r):.3f}) | "
+                    f"{r_law:.3f} | {100 * (np.nanmean(r) - r_law) / r_law:+.0f} % | {share:.2f} | "
+                    f"{programs:.1f} | {np.nanmean(part.wall_time.values):.0f} |")
+        lines.append("")
     return "\n".join(lines)

@@ -44,6 +44,10 @@ def cross_field_problem(config):
         if a * radius < d_max:
             return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
                     f" the column would hold less than one layer of particles (diameters {d_min}-{d_max})")
+    if config["friction_law"] != "associated" and config["friction_law_comparison"]:
+        return "config: friction_law_comparison needs friction_law: associated (it adds the coulomb runs itself)"
+    if config["friction_law"] != "associated" and config.get("convergence"):
+        return "config: the convergence study runs the associated law only; leave out convergence with friction_law: coulomb"
     pack = config["pack_aspect_ratio"]
     if pack is not None and pack < max(config["aspect_ratios"]):
         return f"config: pack_aspect_ratio {pack} is below the largest aspect ratio {max(config['aspect_ratios'])}"
@@ -71,9 +75,14 @@ SEEDS = [str(s) for s in config["seeds"]]
 PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 
 
-RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
-# a collapse with its own number of steps and end time (the convergence study)
-VARIANT = RUN + "/steps_{steps}_t_{duration}"
+# a run under the associated law; under coulomb its runs are in a folder `coulomb` below
+BASE_RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
+FRICTION_LAW = config["friction_law"]
+LAW_DIR = "" if FRICTION_LAW == "associated" else f"/{FRICTION_LAW}"
+# the study's runs
+RUN = BASE_RUN + LAW_DIR
+# a collapse with its own number of steps and end time (the convergence study; associated law)
+VARIANT = BASE_RUN + "/steps_{steps}_t_{duration}"
 # where the study's summary, tables and figures go (runs are shared between studies)
 STUDY_DIR = f"results/{config['study']}" if config["study"] else "results"
 # the report's description of the study, written with its summary (rule study_config)
@@ -184,6 +193,24 @@ def convergence_runs(name):
         "seeds": [run_path(name, R0, s, study["seeds"]["aspect_ratio"], mu_r)
                   for s in study["seeds"]["seeds"]],
     }
+
+
+def friction_law_outputs():
+    """The friction-law comparison's products (friction_law_comparison: true), or none."""
+    if not config["friction_law_comparison"]:
+        return []
+    return [f"{STUDY_DIR}/friction_law.nc", f"{STUDY_DIR}/friction_law.md", f"{STUDY_DIR}/figures/friction_law.png"]
+
+
+def law_runs(name, law):
+    """Paths of file `name` of every run of the study under friction law `law`."""
+    return expand(BASE_RUN + ("" if law == "associated" else f"/{law}") + f"/{name}",
+                  r0=R0, seed=SEEDS, a=ASPECT_RATIOS, mu_r=MU_R)
+
+
+def friction_law_of(wildcards, output):
+    """The friction law of a collapse, from its path (a folder `coulomb` holds the Coulomb runs)."""
+    return "coulomb" if "/coulomb/" in output[0] else "associated"
 
 
 def convergence_outputs():

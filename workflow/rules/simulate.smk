@@ -54,7 +54,7 @@ rule collapse:
     input:
         "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
     output:
-        f"{RUN}/collapse.nc",
+        f"{BASE_RUN}/collapse.nc",
     priority: collapse_priority
     params:
         mu=config["mu"],
@@ -65,6 +65,7 @@ rule collapse:
         checkpoint_every=config["collapse"]["checkpoint_every"],
         to_rest=run_to_rest_options,
         solver=config["solver"],
+        friction_law=friction_law_of,
     log:
         "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.log",
     benchmark:
@@ -73,14 +74,15 @@ rule collapse:
         "colsim collapse --input {input} --mu {params.mu} --mu-r {params.mu_r}"
         " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
         " --checkpoint-every {params.checkpoint_every} {params.to_rest} --solver {params.solver}"
+        " --friction-law {params.friction_law}"
         " --output {output} > {log} 2>&1"
 
 
 rule analyse:
     input:
-        f"{RUN}/collapse.nc",
+        f"{BASE_RUN}/collapse.nc",
     output:
-        f"{RUN}/analysis.nc",
+        f"{BASE_RUN}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
         check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
@@ -99,9 +101,9 @@ rule analyse:
 #   snakemake -j1 results/r0_2/seed_1/a_2/mu_r_0.12/vtk/collapse.pvd
 rule export_vtk:
     input:
-        f"{RUN}/collapse.nc",
+        f"{BASE_RUN}/collapse.nc",
     output:
-        f"{RUN}/vtk/collapse.pvd",
+        f"{BASE_RUN}/vtk/collapse.pvd",
     params:
         directory=output_directory,
     log:

@@ -1,0 +1,61 @@
+# The Coulomb (non-associated) friction law (config key friction_law; README, "Friction law"): the
+# study's collapse and analyse rules at a folder `coulomb` below each run, and, with
+# friction_law_comparison: true, the same runs under both laws in one table and figure.
+
+
+use rule collapse as collapse_coulomb with:
+    output:
+        f"{BASE_RUN}/coulomb/collapse.nc",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/collapse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/collapse.tsv"
+
+
+use rule analyse as analyse_coulomb with:
+    input:
+        f"{BASE_RUN}/coulomb/collapse.nc",
+    output:
+        f"{BASE_RUN}/coulomb/analysis.nc",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/analyse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/analyse.tsv"
+
+
+use rule export_vtk as export_vtk_coulomb with:
+    input:
+        f"{BASE_RUN}/coulomb/collapse.nc",
+    output:
+        f"{BASE_RUN}/coulomb/vtk/collapse.pvd",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/export_vtk.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/export_vtk.tsv"
+
+
+rule friction_law_comparison:
+    input:
+        associated=law_runs("analysis.nc", "associated"),
+        coulomb=law_runs("analysis.nc", "coulomb"),
+    output:
+        nc=f"{STUDY_DIR}/friction_law.nc",
+        markdown=report(
+            f"{STUDY_DIR}/friction_law.md",
+            caption="../report/friction_law_table.rst",
+            category="Friction law",
+            labels={"table": "both laws against Lube's laws"},
+        ),
+        figure=report(
+            f"{STUDY_DIR}/figures/friction_law.png",
+            caption="../report/friction_law.rst",
+            category="Friction law",
+            labels={"figure": "Friction laws"},
+        ),
+    log:
+        f"{STUDY_DIR}/logs/friction_law.log",
+    benchmark:
+        f"{STUDY_DIR}/benchmarks/friction_law.tsv"
+    shell:
+        "colsim compare-laws --associated {input.associated} --coulomb {input.coulomb}"
+        " --output {output.nc} --markdown {output.markdown} --figure {output.figure} > {log} 2>&1"
