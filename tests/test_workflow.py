@@ -64,8 +64,10 @@ def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
     assert result.returncode == 0, result.stderr[-3000:]
     planned = planned_outputs(result)
     simulated = [p for p in planned if p.startswith("results/r0_")]
-    expected_new = {f"results/r0_1/seed_2/a_{a}/mu_r_{m}/collapse.nc" for a in ("0.5", "1") for m in ("0", "0.06", "0.12")}
-    expected_new |= {f"results/r0_1/seed_1/a_{a}/mu_r_0.06/collapse.nc" for a in ("0.5", "1")}
+    # the tiny study's 40 steps are not the default's, so its runs sit in a folder named for them
+    expected_new = {f"results/r0_1/seed_2/a_{a}/mu_r_{m}/steps_40_t_4/collapse.nc"
+                    for a in ("0.5", "1") for m in ("0", "0.06", "0.12")}
+    expected_new |= {f"results/r0_1/seed_1/a_{a}/mu_r_0.06/steps_40_t_4/collapse.nc" for a in ("0.5", "1")}
     assert {p for p in simulated if p.endswith("collapse.nc")} == expected_new
     assert "results/r0_1/seed_2/packing.nc" in simulated
     assert "results/r0_1/seed_1/packing.nc" not in simulated
@@ -189,9 +191,9 @@ def test_the_default_study_plans_every_run(tmp_path):
     assert sum(p.endswith("analysis.nc") for p in planned) == 2 * 6 * 4
 
 
-def test_the_paper_study_plans_its_convergence_runs(tmp_path):
+def test_the_convergence_study_plans_its_runs(tmp_path):
     directory = copy_workflow(tmp_path)
-    result = snakemake(directory, "-n", "all", "--configfile", "config/paper.yaml", timeout=120)
+    result = snakemake(directory, "-n", "all", "--configfile", "config/convergence.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     planned = set(planned_outputs(result))
     run = "results/r0_2/seed_1/a_{a}/mu_r_0.12"
@@ -208,8 +210,8 @@ def test_the_paper_study_plans_its_convergence_runs(tmp_path):
     assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
     assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
     assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned
-    assert {"results/paper/summary.nc", "results/paper/lube_table.md", "results/paper/convergence.nc",
-            "results/paper/figures/convergence.png"} <= planned
+    assert {"results/convergence/summary.nc", "results/convergence/lube_table.md",
+            "results/convergence/convergence.nc", "results/convergence/figures/convergence.png"} <= planned
 
 
 def test_the_friction_law_study_plans_both_laws(tmp_path):
@@ -258,7 +260,7 @@ def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 2 and all("--mu-r 0.1308996938995747 " in c for c in commands), commands
-    assert all("mu_r_0.1309/collapse.nc" in c for c in commands)
+    assert all("mu_r_0.1309/steps_40_t_4/collapse.nc" in c for c in commands)
 
 
 TINY_CONVERGENCE = """

@@ -55,7 +55,8 @@ def cross_field_problem(config):
 
 
 with open(SCHEMA) as stream:
-    problem = schema_problem(config, yaml.safe_load(stream))
+    SCHEMA_TREE = yaml.safe_load(stream)
+problem = schema_problem(config, SCHEMA_TREE)
 if problem is None:
     validate(config, SCHEMA)   # fills in the defaults
     problem = cross_field_problem(config)
@@ -75,14 +76,16 @@ SEEDS = [str(s) for s in config["seeds"]]
 PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 
 
-# a run under the associated law; under coulomb its runs are in a folder `coulomb` below
+# A run's folder depends on the run alone, never on the study asking for it, so no two studies
+# overwrite each other's runs: a run with the schema's default steps and end time (CANONICAL) is
+# BASE_RUN, one with others is VARIANT below it, and a run under the Coulomb law is in a folder
+# `coulomb` below either.
 BASE_RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
-FRICTION_LAW = config["friction_law"]
-LAW_DIR = "" if FRICTION_LAW == "associated" else f"/{FRICTION_LAW}"
-# the study's runs
-RUN = BASE_RUN + LAW_DIR
-# a collapse with its own number of steps and end time (the convergence study; associated law)
 VARIANT = BASE_RUN + "/steps_{steps}_t_{duration}"
+_COLLAPSE_SCHEMA = SCHEMA_TREE["properties"]["collapse"]["properties"]
+CANONICAL = (int(_COLLAPSE_SCHEMA["steps"]["default"]), float(_COLLAPSE_SCHEMA["duration"]["default"]))
+FRICTION_LAW = config["friction_law"]
+STUDY_LENGTH = (int(config["collapse"]["steps"]), float(config["collapse"]["duration"]))
 # where the study's summary, tables and figures go (runs are shared between studies)
 STUDY_DIR = f"results/{config['study']}" if config["study"] else "results"
 # the report's description of the study, written with its summary (rule study_config)
@@ -98,15 +101,11 @@ wildcard_constraints:
     duration=r"[0-9][0-9.e+-]*",
 
 
-def runs(name, mu_r=None, seeds=None):
-    """Paths of one file `name` of every run of the study (optionally one mu_r, some seeds)."""
-    return expand(
-        f"{RUN}/{name}",
-        r0=R0,
-        seed=seeds or SEEDS,
-        a=ASPECT_RATIOS,
-        mu_r=MU_R if mu_r is None else [mu_r],
-    )
+def runs(name, mu_r=None, seeds=None, law=None):
+    """Paths of one file `name` of every run of the study (optionally one mu_r, some seeds, another
+    friction law than the study's)."""
+    return [run_path(name, R0, seed, a, m, law=law or FRICTION_LAW)
+            for seed in seeds or SEEDS for a in ASPECT_RATIOS for m in (MU_R if mu_r is None else [mu_r])]
 
 
 def side_view_mu_r():
@@ -140,31 +139,31 @@ def mu_r_value(wildcards):
 
 
 def collapse_steps(wildcards):
-    """Steps of a collapse: its own (a convergence variant's {steps}) or the study's."""
-    return wildcards.get("steps", config["collapse"]["steps"])
+    """Steps of a collapse: a variant's {steps}, else the canonical ones (its folder says which)."""
+    return int(wildcards.get("steps", CANONICAL[0]))
 
 
 def collapse_duration(wildcards):
-    """End time t/sqrt(h0/g) of a collapse: its own (a variant's {duration}) or the study's."""
-    return wildcards.get("duration", config["collapse"]["duration"])
+    """End time t/sqrt(h0/g) of a collapse: a variant's {duration}, else the canonical one."""
+    return float(wildcards.get("duration", CANONICAL[1]))
 
 
 def run_to_rest_options(wildcards):
     """colsim collapse options that run the study's collapses on to rest ("" without max_duration;
-    a convergence variant keeps its own fixed length)."""
+    a convergence run of other steps or end time than the study's keeps its fixed length)."""
     collapse = config["collapse"]
-    if collapse["max_duration"] is None or "steps" in wildcards.keys():
+    if collapse["max_duration"] is None or (collapse_steps(wildcards), collapse_duration(wildcards)) != STUDY_LENGTH:
         return ""
     return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
             f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")
 
 
-def run_path(name, r0, seed, a, mu_r, steps=None, duration=None):
-    """Path of file `name` of one run; a run with the study's own steps and end time is the study's run."""
-    collapse = config["collapse"]
-    steps = collapse["steps"] if steps is None else int(steps)
-    duration = collapse["duration"] if duration is None else float(duration)
-    pattern = RUN if (steps, duration) == (collapse["steps"], float(collapse["duration"])) else VARIANT
+def run_path(name, r0, seed, a, mu_r, steps=None, duration=None, law="associated"):
+    """Path of file `name` of one run (steps and end time: the study's unless given)."""
+    steps = STUDY_LENGTH[0] if steps is None else int(steps)
+    duration = STUDY_LENGTH[1] if duration is None else float(duration)
+    pattern = BASE_RUN if (steps, duration) == CANONICAL else VARIANT
+    pattern += "" if law == "associated" else f"/{law}"
     return pattern.format(r0=fmt(r0), seed=seed, a=fmt(a), mu_r=fmt(mu_r), steps=steps,
                           duration=fmt(duration)) + f"/{name}"
 
@@ -202,12 +201,6 @@ def friction_law_outputs():
     return [f"{STUDY_DIR}/friction_law.nc", f"{STUDY_DIR}/friction_law.md", f"{STUDY_DIR}/figures/friction_law.png"]
 
 
-def law_runs(name, law):
-    """Paths of file `name` of every run of the study under friction law `law`."""
-    return expand(BASE_RUN + ("" if law == "associated" else f"/{law}") + f"/{name}",
-                  r0=R0, seed=SEEDS, a=ASPECT_RATIOS, mu_r=MU_R)
-
-
 def friction_law_of(wildcards, output):
     """The friction law of a collapse, from its path (a folder `coulomb` holds the Coulomb runs)."""
     return "coulomb" if "/coulomb/" in output[0] else "associated"
@@ -223,8 +216,7 @@ def convergence_outputs():
 def collapse_priority(wildcards):
     """Scheduling priority of a collapse: 10 a (times its steps over the study's), so that the
     costliest columns run first."""
-    steps = int(wildcards.get("steps", config["collapse"]["steps"]))
-    return int(round(10 * float(wildcards.a) * steps / config["collapse"]["steps"]))
+    return int(round(10 * float(wildcards.a) * collapse_steps(wildcards) / STUDY_LENGTH[0]))
 
 
 def write_study_files(study, summary_path, template, config_path, description_path):

@@ -1,4 +1,4 @@
-# The convergence study (config key `convergence`, e.g. config/paper.yaml): collapses with their own
+# The convergence study (config key `convergence`, e.g. config/convergence.yaml): collapses with their own
 # number of steps and end time, then one table, its relative changes and a figure.
 
 

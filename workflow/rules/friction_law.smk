@@ -36,8 +36,8 @@ use rule export_vtk as export_vtk_coulomb with:
 
 rule friction_law_comparison:
     input:
-        associated=law_runs("analysis.nc", "associated"),
-        coulomb=law_runs("analysis.nc", "coulomb"),
+        associated=runs("analysis.nc", law="associated"),
+        coulomb=runs("analysis.nc", law="coulomb"),
     output:
         nc=f"{STUDY_DIR}/friction_law.nc",
         markdown=report(
@@ -59,3 +59,23 @@ rule friction_law_comparison:
     shell:
         "colsim compare-laws --associated {input.associated} --coulomb {input.coulomb}"
         " --output {output.nc} --markdown {output.markdown} --figure {output.figure} > {log} 2>&1"
+
+
+use rule collapse as collapse_variant_coulomb with:
+    output:
+        f"{VARIANT}/coulomb/collapse.nc",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/collapse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/collapse.tsv"
+
+
+use rule analyse as analyse_variant_coulomb with:
+    input:
+        f"{VARIANT}/coulomb/collapse.nc",
+    output:
+        f"{VARIANT}/coulomb/analysis.nc",
+    log:
+        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/analyse.log",
+    benchmark:
+        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/analyse.tsv"
