@@ -4,7 +4,7 @@ import pytest
 
 xr = pytest.importorskip("xarray")
 
-from colsim.convergence import converged_steps, time_step_means, convergence_markdown, runs_table  # noqa: E402
+from colsim.convergence import converged_steps, fit_converged_steps, time_step_means, convergence_markdown, runs_table  # noqa: E402
 
 
 def analysis(a=2.0, r0=2.0, seed=1, steps=100, duration=4.0, h=1.0, runout=1.5, mean_d=0.4):
@@ -66,6 +66,11 @@ def test_time_step_runs_are_averaged_over_seeds_and_the_converged_step_is_named(
     rows = [dict(row) for row in means]
     assert converged_steps(rows) == 500
     assert converged_steps(rows[:1]) is None
+    # the fit through all three levels: h = 1.11 (1 - 6.1 dt), run-out 2.29 (1 - 7.6 dt): within 3 % of
+    # X0 only below dt = 0.0039, finer than any level
+    assert fit_converged_steps(rows) is None
+    slow = [dict(row, h=1.0 + 0.1 * row["dt"], runout=2.0) for row in rows]   # c = 0.1: converged everywhere
+    assert fit_converged_steps(slow) == 250
     text = convergence_markdown(table)
     assert "| 2 | 2 | 500 | 0.008 | 3 | 1.060 | 0.010 |" in text
     assert "a = 2, r0 = 2: converged at 500 steps" in text

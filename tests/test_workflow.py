@@ -198,14 +198,14 @@ def test_the_convergence_study_plans_its_runs(tmp_path):
     planned = set(planned_outputs(result))
     run = "results/r0_2/seed_1/a_{a}/mu_r_0.12"
     for a in ("2", "5"):
-        for variant in ("steps_200_t_4", "steps_400_t_4", "steps_200_t_8"):   # dt/2, dt/4; run on to 8
+        for variant in ("steps_250_t_4", "steps_500_t_4", "steps_2000_t_4", "steps_2000_t_8"):  # run on to 8
             assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
-        assert f"{run.format(a=a)}/collapse.nc" in planned                    # 100 steps: the study's own
+        assert f"{run.format(a=a)}/collapse.nc" in planned                    # 1,000 steps: the default
     assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
     for r0, seeds in (("2", "123"), ("3", "123"), ("4", "1")):   # small columns run on to t = 8
         for a in ("0.5", "1"):
             for seed in seeds:
-                assert f"results/r0_{r0}/seed_{seed}/a_{a}/mu_r_0.12/steps_200_t_8/collapse.nc" in planned
+                assert f"results/r0_{r0}/seed_{seed}/a_{a}/mu_r_0.12/steps_2000_t_8/collapse.nc" in planned
     assert "results/r0_4/seed_2/packing.nc" not in planned
     assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
     assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned

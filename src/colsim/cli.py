@@ -115,7 +115,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="coulomb: stop the fixed point when its gap correction changes by less than this "
                         "many mean diameters (default: %(default)s)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
-    p.add_argument("--steps", type=_positive_int, default=100, help="number of equal steps (default: %(default)s)")
+    p.add_argument("--steps", type=_positive_int, default=1000,
+                   help="number of equal steps (default: %(default)s, converged; the paper's is 100)")
     p.add_argument("--max-duration", type=_positive, default=None,
                    help="go on past --duration at the same dt until the deposit is at rest, up to this "
                         "t / sqrt(h0/g) (default: stop at --duration)")
@@ -125,8 +126,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at rest: h_inf and r_inf moved less than this many mean diameters (default: %(default)s)")
     p.add_argument("--rest-energy", type=_positive, default=1e-2,
                    help="at rest: kinetic energy below this times its peak (default: %(default)s)")
-    p.add_argument("--frame-every", type=_positive_int, default=5, help="keep a frame every k steps (default: %(default)s)")
-    p.add_argument("--checkpoint-every", type=_positive_int, default=10, help="checkpoint every k steps (default: %(default)s)")
+    p.add_argument("--frame-every", type=_positive_int, default=25, help="keep a frame every k steps (default: %(default)s)")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=100, help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")
     _solver_arguments(p)
     p.add_argument("--output", required=True, help="trajectory file to write (netCDF)")

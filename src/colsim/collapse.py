@@ -47,10 +47,10 @@ class CollapseSettings:
     floor_mu: float | None = None       # None: same as mu
     floor_mu_r: float | None = None     # None: same as mu_r
     duration: float = 4.0
-    n_steps: int = 100
-    frame_every: int = 5
+    n_steps: int = 1000
+    frame_every: int = 25
     gravity: float = 9.81
-    checkpoint_every: int = 10
+    checkpoint_every: int = 100
     max_duration: float | None = None   # None: stop at `duration` (the paper)
     rest_window: float = 1.0             # t / sqrt(h0/g)
     rest_tolerance: float = 0.1          # mean diameters

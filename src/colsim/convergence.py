@@ -130,6 +130,20 @@ def converged_steps(rows: list[dict]) -> int | None:
     return finest["steps"]
 
 
+def fit_converged_steps(rows: list[dict]) -> int | None:
+    """The fewest steps of one column's refinement at which the straight-line fit X = X0 (1 + c dt)
+    over all levels (:func:`_linear_fit`) is within 3 % of its dt -> 0 value X0, for h_inf/r0 and
+    the run-out; None with fewer than three levels. Less sensitive to one level's seed noise than
+    :func:`converged_steps`, which compares with the finest level's mean alone."""
+    if len(rows) < 3:
+        return None
+    fits = [_linear_fit(rows, q) for q in ("h", "runout")]
+    for row in sorted(rows, key=lambda row: row["steps"]):
+        if all(abs(c * row["dt"]) <= CONVERGED_RELATIVE for _, c in fits):
+            return row["steps"]
+    return None
+
+
 def _linear_fit(rows, quantity) -> tuple[float, float]:
     """(value at dt -> 0, slope over it) of quantity = X0 + C dt fitted to the levels (least squares)."""
     dt = np.array([row["dt"] for row in rows])
@@ -159,10 +173,12 @@ def _time_step_lines(study) -> list[str]:
         steps = converged_steps(rows)
         if steps is not None:
             (h0, ch), (r_0, cr) = _linear_fit(rows, "h"), _linear_fit(rows, "runout")
+            fitted = fit_converged_steps(rows)
             verdicts.append(f"- a = {a:g}, r0 = {r0:g}: converged at {steps} steps (within "
                             f"{100 * CONVERGED_RELATIVE:g} % of the finest, or a third of its seed sd); "
                             f"fit X = X0 (1 + c dt/sqrt(h0/g)): h_inf/r0 X0 = {h0:.3f}, c = {ch:+.2f}; "
-                            f"run-out X0 = {r_0:.3f}, c = {cr:+.2f}")
+                            f"run-out X0 = {r_0:.3f}, c = {cr:+.2f}; the fit is within "
+                            f"{100 * CONVERGED_RELATIVE:g} % of X0 from {fitted or '-'} steps")
     return lines + ([""] + verdicts if verdicts else [])
 
 
