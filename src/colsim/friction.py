@@ -11,16 +11,15 @@ coulomb: De Saxce's bipotential, solved as in Acary and Cadoux (2013) and Krabbe
 
     with du' the previous iterate's local displacement, and the program is solved again until s
     stops changing (a fixed point of whole solves, each warm-started from the last forces, with a
-    per-contact secant step, :class:`_Secant`). At the
-    fixed point a sliding contact does not open: g + du_n = 0, while its force stays on the cone
-    (||q|| = mu p) and opposes the slip. With mu = mu_r = 0 the correction is zero and the two laws
+    per-contact secant step, :class:`_Secant`). At the fixed point a sliding contact does not
+    open: g + du_n = 0, while its force stays on the cone (||q|| = mu p) and opposes the slip. With mu = mu_r = 0 the correction is zero and the two laws
     are the same program.
 
 Stopping rule: the largest change of the correction s between two iterates, over the contacts,
 is at most `tolerance` times the mean particle diameter (the gap error the fixed point leaves).
 A fixed point not reached in `max_iter` solves is a :class:`SolverError` naming the step.
-The default, 1e-4 d, is the tightest that held on every step of the measured collapse (3e-5 d
-stalled at step 53): a hundredth of the associated law's hop in the fast flow there (mu |du_t|,
+The default, 1e-4 d, is the tightest that held on every step of a measured r0 = 2 collapse (3e-5 d
+stalled at step 53; README, "Friction law"): a hundredth of the associated law's hop in the fast flow there (mu |du_t|,
 about 1e-2 d a step). Cost there: 15 cone programs a step, 13x the APGD iterations and 11x the
 CPU of the associated law.
 """
@@ -34,6 +33,7 @@ from .program import ConeProgram, ConeSolution, Solver, SolverError, at_step
 from .state import FRICTION_LAWS, FrictionLaw
 
 __all__ = ["FRICTION_LAWS", "FrictionLaw", "dilation", "solve_step"]
+
 
 def dilation(program: ConeProgram, increments: np.ndarray) -> np.ndarray:
     """(m,) mu ||du_t|| + mu_r ||dphi|| of each contact for increments u (6n,) (length)."""
