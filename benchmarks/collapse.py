@@ -105,7 +105,8 @@ def main(argv=None):
     parser.add_argument("--aspect-ratio", type=float, default=5.0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--runs", nargs="+", choices=list(RUNS), default=list(RUNS))
-    parser.add_argument("--pack-solver", default="clarabel")
+    parser.add_argument("--pack-solver", default="auto",
+                        help="solver of `colsim pack` (default: %(default)s, as a user packs; clarabel: the reference)")
     parser.add_argument("--pack-dt", type=float, default=0.02)
     parser.add_argument("--clarabel-100-up-to", type=float, default=3.0, metavar="R0",
                         help="run clarabel-100 only up to this r0 (at r0 = 4 it takes 10-20 hours; "
