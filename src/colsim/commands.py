@@ -11,6 +11,7 @@ from . import analysis, io
 from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
 from .packing import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
 from .solvers import make_solver
+from .state import FRICTION_LAWS
 
 log = logging.getLogger("colsim")
 
@@ -201,7 +202,7 @@ def compare_laws(args):
     from .summary import collect_analyses, friction_law_comparison, friction_law_markdown
 
     summaries = {}
-    for law in ("associated", "coulomb"):
+    for law in FRICTION_LAWS:
         analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in getattr(args, law)]
         found = {a.attrs.get("friction_law", "associated") for a in analyses}
         if found != {law}:

@@ -108,11 +108,15 @@ def time_step_means(study) -> list[dict]:
     for a, r0, n in keys:
         pick = np.flatnonzero((study.aspect_ratio.values == a) & (study.r0.values == r0) & (study.n_steps.values == n))
         h, r = study.h_inf_over_r0.values[pick], study.runout_over_r0.values[pick]
-        sd = (lambda v: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0)
         rows.append({"a": a, "r0": r0, "steps": n, "dt": float(study.scaled_dt.values[pick[0]]),
-                     "seeds": len(pick), "h": float(h.mean()), "h_sd": sd(h),
-                     "runout": float(r.mean()), "runout_sd": sd(r)})
+                     "seeds": len(pick), "h": float(h.mean()), "h_sd": _sample_sd(h),
+                     "runout": float(r.mean()), "runout_sd": _sample_sd(r)})
     return rows
+
+
+def _sample_sd(values) -> float:
+    """Sample standard deviation (ddof 1); 0 for a single value."""
+    return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
 
 
 def converged_steps(rows: list[dict]) -> int | None:

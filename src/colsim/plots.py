@@ -86,6 +86,21 @@ def _law_abscissa(end: float):
     return np.concatenate(pieces[:-1])
 
 
+def _against_aspect_ratio(ax, ratios, span, series) -> None:
+    """Draw `series`, [(label, values (aspect_ratio, seed))], against a on `ax`: the
+    mean over seeds with min-max bars, side by side so the bars stay readable; then the axes."""
+    for k, (label, values) in enumerate(series):
+        mean, low, high = _seed_spread(values)
+        dodge = (k - (len(series) - 1) / 2) * 0.012 * span[-1]
+        ax.errorbar(ratios + dodge, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
+                    label=label)
+    ax.set_xlabel("aspect ratio a = h0/r0")
+    ax.set_xlim(0, span[-1])
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+
+
 def law_figure(summary, variable: str, path: Path) -> Path:
     """`variable` (h_inf_over_r0 or runout_over_r0) against a: markers per mu_r, laws as curves."""
     plt = _pyplot()
@@ -95,18 +110,10 @@ def law_figure(summary, variable: str, path: Path) -> Path:
     for (name, law), style in zip(LAWS[variable].items(), LAW_STYLES):
         ax.plot(span, law(span), style, color="0.35", lw=1.2, label=name)
     data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
-    n_mu_r = summary.sizes["mu_r"]
-    for k, mu_r in enumerate(summary["mu_r"].values):
-        mean, low, high = _seed_spread(data.isel(mu_r=k).values)
-        dodge = (k - (n_mu_r - 1) / 2) * 0.012 * span[-1]  # side by side, so the bars stay readable
-        ax.errorbar(ratios + dodge, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
-                    label=f"colsim, $\\mu_r$ = {mu_r:g}")
-    ax.set_xlabel("aspect ratio a = h0/r0")
+    _against_aspect_ratio(ax, ratios, span,
+                          [(f"colsim, $\\mu_r$ = {mu_r:g}", data.isel(mu_r=k).values)
+                           for k, mu_r in enumerate(summary["mu_r"].values)])
     ax.set_ylabel(_label(summary[variable], variable))
-    ax.set_xlim(0, span[-1])
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
     ax.set_title(f"r0 = {summary.attrs.get('r0', float('nan')):g}, mu = {summary.attrs.get('mu', float('nan')):g}, "
                  f"{summary.sizes['seed']} seed(s)", fontsize=9)
     return _save(fig, path)
@@ -122,17 +129,11 @@ def friction_law_figure(comparison, path: Path) -> Path:
     mu_r = float(comparison["mu_r"].values[0])
     for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
         ax.plot(span, LAWS[variable]["Lube et al. (2004)"](span), "-", color="0.35", lw=1.2, label="Lube et al. (2004)")
-        for k, name in enumerate(comparison["friction_law"].values):
-            data = comparison[variable].sel(friction_law=name, mu_r=mu_r).transpose("aspect_ratio", "seed")
-            mean, low, high = _seed_spread(data.values)
-            ax.errorbar(ratios + (k - 0.5) * 0.012 * span[-1], mean, yerr=[low, high],
-                        fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3, label=f"colsim, {name}")
-        ax.set_xlabel("aspect ratio a = h0/r0")
+        data = comparison[variable].sel(mu_r=mu_r).transpose("friction_law", "aspect_ratio", "seed")
+        _against_aspect_ratio(ax, ratios, span,
+                              [(f"colsim, {name}", data.sel(friction_law=name).values)
+                               for name in comparison["friction_law"].values])
         ax.set_ylabel(_label(comparison[variable], variable))
-        ax.set_xlim(0, span[-1])
-        ax.set_ylim(bottom=0)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
     fig.suptitle(f"friction laws, r0 = {comparison.attrs.get('r0', float('nan')):g}, mu_r = {mu_r:g}", fontsize=10)
     return _save(fig, path)
 
