@@ -6,6 +6,7 @@ schedules only the new jobs, and that a wrong configuration stops snakemake nami
 """
 import numpy as np
 import pytest
+import yaml
 
 from helpers import FIGURES, ROOT, SUMMARY_VARIABLES, TINY, copy_workflow, planned_outputs, snakemake
 
@@ -293,3 +294,21 @@ def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
     assert (tiny_study / TINY / "figures" / "convergence.png").stat().st_size > 10000
     lube = (tiny_study / TINY / "lube_table.md").read_text()
     assert "| Lube |" in lube and "| 0.5 | " in lube and "| 1 | " in lube
+
+
+def test_every_simulating_rule_has_its_slurm_resources(tmp_path):
+    """A rule made by `use rule` (collapse_variant, collapse_coulomb, ...) does not get its parent's
+    resources from the SLURM profile: each must be named there, with at least its parent's."""
+    directory = copy_workflow(tmp_path)
+    listed = snakemake(directory, "--list-rules", timeout=120)
+    assert listed.returncode == 0, listed.stderr[-3000:]
+    rules = {line.split()[0] for line in listed.stdout.splitlines() if line.strip()}
+    profile = yaml.safe_load((ROOT / "workflow" / "profiles" / "slurm" / "config.yaml").read_text())
+    resources = profile["set-resources"]
+    for parent in ("collapse", "analyse"):
+        children = {rule for rule in rules if rule.startswith(parent)}
+        assert {parent, f"{parent}_variant", f"{parent}_coulomb"} <= children
+        for rule in children:
+            assert rule in resources, f"{rule} has no resources in workflow/profiles/slurm"
+            for key in ("runtime", "mem_mb"):
+                assert resources[rule][key] >= resources[parent][key], (rule, key)
