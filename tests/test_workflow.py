@@ -312,3 +312,16 @@ def test_every_simulating_rule_has_its_slurm_resources(tmp_path):
             assert rule in resources, f"{rule} has no resources in workflow/profiles/slurm"
             for key in ("runtime", "mem_mb"):
                 assert resources[rule][key] >= resources[parent][key], (rule, key)
+
+
+def test_a_packing_filled_with_friction_has_its_own_tree(tmp_path):
+    """pack.mu > 0 packs and runs below results/pack_mu_{mu}/ (logs and benchmarks too), with
+    --mu reaching colsim pack: the default packings' runs are never overwritten."""
+    directory = copy_workflow(tmp_path)
+    (directory / "loose.yaml").write_text("pack: {mu: 0.2}\n")
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "loose.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    runs = [p for p in planned_outputs(result) if p.endswith(("packing.nc", "column.nc", "collapse.nc", "analysis.nc"))]
+    assert len(runs) == 1 + 2 + 4 + 4
+    assert all(p.startswith("results/pack_mu_0.2/r0_1/seed_1/") for p in runs), runs
+    assert "--mu 0.2 " in result.stdout and "results/pack_mu_0.2/logs/r0_1/seed_1/pack.log" in result.stdout

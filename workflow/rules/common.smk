@@ -80,12 +80,28 @@ PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 # overwrite each other's runs: a run with the schema's default steps and end time (CANONICAL) is
 # BASE_RUN, one with others is VARIANT below it, and a run under the Coulomb law is in a folder
 # `coulomb` below either.
-BASE_RUN = "results/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}"
+# A packing filled with friction (pack.mu > 0) and its runs are another tree, results/pack_mu_{mu}/,
+# so they never overwrite the default packings' runs.
+RUNS = "results" if config["pack"]["mu"] == 0 else f"results/pack_mu_{fmt(config['pack']['mu'])}"
+PACKING_DIR = RUNS + "/r0_{r0}/seed_{seed}"
+BASE_RUN = PACKING_DIR + "/a_{a}/mu_r_{mu_r}"
 VARIANT = BASE_RUN + "/steps_{steps}_t_{duration}"
 _COLLAPSE_SCHEMA = SCHEMA_TREE["properties"]["collapse"]["properties"]
 CANONICAL = (int(_COLLAPSE_SCHEMA["steps"]["default"]), float(_COLLAPSE_SCHEMA["duration"]["default"]))
 FRICTION_LAW = config["friction_law"]
 STUDY_LENGTH = (int(config["collapse"]["steps"]), float(config["collapse"]["duration"]))
+
+
+def logged(path):
+    """The log file of a job whose output is `path` (below RUNS): the same path below RUNS/logs."""
+    return f"{RUNS}/logs{path[len(RUNS):]}"
+
+
+def benchmarked(path):
+    """The benchmark file of a job whose output is `path` (below RUNS): below RUNS/benchmarks."""
+    return f"{RUNS}/benchmarks{path[len(RUNS):]}"
+
+
 # where the study's summary, tables and figures go (runs are shared between studies)
 STUDY_DIR = f"results/{config['study']}" if config["study"] else "results"
 # the report's description of the study, written with its summary (rule study_config)

@@ -8,9 +8,9 @@ use rule collapse as collapse_variant with:
     output:
         f"{VARIANT}/collapse.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/collapse.log",
+        logged(f"{VARIANT}/collapse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/collapse.tsv"
+        benchmarked(f"{VARIANT}/collapse.tsv")
 
 
 use rule analyse as analyse_variant with:
@@ -19,9 +19,9 @@ use rule analyse as analyse_variant with:
     output:
         f"{VARIANT}/analysis.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/analyse.log",
+        logged(f"{VARIANT}/analyse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/analyse.tsv"
+        benchmarked(f"{VARIANT}/analyse.tsv")
 
 
 rule convergence:

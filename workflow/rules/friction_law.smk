@@ -7,9 +7,9 @@ use rule collapse as collapse_coulomb with:
     output:
         f"{BASE_RUN}/coulomb/collapse.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/collapse.log",
+        logged(f"{BASE_RUN}/coulomb/collapse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/collapse.tsv"
+        benchmarked(f"{BASE_RUN}/coulomb/collapse.tsv")
 
 
 use rule analyse as analyse_coulomb with:
@@ -18,9 +18,9 @@ use rule analyse as analyse_coulomb with:
     output:
         f"{BASE_RUN}/coulomb/analysis.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/analyse.log",
+        logged(f"{BASE_RUN}/coulomb/analyse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/analyse.tsv"
+        benchmarked(f"{BASE_RUN}/coulomb/analyse.tsv")
 
 
 use rule export_vtk as export_vtk_coulomb with:
@@ -29,9 +29,9 @@ use rule export_vtk as export_vtk_coulomb with:
     output:
         f"{BASE_RUN}/coulomb/vtk/collapse.pvd",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/export_vtk.log",
+        logged(f"{BASE_RUN}/coulomb/export_vtk.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/coulomb/export_vtk.tsv"
+        benchmarked(f"{BASE_RUN}/coulomb/export_vtk.tsv")
 
 
 rule friction_law_comparison:
@@ -65,9 +65,9 @@ use rule collapse as collapse_variant_coulomb with:
     output:
         f"{VARIANT}/coulomb/collapse.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/collapse.log",
+        logged(f"{VARIANT}/coulomb/collapse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/collapse.tsv"
+        benchmarked(f"{VARIANT}/coulomb/collapse.tsv")
 
 
 use rule analyse as analyse_variant_coulomb with:
@@ -76,6 +76,6 @@ use rule analyse as analyse_variant_coulomb with:
     output:
         f"{VARIANT}/coulomb/analysis.nc",
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/analyse.log",
+        logged(f"{VARIANT}/coulomb/analyse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/steps_{steps}_t_{duration}/coulomb/analyse.tsv"
+        benchmarked(f"{VARIANT}/coulomb/analyse.tsv")

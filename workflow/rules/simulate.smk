@@ -5,7 +5,7 @@
 
 rule pack:
     output:
-        "results/r0_{r0}/seed_{seed}/packing.nc",
+        f"{PACKING_DIR}/packing.nc",
     priority: 1000
     params:
         height=pack_height,
@@ -20,9 +20,9 @@ rule pack:
         mu=config["pack"]["mu"],
         solver=config["solver"],
     log:
-        "results/logs/r0_{r0}/seed_{seed}/pack.log",
+        logged(f"{PACKING_DIR}/pack.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/pack.tsv"
+        benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
         "colsim pack --r0 {wildcards.r0} --height {params.height} --seed {wildcards.seed}"
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
@@ -35,14 +35,14 @@ rule pack:
 # passed up the DAG, so without this the columns of the tallest collapses were cut last).
 rule trim:
     input:
-        "results/r0_{r0}/seed_{seed}/packing.nc",
+        f"{PACKING_DIR}/packing.nc",
     output:
-        "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+        f"{PACKING_DIR}/a_{{a}}/column.nc",
     priority: 1000
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/trim.log",
+        logged(f"{PACKING_DIR}/a_{{a}}/trim.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/trim.tsv"
+        benchmarked(f"{PACKING_DIR}/a_{{a}}/trim.tsv")
     shell:
         "colsim trim --input {input} --aspect-ratio {wildcards.a} --output {output} > {log} 2>&1"
 
@@ -52,7 +52,7 @@ rule trim:
 # Taller columns start first (their cost grows like a^2): the longest jobs do not end up last, alone.
 rule collapse:
     input:
-        "results/r0_{r0}/seed_{seed}/a_{a}/column.nc",
+        f"{PACKING_DIR}/a_{{a}}/column.nc",
     output:
         f"{BASE_RUN}/collapse.nc",
     priority: collapse_priority
@@ -67,9 +67,9 @@ rule collapse:
         solver=config["solver"],
         friction_law=friction_law_of,
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.log",
+        logged(f"{BASE_RUN}/collapse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/collapse.tsv"
+        benchmarked(f"{BASE_RUN}/collapse.tsv")
     shell:
         "colsim collapse --input {input} --mu {params.mu} --mu-r {params.mu_r}"
         " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
@@ -88,9 +88,9 @@ rule analyse:
         check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
         mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.log",
+        logged(f"{BASE_RUN}/analyse.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/analyse.tsv"
+        benchmarked(f"{BASE_RUN}/analyse.tsv")
     shell:
         "colsim analyse --input {input} --contact-tolerance {params.contact_tolerance}"
         " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
@@ -107,8 +107,8 @@ rule export_vtk:
     params:
         directory=output_directory,
     log:
-        "results/logs/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/export_vtk.log",
+        logged(f"{BASE_RUN}/export_vtk.log"),
     benchmark:
-        "results/benchmarks/r0_{r0}/seed_{seed}/a_{a}/mu_r_{mu_r}/export_vtk.tsv"
+        benchmarked(f"{BASE_RUN}/export_vtk.tsv")
     shell:
         "colsim export-vtk --input {input} --output-dir {params.directory} > {log} 2>&1"
