@@ -230,7 +230,9 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
             assert f"{run.format(s=s, a=a)}/coulomb/analysis.nc" in planned
     assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
     commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
-    assert sum("--friction-law coulomb" in c and "/coulomb/collapse.nc" in c for c in commands) == 9
+    assert sum("--friction-law coulomb --friction-tolerance 0.0003" in c and "/coulomb/collapse.nc" in c
+               for c in commands) == 9
+    assert not any("--friction-tolerance" in c for c in commands if "/coulomb/" not in c)
     assert sum("--friction-law associated" in c and "/coulomb/" not in c for c in commands) == 9
     (directory / "coulomb.yaml").write_text("friction_law: coulomb\n")
     alone = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
@@ -325,3 +327,11 @@ def test_a_packing_filled_with_friction_has_its_own_tree(tmp_path):
     assert len(runs) == 1 + 2 + 4 + 4
     assert all(p.startswith("results/pack_mu_0.2/r0_1/seed_1/") for p in runs), runs
     assert "--mu 0.2 " in result.stdout and "results/pack_mu_0.2/logs/r0_1/seed_1/pack.log" in result.stdout
+
+
+def test_the_friction_tolerance_has_one_default():
+    """config.yaml, the schema and colsim (FrictionLaw, so the CLI) agree on the fixed point's tolerance."""
+    from colsim.state import FrictionLaw
+    schema = yaml.safe_load((ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    assert schema["properties"]["friction_tolerance"]["default"] == config["friction_tolerance"] == FrictionLaw().tolerance

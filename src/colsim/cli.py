@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from .solvers import SOLVERS
-from .state import FRICTION_LAWS
+from .state import FRICTION_LAWS, FrictionLaw
 
 log = logging.getLogger("colsim")
 
@@ -111,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--friction-law", choices=FRICTION_LAWS, default="associated",
                    help="associated (the paper's: a sliding contact opens by mu |du_t| a step) or coulomb "
                         "(non-associated: it does not; a fixed point of cone programs) (default: %(default)s)")
-    p.add_argument("--friction-tolerance", type=_positive, default=1e-4,
+    p.add_argument("--friction-tolerance", type=_positive, default=FrictionLaw().tolerance,
                    help="coulomb: stop the fixed point when its gap correction changes by less than this "
                         "many mean diameters (default: %(default)s)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")

@@ -56,7 +56,7 @@ class CollapseSettings:
     rest_tolerance: float = 0.1          # mean diameters
     rest_energy: float = 1e-2            # of the peak kinetic energy
     friction_law: str = "associated"     # or "coulomb" (colsim.friction)
-    friction_tolerance: float = 1e-4     # coulomb's fixed point, mean diameters
+    friction_tolerance: float = FrictionLaw().tolerance     # coulomb's fixed point, mean diameters
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
@@ -263,6 +263,8 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
                           "duration": settings.scaled_time(len(run.diagnostics)),
                           "n_steps": len(run.diagnostics),
                           "wall_time": run.wall_time, "density": float(run.initial.density)})
+    if settings.friction_law == "coulomb":   # the fixed point's stopping rule, mean diameters
+        dataset.attrs["friction_tolerance"] = settings.friction_tolerance
     if settings.max_duration is not None:   # the run went on towards rest: say how far and whether
         dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
                               "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy,

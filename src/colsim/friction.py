@@ -18,16 +18,19 @@ coulomb: De Saxce's bipotential, solved as in Acary and Cadoux (2013) and Krabbe
 Stopping rule: the largest change of the correction s between two iterates, over the contacts,
 is at most `tolerance` times the mean particle diameter (the gap error the fixed point leaves).
 A fixed point not reached in `max_iter` solves is a :class:`SolverError` naming the step.
-The default, 1e-4 d, is the tightest that held on every step of a measured r0 = 2 collapse (3e-5 d
-stalled at step 53; README, "Friction law"): a hundredth of the associated law's hop in the fast flow there (mu |du_t|,
-about 1e-2 d a step). Cost there: 15 cone programs a step, 13x the APGD iterations and 11x the
-CPU of the associated law.
+The default, 3e-4 d (at most 100 solves), is what held in the fast flow of the r0 = 2, a = 5 columns
+(README, "Friction law"): there the largest change wanders at 1e-4 to 5e-4 d after 20-30 solves (a
+few of 8,000 contacts, different ones each time), and 1e-4 d stopped three seeds at steps 21, 28
+and 40; 3e-4 d held through the first 100 steps in 15 solves a step (31 at most). It is 3 % of the
+associated law's hop in the fast flow (mu |du_t|, about 1e-2 d a step).
 
 Whole solves, not a correction folded into the APGD iteration, by measurement: on the first warm
 step of that column, APGD with s updated every 10, 50 or 100 iterations (plain or secant updates,
 with or without a momentum restart, or only once the iterate met 10x the tolerance) left the
 relative residuals at 5e-4 to 2e-2 after 20,000 iterations; whole solves took 6,400 APGD
-iterations in all (15 programs) on average over the first 100 steps.
+iterations in all (15 programs) on average over the first 100 steps. Starting s from the previous
+step's correction (matched by pair) instead of 0 took more solves, not fewer: 23.5 a step (47 at
+most) over the first 60 steps of an a = 5 column at 1e-4 d.
 """
 from __future__ import annotations
 

@@ -132,8 +132,8 @@ class FrictionLaw:
     most cone programs solved per step (max_iter)."""
 
     name: str = "associated"
-    tolerance: float = 1e-4
-    max_iter: int = 50
+    tolerance: float = 3e-4
+    max_iter: int = 100
 
     def __post_init__(self):
         if self.name not in FRICTION_LAWS:

@@ -222,6 +222,13 @@ def friction_law_of(wildcards, output):
     return "coulomb" if "/coulomb/" in output[0] else "associated"
 
 
+def friction_options(wildcards, output):
+    """What follows --friction-law on a collapse's command line: the law, and for a Coulomb run the
+    fixed point's tolerance (so that changing it reruns the Coulomb runs only)."""
+    law = friction_law_of(wildcards, output)
+    return law + (f" --friction-tolerance {config['friction_tolerance']}" if law == "coulomb" else "")
+
+
 def convergence_outputs():
     """The convergence study's products, or none."""
     if not config.get("convergence"):
