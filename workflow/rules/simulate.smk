@@ -65,7 +65,7 @@ rule collapse:
         checkpoint_every=config["collapse"]["checkpoint_every"],
         to_rest=run_to_rest_options,
         solver=config["solver"],
-        friction=friction_options,
+        friction_law=friction_options,
     log:
         logged(f"{BASE_RUN}/collapse.log"),
     benchmark:
@@ -74,7 +74,7 @@ rule collapse:
         "colsim collapse --input {input} --mu {params.mu} --mu-r {params.mu_r}"
         " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
         " --checkpoint-every {params.checkpoint_every} {params.to_rest} --solver {params.solver}"
-        " --friction-law {params.friction}"
+        " --friction-law {params.friction_law}"
         " --output {output} > {log} 2>&1"
 
 
