@@ -230,7 +230,7 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
             assert f"{run.format(s=s, a=a)}/coulomb/analysis.nc" in planned
     assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
     commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
-    assert sum("--friction-law coulomb --friction-tolerance 0.0003" in c and "/coulomb/collapse.nc" in c
+    assert sum("--friction-law coulomb --friction-tolerance 1e-05" in c and "/coulomb/collapse.nc" in c
                for c in commands) == 9
     assert not any("--friction-tolerance" in c for c in commands if "/coulomb/" not in c)
     assert sum("--friction-law associated" in c and "/coulomb/" not in c for c in commands) == 9

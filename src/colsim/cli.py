@@ -112,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="associated (the paper's: a sliding contact opens by mu |du_t| a step) or coulomb "
                         "(non-associated: it does not; a fixed point of cone programs) (default: %(default)s)")
     p.add_argument("--friction-tolerance", type=_positive, default=FrictionLaw().tolerance,
-                   help="coulomb: stop the fixed point when its gap correction changes by less than this "
-                        "many mean diameters (default: %(default)s)")
+                   help="coulomb: stop the fixed point when its gap correction changes by at most this "
+                        "many mean diameters, root mean square over the contacts (default: %(default)s)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
     p.add_argument("--steps", type=_positive_int, default=1000,
                    help="number of equal steps (default: %(default)s, converged; the paper's is 100)")

@@ -132,7 +132,7 @@ class FrictionLaw:
     most cone programs solved per step (max_iter)."""
 
     name: str = "associated"
-    tolerance: float = 3e-4
+    tolerance: float = 1e-5
     max_iter: int = 100
 
     def __post_init__(self):
