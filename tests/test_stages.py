@@ -408,12 +408,13 @@ def test_a_column_of_less_than_a_layer_is_an_error(tmp_path, capsys):
     assert not (tmp_path / "x.nc").exists()
 
 
-def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40):
-    """A small analysis file as `colsim analyse` writes it, with its configuration chain."""
+def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40, **collapse):
+    """A small analysis file as `colsim analyse` writes it, with its configuration chain (collapse:
+    more `colsim collapse` options)."""
     xr = pytest.importorskip("xarray")
     config = {"command": "analyse", "contact_tolerance": 0.01, "input": "collapse.nc",
               "input_config": {"command": "collapse", "steps": steps, "mu_r": 0.12, "output": "collapse.nc",
-                               "input_config": {"command": "trim", "aspect_ratio": aspect_ratio}}}
+                               **collapse, "input_config": {"command": "trim", "aspect_ratio": aspect_ratio}}}
     attrs = {**io.global_attributes(io.ANALYSIS_KIND, "t", config, seed=1), "aspect_ratio": aspect_ratio,
              "mu_r": 0.12, "mu": 0.577, "r0": r0, "h0": aspect_ratio * r0, "duration": 4.0, "n_steps": steps}
     data = {name: ((), 1.0, {"units": "1", "long_name": name}) for name in SUMMARY_VARIABLES}
@@ -423,6 +424,8 @@ def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40):
 @pytest.mark.parametrize("first, second, field", [
     ({"r0": 1.5}, {"r0": 1.0}, "runs differ in r0: 1.5 in"),
     ({"steps": 40}, {"steps": 80}, "runs differ in collapse.steps: 40 in"),
+    ({"friction_law": "coulomb", "friction_tolerance": 1e-5}, {"friction_law": "coulomb", "friction_tolerance": 1e-4},
+     "runs differ in collapse.friction_tolerance: 1e-05 in"),
 ])
 def test_collect_refuses_runs_that_differ_in_an_unswept_setting(tmp_path, capsys, first, second, field):
     """Issue 16, defect 5: collecting an r0 = 1.5 analysis with an r0 = 1 one names the field."""
@@ -433,6 +436,14 @@ def test_collect_refuses_runs_that_differ_in_an_unswept_setting(tmp_path, capsys
     assert len(err.splitlines()) == 1 and field in err and "a.nc" in err and "b.nc" in err, err
     assert not (tmp_path / "summary.nc").exists()
     _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, **first)      # same settings: collected
+    assert _main_in(tmp_path, ["collect", "a.nc", "b.nc", "--output", "summary.nc"]) == 0
+
+
+def test_associated_runs_are_collected_whatever_their_unused_friction_tolerance(tmp_path):
+    """The Coulomb fixed point's tolerance does not touch an associated run (its CLI default changed
+    from 1e-4 to 1e-5): runs made before and after are one study."""
+    _analysis_file(tmp_path / "a.nc", aspect_ratio=1.0, friction_law="associated", friction_tolerance=1e-4)
+    _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, friction_law="associated", friction_tolerance=1e-5)
     assert _main_in(tmp_path, ["collect", "a.nc", "b.nc", "--output", "summary.nc"]) == 0
 
 

@@ -34,13 +34,15 @@ NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every"
 
 def run_settings(analysis) -> dict:
     """A run's settings, flattened: r0 and mu, and each stage's options from the configuration
-    chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS."""
+    chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS and the
+    Coulomb fixed point's tolerance of an associated run (which does not use it)."""
     settings = {name: float(analysis.attrs[name]) for name in ("r0", "mu") if name in analysis.attrs}
     config = json.loads(analysis.attrs.get("config", "{}"))
     while config:
         stage = config.get("command", "stage")
+        unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
         settings |= {f"{stage}.{key}": value for key, value in config.items()
-                     if key not in NOT_SETTINGS and key != "input_config"}
+                     if key not in NOT_SETTINGS | unused and key != "input_config"}
         config = config.get("input_config") or {}
     return settings
 
