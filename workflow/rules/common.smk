@@ -217,16 +217,13 @@ def friction_law_outputs():
     return [f"{STUDY_DIR}/friction_law.nc", f"{STUDY_DIR}/friction_law.md", f"{STUDY_DIR}/figures/friction_law.png"]
 
 
-def friction_law_of(wildcards, output):
-    """The friction law of a collapse, from its path (a folder `coulomb` holds the Coulomb runs)."""
-    return "coulomb" if "/coulomb/" in output[0] else "associated"
-
-
 def friction_options(wildcards, output):
-    """What follows --friction-law on a collapse's command line: the law, and for a Coulomb run the
-    fixed point's tolerance (so that changing it reruns the Coulomb runs only)."""
-    law = friction_law_of(wildcards, output)
-    return law + (f" --friction-tolerance {config['friction_tolerance']}" if law == "coulomb" else "")
+    """What follows --friction-law on a collapse's command line: the law, from the run's path (a
+    folder `coulomb` holds the Coulomb runs), and for a Coulomb run the fixed point's tolerance (so
+    that changing it reruns the Coulomb runs only)."""
+    if "/coulomb/" not in output[0]:
+        return "associated"
+    return f"coulomb --friction-tolerance {config['friction_tolerance']}"
 
 
 def convergence_outputs():
