@@ -26,6 +26,7 @@ def test_check_variables_become_one_column_per_value():
 
 
 def test_lube_table_reports_zero_error_on_the_law_itself():
+    """Lube's own values give +0 % against Lube, and the stated errors against Lajeunesse."""
     ratios = np.array([0.5, 2.0, 5.0])
     h = np.stack([lube_height(ratios)] * 2, axis=-1)[:, None, :]
     r = np.stack([lube_runout(ratios)] * 2, axis=-1)[:, None, :]
@@ -34,8 +35,10 @@ def test_lube_table_reports_zero_error_on_the_law_itself():
                          coords={"aspect_ratio": ratios, "mu_r": [0.12], "seed": [1, 2]})
     text = lube_markdown(summary)
     assert "mean of 2 seeds" in text
-    assert text.count("+0 %") == 6
+    assert text.count("+0 %") == 7  # six against Lube, and a = 0.5's height against Lajeunesse (both a)
     assert "| 0.5 | 0.500 | 0.000 | 0.500 | +0 % | 0.620 |" in text
+    # Lajeunesse at a = 2: h_inf/r0 = 0.74 a = 1.480, run-out 2 a^0.5 = 2.828
+    assert "| 2.263 | +0 % | 1.480 | -33 % | 2.828 | -20 % |" in text
 
 
 def test_other_runout_measures_are_tabled_against_lube():

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import xarray as xr
 
-from .laws import lube_height, lube_runout
+from .laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -170,22 +170,27 @@ def runout_measures_markdown(summary) -> str:
 
 
 def lube_markdown(summary) -> str:
-    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and a."""
+    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and
+    a, with the error against Lajeunesse et al. beside (its height law as the paper prints it)."""
     lines = []
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
         seeds = int(np.isfinite(part.h_inf_over_r0.values).sum(axis=-1).min())
         lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
-                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
+                  "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for a in part.aspect_ratio.values:
             h = part.h_inf_over_r0.sel(aspect_ratio=a).values
             r = part.runout_over_r0.sel(aspect_ratio=a).values
             h_mean, r_mean = np.nanmean(h), np.nanmean(r)
-            h_law, r_law = lube_height(a), lube_runout(a)
-            lines.append(f"| {a:g} | {h_mean:.3f} | {np.nanmax(h) - np.nanmin(h):.3f} | {h_law:.3f} | "
-                         f"{100 * (h_mean - h_law) / h_law:+.0f} % | {r_mean:.3f} | {np.nanmax(r) - np.nanmin(r):.3f} | "
-                         f"{r_law:.3f} | {100 * (r_mean - r_law) / r_law:+.0f} % |")
+            cells = [f"{a:g}"]
+            for mean, values, law in ((h_mean, h, lube_height(a)), (r_mean, r, lube_runout(a))):
+                cells += [f"{mean:.3f}", f"{np.nanmax(values) - np.nanmin(values):.3f}", f"{law:.3f}",
+                          _error(mean, law)]
+            for mean, law in ((h_mean, lajeunesse_height(a)), (r_mean, lajeunesse_runout(a))):
+                cells += [f"{law:.3f}", _error(mean, law)]
+            lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
         lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
@@ -193,6 +198,11 @@ def lube_markdown(summary) -> str:
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
     return "\n".join(lines)
+
+
+def _error(value: float, law: float) -> str:
+    """The relative error of value against law, in percent, signed."""
+    return f"{100 * (value - law) / law:+.0f} %"
 
 
 def friction_law_comparison(summaries) -> xr.Dataset:
