@@ -30,10 +30,10 @@ associated law's mean dilation in the fast flow, and it bounds every contact by 
 Damping: the secant steps are halved (:class:`_Secant`). Undamped, one of those three columns
 (seed 1, step 296, mid-collapse) cycled at 2e-5 to 1.5e-4 d rms for 150 programs, and so it did
 with APGD at 1e-7 instead of 1e-5 and with Clarabel for every solve (40 programs): the cycle is the
-fixed-point map's, not the solver's. On that step the halved secant converged in 26 programs, the
-halved plain step in 42, a damping halved after each 5 programs without progress (down to 1/64) in 135; over
-the first 150 steps of that column the halved secant took 18.9 programs a step (37 at most)
-against 16.4 (25) undamped, 11 % more CPU.
+fixed-point map's, not the solver's. On that step the halved secant converged in 26 programs,
+the halved plain step in 42, a damping halved after each 5 programs without progress (down to
+1/64) in 135; over the first 150 steps of that column the halved secant took 18.9 programs a step
+(37 at most) against 16.4 (25) undamped, 11 % more CPU.
 
 Whole solves, not a correction folded into the APGD iteration, by measurement: on the first warm
 step of that column, APGD with s updated every 10, 50 or 100 iterations (plain or secant updates,
