@@ -164,7 +164,7 @@ def runout_measures_markdown(summary) -> str:
             law = lube_runout(a)
             values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
                 np.nanmean(part.mass_front_over_r0.values, axis=0))
-            cells = [f"{v:.2f} ({100 * (v - law) / law:+.0f} %)" for v in values]
+            cells = [f"{v:.2f} ({_error(v, law)})" for v in values]
             lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -239,8 +239,8 @@ def friction_law_markdown(comparison) -> str:
                             if "cone_programs_per_step" in part else np.nan)
                 lines.append(
                     f"| {a:g} | {law} | {seeds} | {np.nanmean(h):.3f} ({sd(h):.3f}) | {h_law:.3f} | "
-                    f"{100 * (np.nanmean(h) - h_law) / h_law:+.0f} % | {np.nanmean(r):.3f} ({sd(r):.3f}) | "
-                    f"{r_law:.3f} | {100 * (np.nanmean(r) - r_law) / r_law:+.0f} % | {share:.2f} | "
+                    f"{_error(np.nanmean(h), h_law)} | {np.nanmean(r):.3f} ({sd(r):.3f}) | "
+                    f"{r_law:.3f} | {_error(np.nanmean(r), r_law)} | {share:.2f} | "
                     f"{programs:.1f} | {np.nanmean(part.wall_time.values):.0f} |")
         lines.append("")
     return "\n".join(lines)
