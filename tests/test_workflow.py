@@ -192,6 +192,17 @@ def test_the_default_study_plans_every_run(tmp_path):
     assert sum(p.endswith("analysis.nc") for p in planned) == 2 * 6 * 4
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(path.name for path in (ROOT / "config").glob("*.yaml")))
+def test_every_named_configuration_plans(tmp_path, name):
+    """Each study config/*.yaml that the README offers as one command passes the schema and the
+    cross-field checks, and plans at least one collapse (a dry run: nothing is simulated)."""
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-n", "all", "--configfile", f"config/{name}", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert any(path.endswith("collapse.nc") for path in planned_outputs(result))
+
+
 def test_the_convergence_study_plans_its_runs(tmp_path):
     directory = copy_workflow(tmp_path)
     result = snakemake(directory, "-n", "all", "--configfile", "config/convergence.yaml", timeout=120)
