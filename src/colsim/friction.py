@@ -11,9 +11,9 @@ coulomb: De Saxce's bipotential, solved as in Acary and Cadoux (2013) and Krabbe
 
     with du' the previous iterate's local displacement, and the program is solved again until s
     stops changing (a fixed point of whole solves, each warm-started from the last forces, with a
-    per-contact secant step, halved, :class:`_Secant`). At the fixed point a sliding contact does not
-    open: g + du_n = 0, while its force stays on the cone (||q|| = mu p) and opposes the slip. With mu = mu_r = 0 the correction is zero and the two laws
-    are the same program.
+    per-contact secant step, halved, :class:`_Secant`). At the fixed point a sliding contact does
+    not open: g + du_n = 0, while its force stays on the cone (||q|| = mu p) and opposes the slip.
+    With mu = mu_r = 0 the correction is zero and the two laws are the same program.
 
 Stopping rule: the root mean square over the contacts of the change of the correction s between
 two iterates (the spurious opening the fixed point leaves, on average over the contacts) is at most
