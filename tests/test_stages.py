@@ -231,6 +231,24 @@ def _run_cli(*args, cwd):
                           capture_output=True, text=True, timeout=300)
 
 
+def test_progress_is_logged_every_tenth_of_the_steps_or_every_minute(caplog):
+    """A slow run still logs: a line every 10 % of the steps, or after 60 s without one."""
+    from colsim.commands import _progress_bar
+    from colsim.stepper import StepDiagnostics
+
+    now = [0.0]
+    progress = _progress_bar(100, "collapse", interval_s=60.0, clock=lambda: now[0])
+    fields = {name: 0 for name in StepDiagnostics.__dataclass_fields__}
+    caplog.set_level("INFO", logger="colsim")
+    for k, seconds in enumerate([1.0] * 12 + [70.0, 1.0], start=1):
+        now[0] += seconds
+        progress(StepDiagnostics(**{**fields, "step": k, "solver_status": "Solved", "solver_backend": "apgd"}))
+    progress.close()
+    steps = [r.getMessage().split(" of at most")[0].split()[-1] for r in caplog.records]
+    assert steps == ["10", "13"]   # the 10 % mark, then the 70 s step; not every step after it
+    assert "(82 s)" in caplog.records[-1].getMessage()
+
+
 def test_all_stages_through_the_cli(tmp_path):
     """A tiny column (r0 = 1, a = 1) through pack, trim, collapse, analyse, export-vtk, in under a
     minute of CPU time (user + system of the commands, whatever else loads the machine)."""
