@@ -57,7 +57,8 @@ def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=
 
     bar = tqdm(total=total, desc=description, disable=None, unit="step")
     every = max(1, total // 10)
-    counter = {"n": 0, "started": clock(), "last": clock()}
+    started = clock()
+    counter = {"n": 0, "last": started}
 
     def update(diagnostics, *_):
         counter["n"] += 1
@@ -68,7 +69,7 @@ def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=
             counter["last"] = now
             log.info("%s step %d of at most %d (%.0f s): %d contacts, kinetic energy %.3g, "
                      "overlap %.2g, solve %.2f s, %d iterations", description, diagnostics.step,
-                     total, now - counter["started"], diagnostics.n_contacts,
+                     total, now - started, diagnostics.n_contacts,
                      diagnostics.kinetic_energy + diagnostics.rotational_energy,
                      diagnostics.largest_overlap, diagnostics.solve_time, diagnostics.solver_iterations)
     update.close = bar.close
