@@ -165,6 +165,15 @@ def length_scale(program: ConeProgram) -> float:
     return max(rms, 1e-6 * float(np.mean(radius)))
 
 
+def mean_diameter(program: ConeProgram) -> float:
+    """The mean sphere diameter (length), from Mbar's masses and moments of inertia (I = 2/5 m R^2)."""
+    n = program.n_unknowns // 6
+    if n == 0:
+        return 1.0
+    mass = program.mass
+    return 2.0 * float(np.mean(np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3]))))
+
+
 def force_floor(program: ConeProgram, scale: float) -> float:
     """F0 = mean particle mass L / dt^2 (force): about the weight of a mean particle at rest."""
     n = program.n_unknowns // 6
@@ -177,14 +186,21 @@ def relative_residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,
     y (m, 5) and forces lam (m, 5), with L = scale (length) and F0 = floor (force)."""
     nyt = np.sqrt(y[:, 1] ** 2 + y[:, 2] ** 2)
     nyr = np.sqrt(y[:, 3] ** 2 + y[:, 4] ** 2)
-    primal = float(np.max(np.maximum(mu * nyt + mu_r * nyr - y[:, 0], 0.0), initial=0.0)) / scale
+    primal = float(np.max(np.maximum(mu * nyt + mu_r * nyr - y[:, 0], 0.0), initial=0.0))
     p = lam[:, 0]
     nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
     nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
-    dual_abs = np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p])
+    dual = float(np.max(np.maximum.reduce([nq - mu * p, nr - mu_r * p, -p]), initial=0.0))
     total = float(np.sum(np.maximum(p, 0.0)))
-    force_scale = max(total / max(len(p), 1), floor)
-    dual = float(np.max(dual_abs, initial=0.0)) / force_scale
     comp = float(np.sum(np.abs(np.einsum("ij,ij->i", lam, y))))
-    comp = comp / ((total + len(p) * floor) * scale)
-    return {"primal": primal, "dual": max(dual, 0.0), "complementarity": comp}
+    return combine_residuals(primal, dual, total, comp, len(p), scale, floor)
+
+
+def combine_residuals(primal: float, dual: float, total: float, comp: float, m: int, scale: float,
+                      floor: float) -> dict[str, float]:
+    """The relative residuals from their absolute parts: primal, the largest cone violation of the
+    gaps (length); dual, of the forces (force); total, the sum of the positive normal forces;
+    comp, sum_k |lam_k . y_k| (force length); m contacts, L = scale, F0 = floor."""
+    force_scale = max(total / max(m, 1), floor)
+    return {"primal": primal / scale, "dual": max(dual, 0.0) / force_scale,
+            "complementarity": comp / ((total + m * floor) * scale)}
