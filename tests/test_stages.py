@@ -1,6 +1,7 @@
 """The study's stages (pack, trim, collapse, analyse) as a library and through the CLI."""
 from __future__ import annotations
 
+import json
 import os
 import resource
 import signal
@@ -291,6 +292,9 @@ def test_all_stages_through_the_cli(tmp_path):
     backends = io.open_dataset(tmp_path / "fast.nc", io.TRAJECTORY_KIND)["step_solver_backend"].values
     assert backends[0] == "apgd" and set(backends) <= {"apgd", "clarabel", "clarabel-fallback"}
     assert set(trajectory["step_solver_backend"].values) == {"clarabel"}
+    # the back-end's settings, defaults included, are in the run's configuration: reproducible
+    solver = json.loads(io.open_dataset(tmp_path / "fast.nc", io.TRAJECTORY_KIND).attrs["config"])["solver_settings"]
+    assert solver["name"] == "auto" and solver["apgd"]["length_floor"] == 0.1 and solver["apgd"]["tolerance"] == 1e-5
 
 
 def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):
@@ -444,6 +448,9 @@ def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40, **collapse):
     ({"steps": 40}, {"steps": 80}, "runs differ in collapse.steps: 40 in"),
     ({"friction_law": "coulomb", "friction_tolerance": 1e-5}, {"friction_law": "coulomb", "friction_tolerance": 1e-4},
      "runs differ in collapse.friction_tolerance: 1e-05 in"),
+    # a run made before the length floor records no solver settings: not one study with one after
+    ({"solver_settings": {"name": "auto", "apgd": {"length_floor": 0.1}}}, {},
+     "runs differ in collapse.solver_settings: {"),
 ])
 def test_collect_refuses_runs_that_differ_in_an_unswept_setting(tmp_path, capsys, first, second, field):
     """Issue 16, defect 5: collecting an r0 = 1.5 analysis with an r0 = 1 one names the field."""

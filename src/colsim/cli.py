@@ -70,6 +70,13 @@ def _solver_arguments(parser):
                         help="solver tolerance (default: the back-end's own; for auto, APGD's)")
 
 
+def _length_floor_argument(parser, under_auto: str):
+    parser.add_argument("--solver-length-floor", type=_non_negative, default=None,
+                        help="APGD's stopping rule: measure its residuals against the step's free flight "
+                             f"or this many mean diameters, whichever is larger (default: {under_auto}; "
+                             "apgd 0)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="colsim", description=__doc__.split("\n\n")[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log every detail")
@@ -95,6 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sliding friction between spheres and with the floor while filling; the paper's "
                         "is 0, a small value gives a looser packing (default: %(default)s)")
     _solver_arguments(p)
+    _length_floor_argument(p, "under auto 0.1: with the packing's tolerance 1e-3, each contact's gap to "
+                              "1e-4 of a mean diameter at least")
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
 
     p = sub.add_parser("trim", help="remove the spheres that reach above h0 = a r0 (z + R > h0)")
@@ -130,6 +139,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint-every", type=_positive_int, default=100, help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")
     _solver_arguments(p)
+    _length_floor_argument(p, "under auto 0.1: with the tolerance 1e-5, each contact's gap to 1e-6 "
+                              "of a mean diameter at least")
     p.add_argument("--output", required=True, help="trajectory file to write (netCDF)")
 
     p = sub.add_parser("analyse", help="final height, run-out, deposit profile and front position")

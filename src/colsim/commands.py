@@ -35,6 +35,8 @@ def check_outputs(args) -> None:
 def _solver(args, scaled_time_step: float):
     """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
     options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
+    if args.solver_length_floor is not None and args.solver in ("auto", "apgd"):
+        options["length_floor"] = args.solver_length_floor
     if args.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
         options = {"scaled_time_step": scaled_time_step, "apgd": options}
     return make_solver(args.solver, **options)
@@ -45,8 +47,10 @@ def _pack_solver(args):
     tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
-    tolerance = APGD_TOLERANCE if args.solver_tolerance is None else args.solver_tolerance
-    return make_solver("auto", scaled_time_step=None, apgd={"tolerance": tolerance})
+    options = {"tolerance": APGD_TOLERANCE if args.solver_tolerance is None else args.solver_tolerance}
+    if args.solver_length_floor is not None:
+        options["length_floor"] = args.solver_length_floor
+    return make_solver("auto", scaled_time_step=None, apgd=options)
 
 
 def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=time.monotonic):
@@ -83,7 +87,8 @@ def pack(args):
     solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu)
-    attrs = io.global_attributes(io.STATE_KIND, "colsim packing", _settings(args), args.seed)
+    attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
+                                 {**_settings(args), "solver_settings": solver.describe()}, args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})
     io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
@@ -125,13 +130,17 @@ def collapse(args):
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if args.friction_law == "associated" else f" {args.friction_law}"
     progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")
+    solver = _solver(args, settings.duration / settings.n_steps)
     try:
-        run = run_collapse(column, h0, settings, _solver(args, settings.duration / settings.n_steps),
-                           io.contact_forces_of(source), checkpoint=checkpoint, progress=progress)
+        run = run_collapse(column, h0, settings, solver, io.contact_forces_of(source),
+                           checkpoint=checkpoint, progress=progress)
     finally:
         progress.close()
+    # the back-end's settings in full (defaults included), so that a summary never mixes runs
+    # solved to different stopping rules (summary.check_same_settings)
     attrs = io.global_attributes(io.TRAJECTORY_KIND, "colsim collapse",
-                                 {**_settings(args), "input_config": io.config_of(source)},
+                                 {**_settings(args), "solver_settings": solver.describe(),
+                                  "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
     attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
                   "n_particles": column.n, "resumed_from_step": run.resumed_from})

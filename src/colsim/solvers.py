@@ -65,6 +65,9 @@ class AutoSolver(Solver):
     uses_warm_start = True
     #: APGD's tolerance under auto, from the tolerance study (README, "APGD's tolerance")
     APGD_TOLERANCE = 1e-5
+    #: APGD's length floor under auto, mean diameters (README, "APGD's tolerance"): with the
+    #: tolerance, each contact's end-of-step gap to 1e-6 of a mean diameter at least
+    APGD_LENGTH_FLOOR = 0.1
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
                  max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
@@ -74,7 +77,8 @@ class AutoSolver(Solver):
         self.apgd_below = float(apgd_below)
         self.max_iter = int(max_iter)
         self.clarabel = ClarabelSolver(**(clarabel or {}))
-        self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE, **(apgd or {})})
+        self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE,
+                                  "length_floor": self.APGD_LENGTH_FLOOR, **(apgd or {})})
 
     def describe(self) -> dict:
         return {**super().describe(), "apgd": self.apgd.describe(), "clarabel": self.clarabel.describe()}
