@@ -196,7 +196,7 @@ class _Iteration:
     """The APGD state between residual checks, in scaled forces z (lam = S z); iterate(n) runs n
     iterations: compiled and matrix-free when given the program's contacts, else numpy with G and T."""
 
-    def __init__(self, G, T, c, a, b, inv_mass, x, hx, lip, scaling, lip_decay=1.0, contacts=None):
+    def __init__(self, G, T, c, a, b, inv_mass, x, scaling, lip_decay=1.0, contacts=None):
         self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
         self.scaling = scaling  # (m, 5) S: lam = S z
         self.geometry = None if contacts is None else (
@@ -204,22 +204,47 @@ class _Iteration:
             *(np.ascontiguousarray(v, dtype=float) for v in (
                 contacts.normal, contacts.tangent1, contacts.tangent2, contacts.radius_i,
                 contacts.radius_j, contacts.rolling_radius)))
-        self.x, self.hx = x.copy(), hx.copy()
+        hx = self.apply_T(x)
+        self.x, self.hx = x.copy(), hx
         self.y, self.hy = x.copy(), hx.copy()
-        self.g = G @ self.hy + c
+        self.g = self.apply_G(self.hy, c)
         self.x_new, self.h_new = np.empty_like(x), np.empty_like(hx)
-        self.theta, self.lip = 1.0, float(lip)
+        self.theta, self.lip = 1.0, self.lipschitz_estimate()
         self.backtracks = self.restarts = 0
         self.lip_decay = float(lip_decay)
 
+    def apply_T(self, z: np.ndarray) -> np.ndarray:
+        """(6n,) T z = B' S z: the forces and moments of scaled contact forces z (5m,) on the bodies."""
+        if self.geometry is None:
+            return self.T @ z
+        out = np.empty(len(self.inv_mass))
+        _apply_transpose(z, *self.geometry, out)
+        return out
+
+    def apply_G(self, h: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """(5m,) G h + c = S B Mbar^-1 h + c."""
+        if self.geometry is None:
+            return self.G @ h + c
+        out = np.empty_like(c)
+        _apply_gradient(h, self.inv_mass, *self.geometry, c, out)
+        return out
+
+    def lipschitz_estimate(self, iterations: int = 12) -> float:
+        """The largest eigenvalue of S W S = G T, from below, by power iteration from a fixed random
+        start (reproducible); the backtracking in the iteration keeps the step safe."""
+        v = np.random.default_rng(0).standard_normal(len(self.c))
+        zero = np.zeros_like(self.c)
+        lip = 1.0
+        for _ in range(iterations):
+            v /= np.sqrt(_dot(v, v))
+            wv = self.apply_G(self.apply_T(v), zero)
+            lip = _dot(v, wv)
+            v = wv
+        return max(lip, 1e-12)
+
     def gradient_at_x(self) -> np.ndarray:
         """G hx + c: the scaled end-of-step gaps S (B u + g e_n) at the iterate."""
-        if self.geometry is None:
-            return self.G @ self.hx + self.c
-        out = np.empty_like(self.c)
-        s, ci, cj, nrm, t1, t2, ri, rj, reff = self.geometry
-        _apply_gradient(self.hx, self.inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, self.c, out)
-        return out
+        return self.apply_G(self.hx, self.c)
 
     def residuals(self, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
         """:func:`colsim.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
@@ -327,10 +352,8 @@ class ApgdSolver(Solver):
         s = row_scaling(B, inv_mass) if self.precondition else np.ones((m, 5))
         a, b = scaled_coefficients(program, s)
         # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
-        # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic).
-        SB = sp.diags(s.ravel()) @ B
-        T = SB.T.tocsr()
-        G = (SB @ sp.diags(inv_mass)).tocsr()
+        # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic). The compiled
+        # kernels apply T and G from the contacts' frames; the numpy path forms them.
         c = B @ (program.fbar * inv_mass)
         c[::ROWS_PER_CONTACT] += program.gap
         c *= s.ravel()
@@ -338,17 +361,11 @@ class ApgdSolver(Solver):
             x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
         else:
             x = np.zeros(5 * m)
-        # Lipschitz constant of S W S: a few power iterations; backtracking keeps the step safe.
-        v = np.random.default_rng(0).standard_normal(5 * m)
-        lip = 1.0
-        for _ in range(12):
-            v /= np.sqrt(_dot(v, v))
-            wv = G @ (T @ v)
-            lip = _dot(v, wv)
-            v = wv
-        matrix_free = self.kernel == "numba" and program.contacts is not None
-        return _Iteration(G, T, c, a, b, inv_mass, x, T @ x, max(lip, 1e-12), s, self.lipschitz_decay,
-                          contacts=program.contacts if matrix_free else None)
+        if self.kernel == "numba" and program.contacts is not None:
+            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay, contacts=program.contacts)
+        SB = sp.diags(s.ravel()) @ B
+        G = (SB @ sp.diags(inv_mass)).tocsr()
+        return _Iteration(G, SB.T.tocsr(), c, a, b, inv_mass, x, s, self.lipschitz_decay)
 
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None, max_iter: int | None = None) -> ConeSolution:
