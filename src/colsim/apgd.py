@@ -29,7 +29,7 @@ sweep): the relative primal infeasibility and complementarity of
 step's root-mean-square free flight, or `length_floor` mean diameters where that is larger: at rest
 the free flight is g dt^2 (4e-4 d at r0 = 2 and dt/sqrt(h0/g) = 0.004), and without a floor the
 tolerance 1e-5 asks each contact's gap to 4e-9 d, which took most of a resting step's iterations
-(at step 900 of an r0 = 2, a = 5 collapse: 1,310 iterations, 310 with the floor 0.1).
+(at step 900 of an r0 = 2, a = 5 collapse: 1,280 iterations, 310 with the floor 0.1).
 Not reaching it within `max_iter` iterations raises :class:`SolverError`.
 
 Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
@@ -126,6 +126,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
         while True:
             step = 1.0 / lip
             dd = 0.0
+            uphill = 0.0   # g . (x_new - x), for the restart test: summed here, in the same order
             for k in range(m):
                 o = 5 * k
                 pp, q1, q2, r1, r2 = project_point(
@@ -139,6 +140,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
                 for l in range(5):
                     d = x_new[o + l] - y[o + l]
                     dd += d * d
+                    uphill += g[o + l] * (x_new[o + l] - x[o + l])
             _apply_transpose(x_new, s, ci, cj, nrm, t1, t2, ri, rj, reff, h_new)
             wdd = 0.0
             for i in range(nb):
@@ -150,9 +152,6 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
             backtracks += 1
         theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
         beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-        uphill = 0.0
-        for i in range(5 * m):
-            uphill += g[i] * (x_new[i] - x[i])
         if uphill > 0.0:
             theta_new = 1.0
             beta = 0.0
