@@ -44,8 +44,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import (HAVE_NUMBA, combine_residuals, force_floor, length_scale, mean_diameter, project_coupled_cone, project_point,
-                    relative_residuals, row_scaling, scaled_coefficients)
+from .cones import (HAVE_NUMBA, combine_residuals, force_floor, length_scale, mean_diameter,
+                    project_coupled_cone, project_point, relative_residuals, row_scaling,
+                    scaled_coefficients)
 from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
 
 if HAVE_NUMBA:
@@ -114,7 +115,8 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
     x, hx = T x: the iterate; y, hy: the extrapolated point; g = G hy + c: the gradient at y.
     geometry = (s, i, j, normal, tangent1, tangent2, R_i, R_j, R_eff) gives T = B' S and
     G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`, :func:`_apply_gradient`).
-    After each iteration lip *= lip_decay. The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
+    After each iteration lip *= lip_decay. The step 1/lip is accepted when
+    ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
     descent test of a quadratic), else lip doubles. Restart when g . (x_new - x) > 0.
     """
     s, ci, cj, nrm, t1, t2, ri, rj, reff = geometry
@@ -174,7 +176,8 @@ def _residual_parts(g, x, s, mu, mu_r):
     primal = dual = total = comp = 0.0
     for k in range(len(mu)):
         o = 5 * k
-        y0, y1, y2, y3, y4 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2], g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
+        y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
+        y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
         p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
         r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
         primal = max(primal, mu[k] * np.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * np.sqrt(y3 * y3 + y4 * y4) - y0)
@@ -251,7 +254,8 @@ class _Iteration:
         s = self.scaling.ravel()
         if self.geometry is None:
             m = len(mu)
-            return relative_residuals((g / s).reshape(m, 5), (s * self.x).reshape(m, 5), mu, mu_r, scale, floor)
+            return relative_residuals((g / s).reshape(m, 5), (s * self.x).reshape(m, 5), mu, mu_r,
+                                      scale, floor)
         return combine_residuals(*_residual_parts(g, self.x, s, mu, mu_r), len(mu), scale, floor)
 
     def iterate(self, n: int):
@@ -361,7 +365,8 @@ class ApgdSolver(Solver):
         else:
             x = np.zeros(5 * m)
         if self.kernel == "numba" and program.contacts is not None:
-            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay, contacts=program.contacts)
+            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay,
+                              contacts=program.contacts)
         SB = sp.diags(s.ravel()) @ B
         G = (SB @ sp.diags(inv_mass)).tocsr()
         return _Iteration(G, SB.T.tocsr(), c, a, b, inv_mass, x, s, self.lipschitz_decay)

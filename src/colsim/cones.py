@@ -160,13 +160,13 @@ def length_scale(program: ConeProgram) -> float:
     mass = program.mass
     trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
     rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
-    # the gravity part of the free flight cannot be told apart from v in fbar; R from I = 2/5 m R^2
-    radius = np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3])) if n else np.ones(1)
-    return max(rms, 1e-6 * float(np.mean(radius)))
+    # the gravity part of the free flight cannot be told apart from v in fbar
+    return max(rms, 0.5e-6 * mean_diameter(program))
 
 
 def mean_diameter(program: ConeProgram) -> float:
-    """The mean sphere diameter (length), from Mbar's masses and moments of inertia (I = 2/5 m R^2)."""
+    """The mean sphere diameter (length), from Mbar's masses and moments of inertia (I = 2/5 m R^2);
+    1 for a program without spheres."""
     n = program.n_unknowns // 6
     if n == 0:
         return 1.0
