@@ -44,9 +44,8 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import (HAVE_NUMBA, combine_residuals, force_floor, length_scale, mean_diameter,
-                    project_coupled_cone, project_point, relative_residuals, row_scaling,
-                    scaled_coefficients)
+from .cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
+                    project_point, row_scaling, scaled_coefficients, scaled_residuals)
 from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
 
 if HAVE_NUMBA:
@@ -170,25 +169,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
     return theta, lip, backtracks, restarts
 
 
-def _residual_parts(g, x, s, mu, mu_r):
-    """(primal, dual, total, comp) of :func:`colsim.cones.combine_residuals` for the end-of-step
-    gaps y = g / s and the forces lam = s x ((5m,) each, scaled as in the iteration), in one sweep."""
-    primal = dual = total = comp = 0.0
-    for k in range(len(mu)):
-        o = 5 * k
-        y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
-        y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
-        p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
-        r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
-        primal = max(primal, mu[k] * np.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * np.sqrt(y3 * y3 + y4 * y4) - y0)
-        dual = max(dual, np.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, np.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
-        total += max(p, 0.0)
-        comp += abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
-    return primal, dual, total, comp
-
-
 if HAVE_NUMBA:
-    _residual_parts = numba.njit(cache=True)(_residual_parts)
     _apply_transpose = numba.njit(cache=True)(_apply_transpose)
     _apply_gradient = numba.njit(cache=True)(_apply_gradient)
     _iterate_compiled = numba.njit(cache=True)(_iterate)
@@ -250,13 +231,7 @@ class _Iteration:
 
     def residuals(self, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
         """:func:`colsim.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
-        g = self.gradient_at_x()
-        s = self.scaling.ravel()
-        if self.geometry is None:
-            m = len(mu)
-            return relative_residuals((g / s).reshape(m, 5), (s * self.x).reshape(m, 5), mu, mu_r,
-                                      scale, floor)
-        return combine_residuals(*_residual_parts(g, self.x, s, mu, mu_r), len(mu), scale, floor)
+        return scaled_residuals(self.gradient_at_x(), self.x, self.scaling.ravel(), mu, mu_r, scale, floor)
 
     def iterate(self, n: int):
         if self.geometry is not None:

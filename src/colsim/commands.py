@@ -32,11 +32,23 @@ def check_outputs(args) -> None:
         io.check_writable(args.output_dir, directory=True)
 
 
+def _apgd_options(args, tolerance=None) -> dict:
+    """APGD's options the arguments set (--solver-tolerance, else `tolerance` when given;
+    --solver-length-floor); the rest keep the back-end's defaults."""
+    options = {}
+    if args.solver_tolerance is not None or tolerance is not None:
+        options["tolerance"] = tolerance if args.solver_tolerance is None else args.solver_tolerance
+    if args.solver_length_floor is not None:
+        options["length_floor"] = args.solver_length_floor
+    return options
+
+
 def _solver(args, scaled_time_step: float):
     """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
-    options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
-    if args.solver_length_floor is not None and args.solver in ("auto", "apgd"):
-        options["length_floor"] = args.solver_length_floor
+    if args.solver in ("auto", "apgd"):
+        options = _apgd_options(args)
+    else:
+        options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
     if args.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
         options = {"scaled_time_step": scaled_time_step, "apgd": options}
     return make_solver(args.solver, **options)
@@ -47,10 +59,7 @@ def _pack_solver(args):
     tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
-    options = {"tolerance": APGD_TOLERANCE if args.solver_tolerance is None else args.solver_tolerance}
-    if args.solver_length_floor is not None:
-        options["length_floor"] = args.solver_length_floor
-    return make_solver("auto", scaled_time_step=None, apgd=options)
+    return make_solver("auto", scaled_time_step=None, apgd=_apgd_options(args, APGD_TOLERANCE))
 
 
 def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=time.monotonic):
