@@ -268,6 +268,27 @@ def test_length_floor_bounds_each_gap_in_diameters(pile):
         ApgdSolver(length_floor=-1.0)
 
 
+def test_overlap_tolerance_bounds_the_largest_violation_in_diameters(pile):
+    """An overlap tolerance lets the primal residual stop at a violation of that many mean
+    diameters (here 1e-4 d, a hundredth of the 1 % overlap check) while complementarity keeps the
+    relative tolerance; the step stops no later, and no gap is off by more than the tolerance."""
+    program, found = collapse_program(pile)
+    exact = ClarabelSolver(tolerance=1e-10).solve(program)
+    warm = WarmStart.from_step(found, exact.forces).match(found, pile.n) * 0.9
+    d = 2 * pile.radius.mean()
+    tight = ApgdSolver(length_floor=0.1).solve(program, warm_start=warm)
+    loose = ApgdSolver(length_floor=0.1, overlap_tolerance=1e-4).solve(program, warm_start=warm)
+    assert loose.iterations <= tight.iterations
+    assert cone_violation(program, loose.increments, loose.forces)["primal"] <= 1e-4 * d
+    assert loose.info["complementarity"] <= 1e-5
+    # below the relative tolerance's own bound (1e-5 x 0.1 d) it changes nothing
+    same = ApgdSolver(length_floor=0.1, overlap_tolerance=1e-7).solve(program, warm_start=warm)
+    assert same.iterations == tight.iterations
+    assert np.array_equal(same.forces, tight.forces)
+    with pytest.raises(ValueError, match="overlap_tolerance"):
+        ApgdSolver(overlap_tolerance=-1.0)
+
+
 def test_auto_uses_the_length_floor_in_both_stages():
     from colsim.cli import build_parser
     from colsim.commands import _pack_solver, _solver
@@ -281,6 +302,23 @@ def test_auto_uses_the_length_floor_in_both_stages():
     chosen = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc", "--solver", "apgd",
                                 "--solver-length-floor", "0.5"])
     assert _solver(chosen, 0.004).length_floor == 0.5
+
+
+def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
+    """Under auto the collapse's APGD may stop at a largest violation of 1e-4 mean diameters; the
+    packing's own primal bound (tolerance 1e-3 x at least 0.1 d) is already that loose, so the
+    packing's steps stop where they did."""
+    from colsim.cli import build_parser
+    from colsim.commands import _pack_solver, _solver
+    from colsim.packing import APGD_TOLERANCE
+    assert AutoSolver().apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE > 0
+    assert ApgdSolver().overlap_tolerance == 0.0
+    assert AutoSolver.APGD_OVERLAP_TOLERANCE <= APGD_TOLERANCE * AutoSolver.APGD_LENGTH_FLOOR
+    parser = build_parser()
+    collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
+    assert _solver(collapse_args, 0.004).apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE
+    chosen = parser.parse_args(["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "0"])
+    assert _pack_solver(chosen).apgd.overlap_tolerance == 0.0
 
 
 def test_compiled_residuals_match_numpy(pile):

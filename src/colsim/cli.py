@@ -21,7 +21,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .solvers import SOLVERS
+from .solvers import SOLVERS, AutoSolver
 from .state import FRICTION_LAWS, FrictionLaw
 
 log = logging.getLogger("colsim")
@@ -77,6 +77,14 @@ def _length_floor_argument(parser, under_auto: str):
                              "apgd 0)")
 
 
+def _overlap_tolerance_argument(parser):
+    parser.add_argument("--solver-overlap-tolerance", type=_non_negative, default=None,
+                        help="APGD's stopping rule: a step's contacts count as feasible once no "
+                             "end-of-step gap violates its cone by more than this many mean diameters "
+                             "(complementarity keeps the relative tolerance; default: under auto "
+                             f"{AutoSolver.APGD_OVERLAP_TOLERANCE:g}, apgd 0: the relative tolerance alone)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="colsim", description=__doc__.split("\n\n")[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log every detail")
@@ -104,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     _solver_arguments(p)
     _length_floor_argument(p, "under auto 0.1: with the packing's tolerance 1e-3, each contact's gap to "
                               "1e-4 of a mean diameter at least")
+    _overlap_tolerance_argument(p)
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
 
     p = sub.add_parser("trim", help="remove the spheres that reach above h0 = a r0 (z + R > h0)")
@@ -141,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     _solver_arguments(p)
     _length_floor_argument(p, "under auto 0.1: with the tolerance 1e-5, each contact's gap to 1e-6 "
                               "of a mean diameter at least")
+    _overlap_tolerance_argument(p)
     p.add_argument("--output", required=True, help="trajectory file to write (netCDF)")
 
     p = sub.add_parser("analyse", help="final height, run-out, deposit profile and front position")

@@ -34,12 +34,14 @@ def check_outputs(args) -> None:
 
 def _apgd_options(args, tolerance=None) -> dict:
     """APGD's options the arguments set (--solver-tolerance, else `tolerance` when given;
-    --solver-length-floor); the rest keep the back-end's defaults."""
+    --solver-length-floor, --solver-overlap-tolerance); the rest keep the back-end's defaults."""
     options = {}
     if args.solver_tolerance is not None or tolerance is not None:
         options["tolerance"] = tolerance if args.solver_tolerance is None else args.solver_tolerance
     if args.solver_length_floor is not None:
         options["length_floor"] = args.solver_length_floor
+    if args.solver_overlap_tolerance is not None:
+        options["overlap_tolerance"] = args.solver_overlap_tolerance
     return options
 
 

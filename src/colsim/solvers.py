@@ -68,6 +68,10 @@ class AutoSolver(Solver):
     #: APGD's length floor under auto, mean diameters (README, "APGD's tolerance"): with the
     #: tolerance, each contact's end-of-step gap to 1e-6 of a mean diameter at least
     APGD_LENGTH_FLOOR = 0.1
+    #: APGD's overlap tolerance under auto, mean diameters (README, "The overlap tolerance"): a
+    #: step's largest cone violation may reach it while complementarity keeps the relative
+    #: tolerance; the packing's own bound (1e-3 x at least 0.1 d) is no tighter, so it is unchanged
+    APGD_OVERLAP_TOLERANCE = 1e-4
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
                  max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
@@ -78,7 +82,8 @@ class AutoSolver(Solver):
         self.max_iter = int(max_iter)
         self.clarabel = ClarabelSolver(**(clarabel or {}))
         self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE,
-                                  "length_floor": self.APGD_LENGTH_FLOOR, **(apgd or {})})
+                                  "length_floor": self.APGD_LENGTH_FLOOR,
+                                  "overlap_tolerance": self.APGD_OVERLAP_TOLERANCE, **(apgd or {})})
 
     def describe(self) -> dict:
         return {**super().describe(), "apgd": self.apgd.describe(), "clarabel": self.clarabel.describe()}
