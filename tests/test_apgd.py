@@ -307,7 +307,7 @@ def test_auto_uses_the_length_floor_in_both_stages():
 def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     """Under auto the collapse's APGD may stop at a largest violation of 1e-4 mean diameters; the
     packing's own primal bound (tolerance 1e-3 x at least 0.1 d) is already that loose, so the
-    packing's steps stop where they did."""
+    packing goes without it, and records its settings as before the option existed."""
     from colsim.cli import build_parser
     from colsim.commands import _pack_solver, _solver
     from colsim.packing import APGD_TOLERANCE
@@ -317,8 +317,13 @@ def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     parser = build_parser()
     collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
     assert _solver(collapse_args, 0.004).apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE
-    chosen = parser.parse_args(["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "0"])
-    assert _pack_solver(chosen).apgd.overlap_tolerance == 0.0
+    pack_args = parser.parse_args(["pack", "--height", "2", "--output", "p.nc"])
+    packing = _pack_solver(pack_args)
+    assert packing.apgd.overlap_tolerance == 0.0
+    assert "overlap_tolerance" not in packing.describe()["apgd"]
+    assert _solver(collapse_args, 0.004).describe()["apgd"]["overlap_tolerance"] == 1e-4
+    chosen = parser.parse_args(["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "1e-5"])
+    assert _pack_solver(chosen).apgd.overlap_tolerance == 1e-5
 
 
 def test_compiled_residuals_match_numpy(pile):

@@ -330,6 +330,14 @@ class ApgdSolver(Solver):
         self.overlap_tolerance = float(overlap_tolerance)
         self.verbose = verbose
 
+    def describe(self) -> dict:
+        """The settings; the overlap tolerance only when it is on, so that runs made before it
+        existed (and the packings, which do not use it) compare equal to those made after."""
+        settings = super().describe()
+        if not self.overlap_tolerance:
+            del settings["overlap_tolerance"]
+        return settings
+
     # -- the iteration ---------------------------------------------------------------------
     def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None) -> "_Iteration":
         """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""

@@ -58,10 +58,12 @@ def _solver(args, scaled_time_step: float):
 
 def _pack_solver(args):
     """The packing's back-end: under auto, APGD for every warm-started step at the packing's own
-    tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest."""
+    tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest;
+    no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
-    return make_solver("auto", scaled_time_step=None, apgd=_apgd_options(args, APGD_TOLERANCE))
+    return make_solver("auto", scaled_time_step=None,
+                       apgd={"overlap_tolerance": 0.0, **_apgd_options(args, APGD_TOLERANCE)})
 
 
 def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=time.monotonic):

@@ -68,9 +68,9 @@ class AutoSolver(Solver):
     #: APGD's length floor under auto, mean diameters (README, "APGD's tolerance"): with the
     #: tolerance, each contact's end-of-step gap to 1e-6 of a mean diameter at least
     APGD_LENGTH_FLOOR = 0.1
-    #: APGD's overlap tolerance under auto, mean diameters (README, "The overlap tolerance"): a
-    #: step's largest cone violation may reach it while complementarity keeps the relative
-    #: tolerance; the packing's own bound (1e-3 x at least 0.1 d) is no tighter, so it is unchanged
+    #: APGD's overlap tolerance under auto in a collapse, mean diameters (README, "The overlap
+    #: tolerance"): a step's largest cone violation may reach it while complementarity keeps the
+    #: relative tolerance (the packing's own bound, 1e-3 x at least 0.1 d, is as loose already)
     APGD_OVERLAP_TOLERANCE = 1e-4
 
     def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
