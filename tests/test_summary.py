@@ -39,6 +39,9 @@ def test_lube_table_reports_zero_error_on_the_law_itself():
     assert "| 0.5 | 0.500 | 0.000 | 0.500 | +0 % | 0.620 |" in text
     # Lajeunesse at a = 2: h_inf/r0 = 0.74 a = 1.480, run-out 2 a^0.5 = 2.828
     assert "| 2.263 | +0 % | 1.480 | -33 % | 2.828 | -20 % |" in text
+    h[2, 0, 1] = r[2, 0, 1] = np.nan   # a study still running: a = 5 has one seed so far
+    partial = summary.assign(h_inf_over_r0=(dims, h), runout_over_r0=(dims, r))
+    assert "mean of 1-2 seeds" in lube_markdown(partial)
 
 
 def test_other_runout_measures_are_tabled_against_lube():

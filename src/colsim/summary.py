@@ -175,7 +175,8 @@ def lube_markdown(summary) -> str:
     lines = []
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
-        seeds = int(np.isfinite(part.h_inf_over_r0.values).sum(axis=-1).min())
+        counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
+        seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
         lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
                   "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error |",
