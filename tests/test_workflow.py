@@ -266,6 +266,21 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 
+def test_the_overlap_tolerance_reaches_the_collapse_only_when_set(tmp_path):
+    """solver_overlap_tolerance: 0 reaches every `colsim collapse` (not the packing); unset (null,
+    colsim's default) the command is as before the key existed, so no finished run is redone."""
+    directory = copy_workflow(tmp_path)
+    (directory / "overlap.yaml").write_text("solver_overlap_tolerance: 0\n")
+    on = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "overlap.yaml", timeout=120)
+    off = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", timeout=120)
+    assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
+    commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
+    assert len(commands) == 4 and all("--solver auto --solver-overlap-tolerance 0 " in c for c in commands)
+    assert "overlap-tolerance" not in off.stdout and "--solver auto " in off.stdout
+    packs = [line for line in on.stdout.splitlines() if "colsim pack" in line]
+    assert packs and not any("overlap" in line for line in packs)
+
+
 def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
     """pi/24 names its folder mu_r_0.1309 but reaches `colsim collapse` with all its digits."""
     directory = copy_workflow(tmp_path)

@@ -217,6 +217,13 @@ def friction_law_outputs():
     return [f"{STUDY_DIR}/friction_law.nc", f"{STUDY_DIR}/friction_law.md", f"{STUDY_DIR}/figures/friction_law.png"]
 
 
+def collapse_solver_options():
+    """What follows --solver on a collapse's command line: the back-end, and the overlap tolerance
+    when the study sets one (so that the default leaves the command, and the runs, as they were)."""
+    overlap = config.get("solver_overlap_tolerance")
+    return config["solver"] if overlap is None else f"{config['solver']} --solver-overlap-tolerance {overlap}"
+
+
 def friction_options(wildcards, output):
     """What follows --friction-law on a collapse's command line: the law, from the run's path (a
     folder `coulomb` holds the Coulomb runs), and for a Coulomb run the fixed point's tolerance (so

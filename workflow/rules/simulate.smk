@@ -64,7 +64,7 @@ rule collapse:
         frame_every=config["collapse"]["frame_every"],
         checkpoint_every=config["collapse"]["checkpoint_every"],
         to_rest=run_to_rest_options,
-        solver=config["solver"],
+        solver=collapse_solver_options(),
         friction_law=friction_options,
     log:
         logged(f"{BASE_RUN}/collapse.log"),
