@@ -42,6 +42,9 @@ def test_lube_table_reports_zero_error_on_the_law_itself():
     h[2, 0, 1] = r[2, 0, 1] = np.nan   # a study still running: a = 5 has one seed so far
     partial = summary.assign(h_inf_over_r0=(dims, h), runout_over_r0=(dims, r))
     assert "mean of 1-2 seeds" in lube_markdown(partial)
+    h[0, 0, :] = r[0, 0, :] = np.nan   # and a = 0.5 not at all: its row is left out, not NaN
+    text = lube_markdown(summary.assign(h_inf_over_r0=(dims, h), runout_over_r0=(dims, r)))
+    assert "| 0.5 |" not in text and "nan" not in text and "mean of 1-2 seeds" in text
 
 
 def test_other_runout_measures_are_tabled_against_lube():

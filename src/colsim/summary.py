@@ -144,6 +144,8 @@ def claims_markdown(summary) -> str:
     for m in summary.mu_r.values:
         for a in summary.aspect_ratio.values:
             part = summary.sel(mu_r=m, aspect_ratio=a)
+            if not _has_runs(part):
+                continue
             kept = np.nanmean(part.n_main_mass.values / part.n_particles.values)
             lines.append(f"| {float(m):g} | {a:g} | {np.nanmean(part.h_inf_over_r0.values) / a:.2f} | "
                          f"{np.nanmean(part.undisturbed_top_radius.values):.2f} | {kept:.2f} |")
@@ -161,6 +163,8 @@ def runout_measures_markdown(summary) -> str:
     for m in summary.mu_r.values:
         for a in summary.aspect_ratio.values:
             part = summary.sel(mu_r=m, aspect_ratio=a)
+            if not _has_runs(part):
+                continue
             law = lube_runout(a)
             values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
                 np.nanmean(part.mass_front_over_r0.values, axis=0))
@@ -176,12 +180,15 @@ def lube_markdown(summary) -> str:
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
         counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
+        counts = counts[counts > 0] if counts.any() else counts   # a partial study: only the a run
         seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
         lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
                   "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for a in part.aspect_ratio.values:
+            if not _has_runs(part.sel(aspect_ratio=a)):
+                continue
             h = part.h_inf_over_r0.sel(aspect_ratio=a).values
             r = part.runout_over_r0.sel(aspect_ratio=a).values
             h_mean, r_mean = np.nanmean(h), np.nanmean(r)
@@ -199,6 +206,11 @@ def lube_markdown(summary) -> str:
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
     return "\n".join(lines)
+
+
+def _has_runs(part) -> bool:
+    """Whether any seed of this part of a summary ran (a partial study leaves NaN rows out)."""
+    return bool(np.isfinite(part.h_inf_over_r0.values).any())
 
 
 def _error(value: float, law: float) -> str:
