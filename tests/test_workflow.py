@@ -252,14 +252,20 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
     assert collapses and all(p.endswith("/coulomb/collapse.nc") for p in collapses)
 
 
+def plan_with_and_without(tmp_path, setting: str):
+    """The tiny study's dry runs (-n -p) with the YAML `setting` added and without it."""
+    directory = copy_workflow(tmp_path)
+    (directory / "setting.yaml").write_text(setting)
+    on = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "setting.yaml", timeout=120)
+    off = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", timeout=120)
+    assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
+    return on, off
+
+
 def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     """collapse.max_duration set: every study collapse gets the rest options; unset (the paper):
     none does, and the command is the fixed-length one."""
-    directory = copy_workflow(tmp_path)
-    (directory / "rest.yaml").write_text("collapse: {max_duration: 8, rest_tolerance: 0.2}\n")
-    on = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "rest.yaml", timeout=120)
-    off = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", timeout=120)
-    assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
+    on, off = plan_with_and_without(tmp_path, "collapse: {max_duration: 8, rest_tolerance: 0.2}\n")
     commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 4
     assert all("--max-duration 8 --rest-window 1.0 --rest-tolerance 0.2 --rest-energy 0.01" in c for c in commands)
@@ -269,11 +275,7 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
 def test_the_overlap_tolerance_reaches_the_collapse_only_when_set(tmp_path):
     """solver_overlap_tolerance: 0 reaches every `colsim collapse` (not the packing); unset (null,
     colsim's default) the command is as before the key existed, so no finished run is redone."""
-    directory = copy_workflow(tmp_path)
-    (directory / "overlap.yaml").write_text("solver_overlap_tolerance: 0\n")
-    on = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "overlap.yaml", timeout=120)
-    off = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", timeout=120)
-    assert on.returncode == 0 and off.returncode == 0, on.stderr[-3000:] + off.stderr[-3000:]
+    on, off = plan_with_and_without(tmp_path, "solver_overlap_tolerance: 0\n")
     commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 4 and all("--solver auto --solver-overlap-tolerance 0 " in c for c in commands)
     assert "overlap-tolerance" not in off.stdout and "--solver auto " in off.stdout
