@@ -21,7 +21,6 @@ from colsim.apgd import ApgdSolver
 from colsim.collapse import CollapseSettings
 from colsim.contacts import detect
 from colsim.program import assemble
-from colsim.state import StepSettings, Walls
 from colsim.stepper import base_margin, predicted_displacement
 
 CACHE = Path(__file__).resolve().parent / ".cache"
@@ -32,8 +31,7 @@ def first_step(column: Path):
     state, source = io.read_state(column)
     h0 = float(source.attrs["h0"])
     collapse = CollapseSettings(mu_r=0.12, n_steps=1000)
-    settings = StepSettings(dt=collapse.time_step(h0), gravity=(0, 0, -9.81),
-                            walls=Walls(floor=True, cylinder_radius=None), law=collapse.law())
+    settings = collapse.step_settings(h0)
     found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
                    base_margin(state, settings), settings.detection_slack)
     forces = io.contact_forces_of(source)

@@ -21,7 +21,7 @@ from pathlib import Path
 from colsim import io
 from colsim.apgd import ApgdSolver
 from colsim.collapse import CollapseSettings, collapse
-from colsim.cones import force_floor, length_scale, mean_diameter
+from colsim.cones import mean_diameter
 from colsim.program import Solver
 from colsim.solvers import make_solver
 
@@ -32,10 +32,10 @@ TOLERANCE = 1e-5
 def iterations_to_levels(program, warm_start, max_iter: int = 20_000) -> dict:
     """Iterations (multiples of 10) until complementarity <= 1e-5 ('complementarity') and until,
     with it, the largest violation <= each level of LEVELS (mean diameters)."""
-    run = ApgdSolver(tolerance=TOLERANCE, length_floor=0.1).prepare(program, warm_start)
+    solver = ApgdSolver(tolerance=TOLERANCE, length_floor=0.1)
+    run = solver.prepare(program, warm_start)
     d = mean_diameter(program)
-    raw = length_scale(program)
-    floor, scale = force_floor(program, raw), max(raw, 0.1 * d)
+    scale, floor, _ = solver.stopping_scales(program)
     first, k = {}, 0
     while k < max_iter and len(first) < len(LEVELS) + 1:
         run.iterate(10)

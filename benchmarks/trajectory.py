@@ -31,7 +31,6 @@ import numpy as np
 from colsim import io
 from colsim.collapse import CollapseSettings, collapse
 from colsim.solvers import make_solver
-from colsim.state import StepSettings, Walls
 from colsim.stepper import Carry, run
 
 
@@ -59,10 +58,7 @@ def run_one(start, solver, n_steps: int, first_step: int, steps: int):
     state, h0, carry = start[0].copy(), start[1], copy.deepcopy(start[2])
     if not solver.uses_warm_start:   # as colsim.collapse hands it on
         carry = Carry(None, carry.margin)
-    settings = CollapseSettings(mu_r=0.12, n_steps=n_steps)
-    step_settings = StepSettings(dt=settings.time_step(h0), gravity=(0.0, 0.0, -settings.gravity),
-                                 walls=Walls(floor=True, cylinder_radius=None), law=settings.law(),
-                                 friction=settings.friction())
+    step_settings = CollapseSettings(mu_r=0.12, n_steps=n_steps).step_settings(h0)
     cpu = time.process_time()
     results = list(run(state, step_settings, steps, solver, first_step, carry))
     cpu = time.process_time() - cpu

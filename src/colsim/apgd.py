@@ -363,6 +363,17 @@ class ApgdSolver(Solver):
         G = (SB @ sp.diags(inv_mass)).tocsr()
         return _Iteration(G, SB.T.tocsr(), c, a, b, inv_mass, x, s, self.lipschitz_decay)
 
+    def stopping_scales(self, program: ConeProgram) -> tuple[float, float, float]:
+        """The stopping rule's scales for `program`: the residuals' length L (the free flight or
+        `length_floor` mean diameters d, whichever is larger), the force floor F0 (from the free
+        flight alone) and the primal tolerance (relative to L: `tolerance`, or the overlap
+        tolerance's `overlap_tolerance` d / L where that is larger)."""
+        free_flight = length_scale(program)
+        diameter = mean_diameter(program)
+        scale = max(free_flight, self.length_floor * diameter)
+        return (scale, force_floor(program, free_flight),
+                max(self.tolerance, self.overlap_tolerance * diameter / scale))
+
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None, max_iter: int | None = None) -> ConeSolution:
         """Solve `program` from `warm_start` ((m, 5) forces or None); max_iter: this call's cap
@@ -375,11 +386,7 @@ class ApgdSolver(Solver):
         run = self.prepare(program, warm_start)
         s_flat = run.scaling.ravel()
         started = "warm" if np.any(run.x) else "cold"
-        scale = length_scale(program)
-        floor = force_floor(program, scale)
-        diameter = mean_diameter(program)
-        scale = max(scale, self.length_floor * diameter)
-        primal_tolerance = max(self.tolerance, self.overlap_tolerance * diameter / scale)
+        scale, floor, primal_tolerance = self.stopping_scales(program)
         setup_time = time.perf_counter() - start
 
         res = {"primal": np.inf, "dual": 0.0, "complementarity": np.inf}

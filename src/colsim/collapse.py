@@ -85,6 +85,13 @@ class CollapseSettings:
     def time_step(self, h0: float) -> float:
         return self.duration / self.n_steps * np.sqrt(h0 / self.gravity)
 
+    def step_settings(self, h0: float) -> StepSettings:
+        """The engine's settings for one step of the collapse of a column of height h0: the
+        floor and no cylinder, gravity, the contact and friction laws, dt from `time_step`."""
+        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity),
+                            walls=Walls(floor=True, cylinder_radius=None), law=self.law(),
+                            friction=self.friction())
+
     def scaled_time(self, steps: int) -> float:
         """t / sqrt(h0/g) after `steps` steps."""
         return steps * self.duration / self.n_steps
@@ -147,10 +154,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     progress: optional callable(diagnostics) after each step.
     stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
     """
-    dt = settings.time_step(h0)
-    step_settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -settings.gravity),
-                                 walls=Walls(floor=True, cylinder_radius=None), law=settings.law(),
-                                 friction=settings.friction())
+    step_settings = settings.step_settings(h0)
     fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
     saved = _load_checkpoint(checkpoint, fingerprint)
     if saved:

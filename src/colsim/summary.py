@@ -180,7 +180,7 @@ def lube_markdown(summary) -> str:
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
         counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
-        counts = counts[counts > 0] if counts.any() else counts   # a partial study: only the a run
+        counts = counts[counts > 0]   # a partial study: the aspect ratios run (every mu_r has one)
         seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
         lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
