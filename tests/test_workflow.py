@@ -136,7 +136,7 @@ def test_a_failed_run_does_not_rewrite_the_study_config(tmp_path):
     ("solver: simplex", "config: solver: 'simplex' is not one of"),
     ("r0: -1", "config: r0: -1 is less than or equal to the minimum of 0"),
     ("diameter_min: 0.9", "config: diameter_min 0.9 exceeds diameter_max 0.5"),
-    ("aspect_ratios: [0.1, 1]", "config: aspect ratio 0.1 at r0 2.5 gives h0 = 0.25, below diameter_max 0.5"),
+    ("aspect_ratios: [0.1, 1]", "config: aspect ratio 0.1 at r0 3 gives h0 = 0.3, below diameter_max 0.5"),
     ("pack_aspect_ratio: 1", "config: pack_aspect_ratio 1 is below the largest aspect ratio 5"),
     ("friction_law: bipotential", "config: friction_law: 'bipotential' is not one of"),
     ("{friction_law: coulomb, friction_law_comparison: true}",
