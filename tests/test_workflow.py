@@ -209,21 +209,36 @@ def test_the_convergence_study_plans_its_runs(tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     planned = set(planned_outputs(result))
     run = "results/r0_2/seed_1/a_{a}/mu_r_0.12"
-    for a in ("2", "5"):
-        for variant in ("steps_250_t_4", "steps_500_t_4", "steps_2000_t_4", "steps_2000_t_8"):  # run on to 8
+    for a in ("2", "5"):   # 1,000 steps stopped at t = 4: not the default study's run to rest
+        for variant in ("steps_250_t_4", "steps_500_t_4", "steps_1000_t_4", "steps_2000_t_4", "steps_2000_t_8"):
             assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
-        assert f"{run.format(a=a)}/collapse.nc" in planned                    # 1,000 steps: the default
-    assert "results/r0_3/seed_1/a_2/mu_r_0.12/collapse.nc" in planned
+        assert f"{run.format(a=a)}/collapse.nc" not in planned
+    assert "results/r0_3/seed_1/a_2/mu_r_0.12/steps_1000_t_4/collapse.nc" in planned
     for r0, seeds in (("2", "123"), ("3", "123"), ("4", "1")):   # small columns run on to t = 8
         for a in ("0.5", "1"):
             for seed in seeds:
                 assert f"results/r0_{r0}/seed_{seed}/a_{a}/mu_r_0.12/steps_2000_t_8/collapse.nc" in planned
     assert "results/r0_4/seed_2/packing.nc" not in planned
     assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
-    assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/collapse.nc" for s in range(1, 6)} <= planned
-    assert "results/r0_2/seed_3/a_5/mu_r_0.12/collapse.nc" in planned
+    assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/steps_1000_t_4/collapse.nc" for s in range(1, 6)} <= planned
+    assert "results/r0_2/seed_3/a_5/mu_r_0.12/steps_1000_t_4/collapse.nc" in planned
     assert {"results/convergence/summary.nc", "results/convergence/lube_table.md",
             "results/convergence/convergence.nc", "results/convergence/figures/convergence.png"} <= planned
+
+
+def test_a_run_to_rest_and_a_run_stopped_at_its_end_time_keep_separate_folders(tmp_path):
+    """The default study (1,000 steps, on to rest) and a study of the same columns stopped at
+    t/sqrt(h0/g) = 4 (max_duration: null) plan different runs: neither overwrites the other."""
+    directory = copy_workflow(tmp_path)
+    (directory / "fixed.yaml").write_text("collapse: {max_duration: null}\nstudy: fixed\n")
+    to_rest = snakemake(directory, "-n", "-p", "all", timeout=120)
+    fixed = snakemake(directory, "-n", "-p", "all", "--configfile", "fixed.yaml", timeout=120)
+    assert to_rest.returncode == 0 and fixed.returncode == 0, to_rest.stderr[-3000:] + fixed.stderr[-3000:]
+    rest_runs = {p for p in planned_outputs(to_rest) if p.endswith("collapse.nc")}
+    fixed_runs = {p for p in planned_outputs(fixed) if p.endswith("collapse.nc")}
+    assert len(rest_runs) == len(fixed_runs) == 48 and not rest_runs & fixed_runs
+    assert all(p.endswith("/steps_1000_t_4/collapse.nc") for p in fixed_runs)
+    assert "--max-duration 12 " in to_rest.stdout and "--max-duration" not in fixed.stdout
 
 
 def test_the_friction_law_study_plans_both_laws(tmp_path):

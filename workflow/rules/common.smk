@@ -77,9 +77,12 @@ PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 
 
 # A run's folder depends on the run alone, never on the study asking for it, so no two studies
-# overwrite each other's runs: a run with the schema's default steps and end time (CANONICAL) is
-# BASE_RUN, one with others is VARIANT below it, and a run under the Coulomb law is in a folder
-# `coulomb` below either.
+# overwrite each other's runs: a run with the schema's default steps and end time (CANONICAL) that
+# goes on to rest (the default study's) is BASE_RUN; one that stops at its end time, or has other
+# steps or end time, is VARIANT below it (so the default study and a study with max_duration: null
+# at the same r0 keep both runs); a run under the Coulomb law is in a folder `coulomb` below either.
+# The rest settings themselves (max_duration, rest_window, ...) are not in the name: changing them
+# reruns the runs, as Snakemake's "Params have changed" says.
 # A packing filled with friction (pack.mu > 0) and its runs are another tree, results/pack_mu_{mu}/,
 # so they never overwrite the default packings' runs.
 RUNS = "results" if config["pack"]["mu"] == 0 else f"results/pack_mu_{fmt(config['pack']['mu'])}"
@@ -90,6 +93,7 @@ _COLLAPSE_SCHEMA = SCHEMA_TREE["properties"]["collapse"]["properties"]
 CANONICAL = (int(_COLLAPSE_SCHEMA["steps"]["default"]), float(_COLLAPSE_SCHEMA["duration"]["default"]))
 FRICTION_LAW = config["friction_law"]
 STUDY_LENGTH = (int(config["collapse"]["steps"]), float(config["collapse"]["duration"]))
+RUN_TO_REST = config["collapse"]["max_duration"] is not None
 
 
 def logged(path):
@@ -168,17 +172,19 @@ def run_to_rest_options(wildcards):
     """colsim collapse options that run the study's collapses on to rest ("" without max_duration;
     a convergence run of other steps or end time than the study's keeps its fixed length)."""
     collapse = config["collapse"]
-    if collapse["max_duration"] is None or (collapse_steps(wildcards), collapse_duration(wildcards)) != STUDY_LENGTH:
+    if not RUN_TO_REST or (collapse_steps(wildcards), collapse_duration(wildcards)) != STUDY_LENGTH:
         return ""
     return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
             f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")
 
 
 def run_path(name, r0, seed, a, mu_r, steps=None, duration=None, law="associated"):
-    """Path of file `name` of one run (steps and end time: the study's unless given)."""
+    """Path of file `name` of one run (steps and end time: the study's unless given; a run of the
+    study's own length goes on to rest if the study does, any other stops at its end time)."""
     steps = STUDY_LENGTH[0] if steps is None else int(steps)
     duration = STUDY_LENGTH[1] if duration is None else float(duration)
-    pattern = BASE_RUN if (steps, duration) == CANONICAL else VARIANT
+    to_rest = RUN_TO_REST and (steps, duration) == STUDY_LENGTH
+    pattern = BASE_RUN if (steps, duration) == CANONICAL and to_rest else VARIANT
     pattern += "" if law == "associated" else f"/{law}"
     return pattern.format(r0=fmt(r0), seed=seed, a=fmt(a), mu_r=fmt(mu_r), steps=steps,
                           duration=fmt(duration)) + f"/{name}"
