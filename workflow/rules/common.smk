@@ -168,11 +168,16 @@ def collapse_duration(wildcards):
     return float(wildcards.get("duration", CANONICAL[1]))
 
 
+def goes_to_rest(steps, duration):
+    """Whether a run of these steps and end time goes on to rest: only the study's own runs, and
+    only when the study sets max_duration; a convergence run of other steps or end time stops."""
+    return RUN_TO_REST and (steps, duration) == STUDY_LENGTH
+
+
 def run_to_rest_options(wildcards):
-    """colsim collapse options that run the study's collapses on to rest ("" without max_duration;
-    a convergence run of other steps or end time than the study's keeps its fixed length)."""
+    """colsim collapse options that run a collapse on to rest ("" for one that stops at its end)."""
     collapse = config["collapse"]
-    if not RUN_TO_REST or (collapse_steps(wildcards), collapse_duration(wildcards)) != STUDY_LENGTH:
+    if not goes_to_rest(collapse_steps(wildcards), collapse_duration(wildcards)):
         return ""
     return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
             f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")
@@ -183,8 +188,7 @@ def run_path(name, r0, seed, a, mu_r, steps=None, duration=None, law="associated
     study's own length goes on to rest if the study does, any other stops at its end time)."""
     steps = STUDY_LENGTH[0] if steps is None else int(steps)
     duration = STUDY_LENGTH[1] if duration is None else float(duration)
-    to_rest = RUN_TO_REST and (steps, duration) == STUDY_LENGTH
-    pattern = BASE_RUN if (steps, duration) == CANONICAL and to_rest else VARIANT
+    pattern = BASE_RUN if (steps, duration) == CANONICAL and goes_to_rest(steps, duration) else VARIANT
     pattern += "" if law == "associated" else f"/{law}"
     return pattern.format(r0=fmt(r0), seed=seed, a=fmt(a), mu_r=fmt(mu_r), steps=steps,
                           duration=fmt(duration)) + f"/{name}"
