@@ -32,19 +32,24 @@ def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE):
     return assemble(state, found, settings.dt, settings.gravity), found
 
 
-def mid_collapse(state: ParticleState, steps: int = 6) -> ParticleState:
-    """The state after `steps` collapse steps with Clarabel."""
+def collapse_settings(law: ContactLaw | None = None) -> StepSettings:
+    """COLLAPSE, or the same step under another contact law."""
+    return COLLAPSE if law is None else StepSettings(dt=COLLAPSE.dt, law=law)
+
+
+def mid_collapse(state: ParticleState, steps: int = 6, law: ContactLaw | None = None) -> ParticleState:
+    """The state after `steps` collapse steps with Clarabel (under `law`: COLLAPSE's by default)."""
     for k in range(steps):
-        state = step(state, COLLAPSE, ClarabelSolver(), k).state
+        state = step(state, collapse_settings(law), ClarabelSolver(), k).state
     return state
 
 
-def against_clarabel(solver, state: ParticleState):
+def against_clarabel(solver, state: ParticleState, law: ContactLaw | None = None):
     """Solve one collapse step from `state` with `solver` and with Clarabel at 1e-10.
 
     Returns (program, solution, relative difference of the increments, relative difference of the
     net contact force on the particles B' lam, which is unique even where the forces are not)."""
-    program, _ = collapse_program(state)
+    program, _ = collapse_program(state, collapse_settings(law))
     assert program.m > 100 and np.all(program.mu > 0) and np.any(program.mu_r > 0)
     ref = ClarabelSolver(tolerance=1e-10).solve(program)
     sol = solver.solve(program)

@@ -176,6 +176,8 @@ def _run_attributes(trajectory) -> dict:
     attrs = {key: float(trajectory.attrs[key]) for key in ("aspect_ratio", "mu_r", "mu", "r0", "h0", "duration")}
     attrs["n_steps"] = int(trajectory.attrs["n_steps"])
     attrs["friction_law"] = str(trajectory.attrs.get("friction_law", "associated"))
+    # a trajectory written before the option existed was computed with R_eff
+    attrs["rolling_lever"] = str(trajectory.attrs.get("rolling_lever", "effective"))
     if "at_rest" in trajectory.attrs:
         attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     return attrs

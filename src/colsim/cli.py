@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from .solvers import SOLVERS, AutoSolver
-from .state import FRICTION_LAWS, FrictionLaw
+from .state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
 
 log = logging.getLogger("colsim")
 
@@ -132,6 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--friction-tolerance", type=_positive, default=FrictionLaw().tolerance,
                    help="coulomb: stop the fixed point when its gap correction changes by at most this "
                         "many mean diameters, root mean square over the contacts (default: %(default)s)")
+    p.add_argument("--rolling-lever", choices=ROLLING_LEVERS, default="paper",
+                   help="lever L of the rolling moment L r between two spheres: paper (its Eqs. 6 and 9: "
+                        "2 R_i R_j/(R_i + R_j), each radius when equal) or effective (R_eff = R_i R_j/(R_i + R_j), "
+                        "the common DEM convention, half of it); R_i at the floor either way (default: %(default)s)")
     p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
     p.add_argument("--steps", type=_positive_int, default=1000,
                    help="number of equal steps (default: %(default)s, converged; the paper's is 100)")

@@ -57,6 +57,7 @@ class CollapseSettings:
     rest_energy: float = 1e-2            # of the peak kinetic energy
     friction_law: str = "associated"     # or "coulomb" (colsim.friction)
     friction_tolerance: float = FrictionLaw().tolerance     # coulomb's fixed point, mean diameters
+    rolling_lever: str = "paper"         # or "effective" (R_eff; colsim.state.rolling_lever)
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):
@@ -70,6 +71,7 @@ class CollapseSettings:
         if self.max_duration is not None and self.max_duration < self.duration:
             raise ValueError(f"max_duration {self.max_duration} is below duration {self.duration}")
         self.friction()   # checks the law's name and tolerance
+        self.law()        # checks the rolling lever
         if self.rest_window <= 0 or self.rest_tolerance <= 0 or self.rest_energy <= 0:
             raise ValueError(f"need rest_window, rest_tolerance and rest_energy > 0; got "
                              f"{self.rest_window}, {self.rest_tolerance}, {self.rest_energy}")
@@ -80,7 +82,8 @@ class CollapseSettings:
     def law(self) -> ContactLaw:
         floor_mu = self.mu if self.floor_mu is None else self.floor_mu
         floor_mu_r = self.mu_r if self.floor_mu_r is None else self.floor_mu_r
-        return ContactLaw(mu=(self.mu, floor_mu, 0.0), mu_r=(self.mu_r, floor_mu_r, 0.0))
+        return ContactLaw(mu=(self.mu, floor_mu, 0.0), mu_r=(self.mu_r, floor_mu_r, 0.0),
+                          rolling_lever=self.rolling_lever)
 
     def time_step(self, h0: float) -> float:
         return self.duration / self.n_steps * np.sqrt(h0 / self.gravity)
@@ -263,6 +266,7 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "friction_law": settings.friction_law,
+                          "rolling_lever": settings.rolling_lever,
                           "dt": settings.time_step(h0),
                           "duration": settings.scaled_time(len(run.diagnostics)),
                           "n_steps": len(run.diagnostics),

@@ -139,7 +139,8 @@ def collapse(args):
         gravity=float(source.attrs.get("gravity", 9.81)),
         checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
         rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy,
-        friction_law=args.friction_law, friction_tolerance=args.friction_tolerance)
+        friction_law=args.friction_law, friction_tolerance=args.friction_tolerance,
+        rolling_lever=args.rolling_lever)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if args.friction_law == "associated" else f" {args.friction_law}"
     progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")

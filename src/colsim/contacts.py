@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, ParticleState, Walls
+from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, ParticleState, Walls, rolling_lever
 
 WALL = -1  # index of the other body for a particle-wall contact
 
@@ -27,7 +27,8 @@ class Contacts:
     normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
     gap: (m,) float, length, surface distance at the start of the step
     radius_i, radius_j: (m,) float, length (radius_j = 0 for walls)
-    rolling_radius: (m,) float, length, R_i R_j/(R_i + R_j), or R_i for a wall
+    rolling_radius: (m,) float, length, the lever L of the rolling moment L r (law.rolling_lever:
+        the paper's 2 R_i R_j/(R_i + R_j) or R_eff = R_i R_j/(R_i + R_j)), R_i for a wall
     mu, mu_r: (m,) float, sliding and rolling coefficients
     """
 
@@ -161,7 +162,7 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     gap = np.concatenate([pair_gap, wgap])
     radius_i = state.radius[i]
     radius_j = np.where(j >= 0, state.radius[np.maximum(j, 0)], 0.0)
-    rolling_radius = np.where(j >= 0, radius_i * radius_j / (radius_i + radius_j), radius_i)
+    rolling_radius = rolling_lever(radius_i, radius_j, law.rolling_lever)
     t1, t2 = tangent_basis(normal)
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,

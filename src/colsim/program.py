@@ -14,7 +14,8 @@ Its Lagrange dual (force form) is
     subject to lam_k = (p, q1, q2, r1, r2) with ||q|| <= mu p, ||r|| <= mu_r p
 
 and u = Mbar^-1 (fbar + B' lam). The multipliers are the contact forces: normal p, sliding q and
-rolling r; the rolling moment is R_eff r. This is the associated friction law of the paper: a
+rolling r; the rolling moment is L r, L the contact's lever (:func:`colsim.state.rolling_lever`:
+the paper's particle radius, or R_eff). This is the associated friction law of the paper: a
 sliding contact opens by mu ||du_t|| per step.
 
 A back-end solves a program behind one contract (:class:`Solver`): it returns a

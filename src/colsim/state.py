@@ -98,16 +98,21 @@ class Walls:
 
 @dataclass(frozen=True)
 class ContactLaw:
-    """Sliding (mu) and rolling (mu_r) coefficients for each contact family.
+    """Sliding (mu) and rolling (mu_r) coefficients for each contact family, and the rolling lever.
 
     Each tuple is (particle-particle, particle-floor, particle-cylinder). The paper uses
     mu = mu_r = 0 while filling and mu = 0.577, mu_r = 0.12 for the collapse; its cylinder is frictionless.
+    rolling_lever: the lever arm L of the rolling moment L r between two spheres (:func:`rolling_lever`):
+    "paper" (its Eqs. 6 and 9) or "effective" (R_eff, the common DEM convention).
     """
 
     mu: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mu_r: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rolling_lever: str = "paper"
 
     def __post_init__(self):
+        if self.rolling_lever not in ROLLING_LEVERS:
+            raise ValueError(f"rolling_lever must be one of {', '.join(ROLLING_LEVERS)}, got {self.rolling_lever!r}")
         for name in ("mu", "mu_r"):
             values = tuple(float(v) for v in getattr(self, name))
             if len(values) != 3:
@@ -117,9 +122,30 @@ class ContactLaw:
             object.__setattr__(self, name, values)
 
     @classmethod
-    def uniform(cls, mu: float, mu_r: float, cylinder_mu: float = 0.0) -> "ContactLaw":
+    def uniform(cls, mu: float, mu_r: float, cylinder_mu: float = 0.0,
+                rolling_lever: str = "paper") -> "ContactLaw":
         """The same mu, mu_r on particles and floor; a frictionless cylinder (as in the paper)."""
-        return cls(mu=(mu, mu, cylinder_mu), mu_r=(mu_r, mu_r, 0.0))
+        return cls(mu=(mu, mu, cylinder_mu), mu_r=(mu_r, mu_r, 0.0), rolling_lever=rolling_lever)
+
+
+# The lever arm of the rolling moment between two spheres (SPEC section 2, "Rolling"). The paper's
+# Eq. (6) turns the rolling force r into each particle's moment through the particle-radius matrix R,
+# as it does the friction force, and its Eq. (9) gives a disc's resisting moment as mu_r r p, r the
+# disc's own radius: between spheres L = 2 R_i R_j / (R_i + R_j), each radius when they are equal.
+# "effective": R_eff = R_i R_j / (R_i + R_j), half of it between equal spheres. At a wall both are R_i.
+ROLLING_LEVERS = ("paper", "effective")
+
+
+def rolling_lever(radius_i: np.ndarray, radius_j: np.ndarray, lever: str = "paper") -> np.ndarray:
+    """Lever arm L (length) of each contact's rolling moment L r; radius_j = 0 marks a wall (L = R_i).
+
+    radius_i, radius_j: (m,) radii (length); lever: one of ROLLING_LEVERS."""
+    if lever not in ROLLING_LEVERS:
+        raise ValueError(f"rolling lever must be one of {', '.join(ROLLING_LEVERS)}, got {lever!r}")
+    radius_i, radius_j = np.asarray(radius_i, dtype=float), np.asarray(radius_j, dtype=float)
+    between = radius_i * radius_j / np.where(radius_j > 0, radius_i + radius_j, 1.0)
+    scale = 2.0 if lever == "paper" else 1.0
+    return np.where(radius_j > 0, scale * between, radius_i)
 
 
 FRICTION_LAWS = ("associated", "coulomb")

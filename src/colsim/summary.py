@@ -37,9 +37,13 @@ def run_settings(analysis) -> dict:
     chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS and the
     Coulomb fixed point's tolerance of an associated run (which does not use it)."""
     settings = {name: float(analysis.attrs[name]) for name in ("r0", "mu") if name in analysis.attrs}
+    # runs made before the option existed used R_eff: they differ from the paper's lever's
+    settings["rolling_lever"] = str(analysis.attrs.get("rolling_lever", "effective"))
     config = json.loads(analysis.attrs.get("config", "{}"))
     while config:
         stage = config.get("command", "stage")
+        if stage == "collapse":   # written before the option existed: R_eff
+            config = {"rolling_lever": "effective", **config}
         unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
         settings |= {f"{stage}.{key}": value for key, value in config.items()
                      if key not in NOT_SETTINGS | unused and key != "input_config"}
@@ -116,6 +120,7 @@ def collect_analyses(analyses) -> xr.Dataset:
     first = analyses[0].attrs
     attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
              "friction_law": str(first.get("friction_law", "associated")),
+             "rolling_lever": str(first.get("rolling_lever", "effective")),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
