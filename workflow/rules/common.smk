@@ -1,4 +1,7 @@
 # Configuration check and the helpers that name the study's files (no physics here).
+import hashlib
+import json
+
 import jsonschema
 import yaml
 from snakemake.exceptions import WorkflowError
@@ -65,8 +68,10 @@ if problem:
 
 
 def fmt(value):
-    """A number as it appears in paths and on the colsim command line: 1 -> '1', 0.06 -> '0.06'."""
-    return f"{float(value):g}"
+    """A number as it appears in paths and on the colsim command line, without loss: 1 -> '1',
+    0.06 -> '0.06', pi/24 -> '0.1308996938995747' (%g where it gives the same number back)."""
+    short = f"{float(value):g}"
+    return short if float(short) == float(value) else repr(float(value))
 
 
 R0 = fmt(config["r0"])
@@ -76,34 +81,39 @@ SEEDS = [str(s) for s in config["seeds"]]
 PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 
 
-# A run's folder depends on the run alone, never on the study asking for it, so no two studies
-# overwrite each other's runs: a run with the schema's default steps and end time (CANONICAL) that
-# goes on to rest (the default study's) is BASE_RUN; one that stops at its end time, or has other
-# steps or end time, is VARIANT below it (so the default study and a study with max_duration: null
-# at the same r0 keep both runs); a run under the Coulomb law is in a folder `coulomb` below either.
-# The rest settings themselves (max_duration, rest_window, ...) are not in the name: changing them
-# reruns the runs, as Snakemake's "Params have changed" says.
-# A packing filled with friction (pack.mu > 0) and its runs are another tree, results/pack_mu_{mu}/,
-# so they never overwrite the default packings' runs.
-RUNS = "results" if config["pack"]["mu"] == 0 else f"results/pack_mu_{fmt(config['pack']['mu'])}"
-PACKING_DIR = RUNS + "/r0_{r0}/seed_{seed}"
-BASE_RUN = PACKING_DIR + "/a_{a}/mu_r_{mu_r}"
-VARIANT = BASE_RUN + "/steps_{steps}_t_{duration}"
+# A run's identity is every setting that changes its result. Its folder names the swept values for
+# a reader (r0, seed, a, mu_r) and a key: the first ten hex digits of the SHA-256 of its settings
+# (settings_key), written out beside it as settings.yaml. A packing's key covers its height, seeds,
+# diameters, density, gravity, pack.* and the solver; a collapse's covers mu, mu_r, the rolling lever,
+# the friction law, steps, end time, the rest settings, the solver and frame_every (not
+# checkpoint_every, which does not change a result). Two studies share a file only when it is the
+# same computation; the key of a setting changed means a new folder, never an overwrite.
+RESULTS = "results"
+PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
+COLUMN = PACKING_DIR + "/a_{a}/column.nc"
+RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
+PACKINGS = {}   # key -> packing settings, of every packing this study names
+RUNS = {}       # key -> collapse settings, of every run this study names
 _COLLAPSE_SCHEMA = SCHEMA_TREE["properties"]["collapse"]["properties"]
-CANONICAL = (int(_COLLAPSE_SCHEMA["steps"]["default"]), float(_COLLAPSE_SCHEMA["duration"]["default"]))
 FRICTION_LAW = config["friction_law"]
 STUDY_LENGTH = (int(config["collapse"]["steps"]), float(config["collapse"]["duration"]))
 RUN_TO_REST = config["collapse"]["max_duration"] is not None
 
 
+def settings_key(settings):
+    """Ten hex digits of the SHA-256 of `settings` as canonical JSON (a folder name)."""
+    text = json.dumps(settings, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
 def logged(path):
-    """The log file of a job whose output is `path` (below RUNS): the same path below RUNS/logs."""
-    return f"{RUNS}/logs{path[len(RUNS):]}"
+    """The log file of a job whose output is `path` (below results/): the same path below results/logs."""
+    return f"{RESULTS}/logs{path[len(RESULTS):]}"
 
 
 def benchmarked(path):
-    """The benchmark file of a job whose output is `path` (below RUNS): below RUNS/benchmarks."""
-    return f"{RUNS}/benchmarks{path[len(RUNS):]}"
+    """The benchmark file of a job whose output is `path` (below results/): below results/benchmarks."""
+    return f"{RESULTS}/benchmarks{path[len(RESULTS):]}"
 
 
 # where the study's summary, tables and figures go (runs are shared between studies)
@@ -117,8 +127,8 @@ wildcard_constraints:
     a=r"[0-9][0-9.e+-]*",
     mu_r=r"[0-9][0-9.e+-]*",
     seed=r"[0-9]+",
-    steps=r"[0-9]+",
-    duration=r"[0-9][0-9.e+-]*",
+    packing=r"[0-9a-f]{10}",
+    run=r"[0-9a-f]{10}",
 
 
 def runs(name, mu_r=None, seeds=None, law=None):
@@ -134,38 +144,37 @@ def side_view_mu_r():
     return min(MU_R, key=lambda m: abs(float(m) - target))
 
 
-def pack_height(wildcards):
-    """Height the packing of radius r0 must exceed: pack_aspect_ratio (or the largest a) times r0.
-    A packing only the convergence study uses (another r0, or a seed outside `seeds`) is packed
-    just tall enough for its sub-study's (largest) aspect ratio."""
+def pack_height(r0, seed):
+    """Height (length) the packing of radius r0 and seed `seed` must exceed: pack_aspect_ratio (or
+    the largest a) times r0. A packing only the convergence study uses (another r0, or a seed outside
+    `seeds`) is packed just tall enough for its sub-study's (largest) aspect ratio."""
+    r0, seed = fmt(r0), str(seed)
     study = config.get("convergence")
     sizes = [entry["aspect_ratio"] for entry in (study or {}).get("column_size", [])
-             if wildcards.r0 != R0 and wildcards.r0 in [fmt(r0) for r0 in entry["r0"]]]
+             if r0 != R0 and r0 in [fmt(size) for size in entry["r0"]]]
     if sizes:
-        return fmt(max(sizes) * float(wildcards.r0))
-    if study and wildcards.seed not in SEEDS:   # tall enough for every sub-study using the seed
-        seed = int(wildcards.seed)
-        needs = [study["seeds"]["aspect_ratio"]] if seed in study["seeds"]["seeds"] else []
-        needs += study["time_step"]["aspect_ratios"] if seed in study["time_step"].get("seeds", []) else []
-        return fmt(max(needs or [PACK_ASPECT_RATIO]) * float(wildcards.r0))
-    return fmt(PACK_ASPECT_RATIO * float(wildcards.r0))
+        return max(sizes) * float(r0)
+    if study and seed not in SEEDS:   # tall enough for every sub-study using the seed
+        needs = [study["seeds"]["aspect_ratio"]] if int(seed) in study["seeds"]["seeds"] else []
+        needs += study["time_step"]["aspect_ratios"] if int(seed) in study["time_step"].get("seeds", []) else []
+        return max(needs or [PACK_ASPECT_RATIO]) * float(r0)
+    return PACK_ASPECT_RATIO * float(r0)
 
 
-def mu_r_value(wildcards):
-    """The configured mu_r whose path string is {mu_r}, at full precision (pi/24 stays
-    0.1308996938995747; its path is mu_r_0.1309)."""
-    values = list(config["mu_r"]) + ([config["convergence"]["mu_r"]] if config.get("convergence") else [])
-    return next((m for m in values if fmt(m) == wildcards.mu_r), float(wildcards.mu_r))
+def packing_settings(r0, seed):
+    """Everything `colsim pack` is given for the packing of (r0, seed): its identity."""
+    return {"r0": float(r0), "seed": int(seed), "height": float(pack_height(r0, seed)),
+            "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
+            "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
+            "gravity": float(config["gravity"]), "pack": dict(config["pack"]), "solver": config["solver"]}
 
 
-def collapse_steps(wildcards):
-    """Steps of a collapse: a variant's {steps}, else the canonical ones (its folder says which)."""
-    return int(wildcards.get("steps", CANONICAL[0]))
-
-
-def collapse_duration(wildcards):
-    """End time t/sqrt(h0/g) of a collapse: a variant's {duration}, else the canonical one."""
-    return float(wildcards.get("duration", CANONICAL[1]))
+def packing_dir(r0, seed):
+    """The folder of the packing of (r0, seed) under this study's settings (registered in PACKINGS)."""
+    settings = packing_settings(r0, seed)
+    key = settings_key(settings)
+    PACKINGS[key] = settings
+    return PACKING_DIR.format(r0=fmt(r0), seed=seed, packing=key)
 
 
 def goes_to_rest(steps, duration):
@@ -174,24 +183,54 @@ def goes_to_rest(steps, duration):
     return RUN_TO_REST and (steps, duration) == STUDY_LENGTH
 
 
-def run_to_rest_options(wildcards):
-    """colsim collapse options that run a collapse on to rest ("" for one that stops at its end)."""
+def run_settings(mu_r, steps, duration, law):
+    """Everything `colsim collapse` is given for one run of a column (its identity, with the column)."""
     collapse = config["collapse"]
-    if not goes_to_rest(collapse_steps(wildcards), collapse_duration(wildcards)):
-        return ""
-    return (f"--max-duration {collapse['max_duration']} --rest-window {collapse['rest_window']}"
-            f" --rest-tolerance {collapse['rest_tolerance']} --rest-energy {collapse['rest_energy']}")
+    rest = None
+    if goes_to_rest(steps, duration):
+        rest = {key: float(collapse[key]) for key in ("max_duration", "rest_window", "rest_tolerance", "rest_energy")}
+    return {"mu": float(config["mu"]), "mu_r": float(mu_r), "rolling_lever": config["rolling_lever"],
+            "friction_law": law, "friction_tolerance": config["friction_tolerance"] if law == "coulomb" else None,
+            "steps": int(steps), "duration": float(duration), "rest": rest, "solver": config["solver"],
+            "solver_overlap_tolerance": config["solver_overlap_tolerance"],
+            "frame_every": int(collapse["frame_every"])}
 
 
-def run_path(name, r0, seed, a, mu_r, steps=None, duration=None, law="associated"):
+def run_path(name, r0, seed, a, mu_r, steps=None, duration=None, law=None):
     """Path of file `name` of one run (steps and end time: the study's unless given; a run of the
-    study's own length goes on to rest if the study does, any other stops at its end time)."""
+    study's own length goes on to rest if the study does, any other stops at its end time; the
+    friction law: the study's unless given). The run is registered in RUNS."""
     steps = STUDY_LENGTH[0] if steps is None else int(steps)
     duration = STUDY_LENGTH[1] if duration is None else float(duration)
-    pattern = BASE_RUN if (steps, duration) == CANONICAL and goes_to_rest(steps, duration) else VARIANT
-    pattern += "" if law == "associated" else f"/{law}"
-    return pattern.format(r0=fmt(r0), seed=seed, a=fmt(a), mu_r=fmt(mu_r), steps=steps,
-                          duration=fmt(duration)) + f"/{name}"
+    settings = run_settings(mu_r, steps, duration, law or FRICTION_LAW)
+    key = settings_key(settings)
+    RUNS[key] = settings
+    return f"{packing_dir(r0, seed)}/a_{fmt(a)}/mu_r_{fmt(mu_r)}/run_{key}/{name}"
+
+
+def packing_of(wildcards):
+    """The settings of the packing that {packing} names; a key this study does not name is an error
+    (its settings are not in this configuration, so the file cannot be made again from it)."""
+    settings = PACKINGS.get(wildcards.packing)
+    if settings is None or fmt(settings["r0"]) != wildcards.r0 or str(settings["seed"]) != wildcards.seed:
+        raise WorkflowError(f"no packing of this study has the folder r0_{wildcards.r0}/seed_{wildcards.seed}/"
+                            f"pack_{wildcards.packing}: its settings.yaml says what made it")
+    return settings
+
+
+def run_of(wildcards):
+    """The settings of the run that {run} names (an error for a key this study does not name)."""
+    settings = RUNS.get(wildcards.run)
+    if settings is None or fmt(settings["mu_r"]) != wildcards.mu_r:
+        raise WorkflowError(f"no run of this study has the folder mu_r_{wildcards.mu_r}/run_{wildcards.run}:"
+                            " its settings.yaml says what made it")
+    return settings
+
+
+def write_settings(settings, path):
+    """Write a run's or packing's settings (its identity) as YAML, atomically."""
+    with atomic_path(path) as tmp, open(tmp, "w") as stream:
+        yaml.safe_dump(settings, stream, sort_keys=True)
 
 
 def convergence_runs(name):
@@ -227,20 +266,23 @@ def friction_law_outputs():
     return [f"{STUDY_DIR}/friction_law.nc", f"{STUDY_DIR}/friction_law.md", f"{STUDY_DIR}/figures/friction_law.png"]
 
 
-def collapse_solver_options():
-    """What follows --solver on a collapse's command line: the back-end, and the overlap tolerance
-    when the study sets one (so that the default leaves the command, and the runs, as they were)."""
-    overlap = config.get("solver_overlap_tolerance")
-    return config["solver"] if overlap is None else f"{config['solver']} --solver-overlap-tolerance {overlap}"
-
-
-def friction_options(wildcards, output):
-    """What follows --friction-law on a collapse's command line: the law, from the run's path (a
-    folder `coulomb` holds the Coulomb runs), and for a Coulomb run the fixed point's tolerance (so
-    that changing it reruns the Coulomb runs only)."""
-    if "/coulomb/" not in output[0]:
-        return "associated"
-    return f"coulomb --friction-tolerance {config['friction_tolerance']}"
+def collapse_options(wildcards):
+    """What follows --mu-r on a run's collapse command line, from its settings: the rolling lever,
+    the friction law (and a Coulomb run's fixed-point tolerance), steps, end time, frames, the rest
+    options, the solver (and its overlap tolerance when the study sets one)."""
+    run = run_of(wildcards)
+    options = (f"--rolling-lever {run['rolling_lever']} --friction-law {run['friction_law']}"
+               f" --steps {run['steps']} --duration {fmt(run['duration'])} --frame-every {run['frame_every']}")
+    if run["friction_law"] == "coulomb":
+        options += f" --friction-tolerance {run['friction_tolerance']}"
+    if run["rest"] is not None:
+        rest = run["rest"]
+        options += (f" --max-duration {fmt(rest['max_duration'])} --rest-window {fmt(rest['rest_window'])}"
+                    f" --rest-tolerance {fmt(rest['rest_tolerance'])} --rest-energy {fmt(rest['rest_energy'])}")
+    options += f" --solver {run['solver']}"
+    if run["solver_overlap_tolerance"] is not None:
+        options += f" --solver-overlap-tolerance {run['solver_overlap_tolerance']}"
+    return options
 
 
 def convergence_outputs():
@@ -253,7 +295,7 @@ def convergence_outputs():
 def collapse_priority(wildcards):
     """Scheduling priority of a collapse: 10 a (times its steps over the study's), so that the
     costliest columns run first."""
-    return int(round(10 * float(wildcards.a) * collapse_steps(wildcards) / STUDY_LENGTH[0]))
+    return int(round(10 * float(wildcards.a) * run_of(wildcards)["steps"] / STUDY_LENGTH[0]))
 
 
 def write_study_files(study, summary_path, template, config_path, description_path):
@@ -294,3 +336,5 @@ def figures():
 localrules:
     all,
     study_config,
+    packing_settings,
+    run_settings,

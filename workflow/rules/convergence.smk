@@ -1,27 +1,6 @@
 # The convergence study (config key `convergence`, e.g. config/convergence.yaml): collapses with their own
-# number of steps and end time, then one table, its relative changes and a figure.
-
-
-# The study's own collapse and analyse rules at the variant's path; collapse takes its steps and end
-# time from the {steps} and {duration} wildcards (common.smk: collapse_steps, collapse_duration).
-use rule collapse as collapse_variant with:
-    output:
-        f"{VARIANT}/collapse.nc",
-    log:
-        logged(f"{VARIANT}/collapse.log"),
-    benchmark:
-        benchmarked(f"{VARIANT}/collapse.tsv")
-
-
-use rule analyse as analyse_variant with:
-    input:
-        f"{VARIANT}/collapse.nc",
-    output:
-        f"{VARIANT}/analysis.nc",
-    log:
-        logged(f"{VARIANT}/analyse.log"),
-    benchmark:
-        benchmarked(f"{VARIANT}/analyse.tsv")
+# number of steps and end time (the rules collapse and analyse, at the folders their settings name),
+# then one table, its relative changes and a figure.
 
 
 rule convergence:
@@ -49,7 +28,7 @@ rule convergence:
     benchmark:
         f"{STUDY_DIR}/benchmarks/convergence.tsv"
     shell:
-        "colsim convergence --time-step {input.time_step} --end-time {input.end_time}"
-        " --column-size {input.column_size} --seeds {input.seeds} --default-end {params.default_end}"
-        " --output {output.nc} --csv {output.csv} --markdown {output.markdown}"
-        " --figure {output.figure} > {log} 2>&1"
+        "colsim convergence --time-step {input.time_step:q} --end-time {input.end_time:q}"
+        " --column-size {input.column_size:q} --seeds {input.seeds:q} --default-end {params.default_end}"
+        " --output {output.nc:q} --csv {output.csv:q} --markdown {output.markdown:q}"
+        " --figure {output.figure:q} > {log:q} 2>&1"

@@ -1,37 +1,6 @@
-# The Coulomb (non-associated) friction law (config key friction_law; README, "Friction law"): the
-# study's collapse and analyse rules at a folder `coulomb` below each run, and, with
-# friction_law_comparison: true, the same runs under both laws in one table and figure.
-
-
-use rule collapse as collapse_coulomb with:
-    output:
-        f"{BASE_RUN}/coulomb/collapse.nc",
-    log:
-        logged(f"{BASE_RUN}/coulomb/collapse.log"),
-    benchmark:
-        benchmarked(f"{BASE_RUN}/coulomb/collapse.tsv")
-
-
-use rule analyse as analyse_coulomb with:
-    input:
-        f"{BASE_RUN}/coulomb/collapse.nc",
-    output:
-        f"{BASE_RUN}/coulomb/analysis.nc",
-    log:
-        logged(f"{BASE_RUN}/coulomb/analyse.log"),
-    benchmark:
-        benchmarked(f"{BASE_RUN}/coulomb/analyse.tsv")
-
-
-use rule export_vtk as export_vtk_coulomb with:
-    input:
-        f"{BASE_RUN}/coulomb/collapse.nc",
-    output:
-        f"{BASE_RUN}/coulomb/vtk/collapse.pvd",
-    log:
-        logged(f"{BASE_RUN}/coulomb/export_vtk.log"),
-    benchmark:
-        benchmarked(f"{BASE_RUN}/coulomb/export_vtk.tsv")
+# The Coulomb (non-associated) friction law (config key friction_law; README, "Friction law"): its runs
+# are the rules collapse and analyse at the folders their settings name (the law is one of them);
+# with friction_law_comparison: true, the same runs under both laws in one table and figure.
 
 
 rule friction_law_comparison:
@@ -57,25 +26,5 @@ rule friction_law_comparison:
     benchmark:
         f"{STUDY_DIR}/benchmarks/friction_law.tsv"
     shell:
-        "colsim compare-laws --associated {input.associated} --coulomb {input.coulomb}"
-        " --output {output.nc} --markdown {output.markdown} --figure {output.figure} > {log} 2>&1"
-
-
-use rule collapse as collapse_variant_coulomb with:
-    output:
-        f"{VARIANT}/coulomb/collapse.nc",
-    log:
-        logged(f"{VARIANT}/coulomb/collapse.log"),
-    benchmark:
-        benchmarked(f"{VARIANT}/coulomb/collapse.tsv")
-
-
-use rule analyse as analyse_variant_coulomb with:
-    input:
-        f"{VARIANT}/coulomb/collapse.nc",
-    output:
-        f"{VARIANT}/coulomb/analysis.nc",
-    log:
-        logged(f"{VARIANT}/coulomb/analyse.log"),
-    benchmark:
-        benchmarked(f"{VARIANT}/coulomb/analyse.tsv")
+        "colsim compare-laws --associated {input.associated:q} --coulomb {input.coulomb:q}"
+        " --output {output.nc:q} --markdown {output.markdown:q} --figure {output.figure:q} > {log:q} 2>&1"

@@ -1,14 +1,36 @@
 # Stages 1-4 of the study, one job per file: pack per (r0, seed), trim per a, collapse per mu_r,
-# analyse per collapse. Every value reaches `colsim` through params, so editing config.yaml reruns
-# exactly the jobs whose settings changed.
+# analyse per collapse. Every value reaches `colsim` from the settings its folder's key names
+# (common.smk: packing_of, run_of), so a changed setting is a new folder and never an overwrite.
+
+
+# A packing's and a run's settings, readable beside its files; the simulation rules take them as
+# input, so they exist before the file they describe.
+rule packing_settings:
+    output:
+        f"{PACKING_DIR}/settings.yaml",
+    params:
+        settings=packing_of,
+    run:
+        write_settings(params.settings, output[0])
+
+
+rule run_settings:
+    output:
+        f"{RUN_DIR}/settings.yaml",
+    params:
+        settings=run_of,
+    run:
+        write_settings(params.settings, output[0])
 
 
 rule pack:
+    input:
+        f"{PACKING_DIR}/settings.yaml",
     output:
         f"{PACKING_DIR}/packing.nc",
     priority: 1000
     params:
-        height=pack_height,
+        height=lambda wildcards: fmt(packing_of(wildcards)["height"]),
         root_seed=config["root_seed"],
         diameter_min=config["diameter_min"],
         diameter_max=config["diameter_max"],
@@ -28,7 +50,7 @@ rule pack:
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
         " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
-        " --solver {params.solver} --output {output} > {log} 2>&1"
+        " --solver {params.solver} --output {output:q} > {log:q} 2>&1"
 
 
 # A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
@@ -37,14 +59,14 @@ rule trim:
     input:
         f"{PACKING_DIR}/packing.nc",
     output:
-        f"{PACKING_DIR}/a_{{a}}/column.nc",
+        COLUMN,
     priority: 1000
     log:
         logged(f"{PACKING_DIR}/a_{{a}}/trim.log"),
     benchmark:
         benchmarked(f"{PACKING_DIR}/a_{{a}}/trim.tsv")
     shell:
-        "colsim trim --input {input} --aspect-ratio {wildcards.a} --output {output} > {log} 2>&1"
+        "colsim trim --input {input:q} --aspect-ratio {wildcards.a} --output {output:q} > {log:q} 2>&1"
 
 
 # `colsim collapse` keeps OUTPUT.checkpoint while it runs and deletes it on success; a job that was
@@ -52,63 +74,57 @@ rule trim:
 # Taller columns start first (their cost grows like a^2): the longest jobs do not end up last, alone.
 rule collapse:
     input:
-        f"{PACKING_DIR}/a_{{a}}/column.nc",
+        column=COLUMN,
+        settings=f"{RUN_DIR}/settings.yaml",
     output:
-        f"{BASE_RUN}/collapse.nc",
+        f"{RUN_DIR}/collapse.nc",
     priority: collapse_priority
     params:
         mu=config["mu"],
-        mu_r=mu_r_value,
-        duration=collapse_duration,
-        steps=collapse_steps,
-        frame_every=config["collapse"]["frame_every"],
+        mu_r=lambda wildcards: run_of(wildcards)["mu_r"],
+        options=collapse_options,
         checkpoint_every=config["collapse"]["checkpoint_every"],
-        to_rest=run_to_rest_options,
-        solver=collapse_solver_options(),
-        friction_law=friction_options,
     log:
-        logged(f"{BASE_RUN}/collapse.log"),
+        logged(f"{RUN_DIR}/collapse.log"),
     benchmark:
-        benchmarked(f"{BASE_RUN}/collapse.tsv")
+        benchmarked(f"{RUN_DIR}/collapse.tsv")
     shell:
-        "colsim collapse --input {input} --mu {params.mu} --mu-r {params.mu_r}"
-        " --duration {params.duration} --steps {params.steps} --frame-every {params.frame_every}"
-        " --checkpoint-every {params.checkpoint_every} {params.to_rest} --solver {params.solver}"
-        " --friction-law {params.friction_law}"
-        " --output {output} > {log} 2>&1"
+        "colsim collapse --input {input.column:q} --mu {params.mu} --mu-r {params.mu_r} {params.options}"
+        " --checkpoint-every {params.checkpoint_every} --output {output:q} > {log:q} 2>&1"
 
 
 rule analyse:
     input:
-        f"{BASE_RUN}/collapse.nc",
+        f"{RUN_DIR}/collapse.nc",
     output:
-        f"{BASE_RUN}/analysis.nc",
+        f"{RUN_DIR}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
         check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
         mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
     log:
-        logged(f"{BASE_RUN}/analyse.log"),
+        logged(f"{RUN_DIR}/analyse.log"),
     benchmark:
-        benchmarked(f"{BASE_RUN}/analyse.tsv")
+        benchmarked(f"{RUN_DIR}/analyse.tsv")
     shell:
-        "colsim analyse --input {input} --contact-tolerance {params.contact_tolerance}"
+        "colsim analyse --input {input:q} --contact-tolerance {params.contact_tolerance}"
         " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
-        " --output {output} > {log} 2>&1"
+        " --output {output:q} > {log:q} 2>&1"
 
 
 # Not part of `all`: a ParaView time series of one collapse, on request, e.g.
-#   snakemake -j1 results/r0_2/seed_1/a_2/mu_r_0.12/vtk/collapse.pvd
+#   snakemake -j1 results/r0_3/seed_1/pack_<key>/a_2/mu_r_0.12/run_<key>/vtk/collapse.pvd
+# (the folder of any run of the study: `ls results/r0_3/seed_1/pack_*/a_2/mu_r_0.12/`).
 rule export_vtk:
     input:
-        f"{BASE_RUN}/collapse.nc",
+        f"{RUN_DIR}/collapse.nc",
     output:
-        f"{BASE_RUN}/vtk/collapse.pvd",
+        f"{RUN_DIR}/vtk/collapse.pvd",
     params:
         directory=output_directory,
     log:
-        logged(f"{BASE_RUN}/export_vtk.log"),
+        logged(f"{RUN_DIR}/export_vtk.log"),
     benchmark:
-        benchmarked(f"{BASE_RUN}/export_vtk.tsv")
+        benchmarked(f"{RUN_DIR}/export_vtk.tsv")
     shell:
-        "colsim export-vtk --input {input} --output-dir {params.directory} > {log} 2>&1"
+        "colsim export-vtk --input {input:q} --output-dir {params.directory:q} > {log:q} 2>&1"

@@ -24,8 +24,8 @@ rule collect:
     benchmark:
         f"{STUDY_DIR}/benchmarks/collect.tsv"
     shell:
-        "colsim collect {input} --output {output.nc} --csv {output.csv}"
-        " --markdown {output.markdown} > {log} 2>&1"
+        "colsim collect {input:q} --output {output.nc:q} --csv {output.csv:q}"
+        " --markdown {output.markdown:q} > {log:q} 2>&1"
 
 
 rule plot:
@@ -50,8 +50,8 @@ rule plot:
     benchmark:
         f"{STUDY_DIR}/benchmarks/plot.tsv"
     shell:
-        "colsim plot --summary {input.summary} --analyses {input.analyses}"
-        " --trajectories {input.trajectories} --output-dir {params.directory} > {log} 2>&1"
+        "colsim plot --summary {input.summary:q} --analyses {input.analyses:q}"
+        " --trajectories {input.trajectories:q} --output-dir {params.directory:q} > {log:q} 2>&1"
 
 
 # The study's configuration and the report's description, written only once the summary they
