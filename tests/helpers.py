@@ -4,6 +4,7 @@ dry run plans and the names of the tiny study's files."""
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -62,3 +63,18 @@ def planned_outputs(result: subprocess.CompletedProcess) -> list[str]:
         if line.startswith("output:"):
             outputs += [p.strip() for p in line[len("output:"):].split(",")]
     return outputs
+
+
+RUN_PATH = re.compile(r"results/r0_(?P<r0>[^/]+)/seed_(?P<seed>\d+)/pack_(?P<packing>[0-9a-f]{10})"
+                      r"/a_(?P<a>[^/]+)/mu_r_(?P<mu_r>[^/]+)/run_(?P<run>[0-9a-f]{10})/collapse\.nc")
+
+
+def planned_collapses(result: subprocess.CompletedProcess) -> list[dict]:
+    """The collapses of a dry run with -p: for each, the parts of its folder (r0, seed, packing, a,
+    mu_r, run: strings), its `path` and its `command` line."""
+    found = []
+    for line in result.stdout.splitlines():
+        if "colsim collapse" in line:
+            match = RUN_PATH.search(line.split("--output", 1)[1])
+            found.append({**match.groupdict(), "path": match.group(0), "command": line})
+    return found

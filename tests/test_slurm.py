@@ -39,7 +39,7 @@ SLURM_COMMAND = ("--executor", "slurm", "--workflow-profile", "workflow/profiles
                  "--configfile", "config/tiny.yaml")
 TEST_CLUSTER_OPTIONS = ("--slurm-status-command", "squeue",
                         "--slurm-init-seconds-before-status-checks", "2")
-LOCAL_RULES = {"all", "study_config"}
+LOCAL_RULES = {"all", "study_config", "packing_settings", "run_settings"}
 SLURM_JOBS = 13          # pack 1, trim 2, collapse 4, analyse 4, collect, plot
 
 
@@ -114,8 +114,7 @@ def test_every_job_but_the_local_rules_ran_on_slurm(cluster, slurm_study):
     assert all(state == "COMPLETED" for state, _ in jobs), jobs
     # the plugin writes "rule_<name>_wildcards_..." as each job's comment
     rules = sorted(comment.split("_wildcards")[0].removeprefix("rule_") for _, comment in jobs)
-    # the tiny study's runs are shorter than the schema's default: rules collapse_variant, analyse_variant
-    assert rules == sorted(["pack"] + ["trim"] * 2 + ["collapse_variant"] * 4 + ["analyse_variant"] * 4
+    assert rules == sorted(["pack"] + ["trim"] * 2 + ["collapse"] * 4 + ["analyse"] * 4
                            + ["collect", "plot"]), rules
     assert not LOCAL_RULES & set(rules)
     assert "Finished" in result.stderr and "100%" in result.stderr
@@ -163,13 +162,15 @@ def test_a_job_that_fails_on_slurm_fails_the_run_naming_its_log(cluster, tmp_pat
     result = snakemake(cluster, directory, *SLURM_COMMAND, "fail.yaml", *TEST_CLUSTER_OPTIONS)
     output = result.stdout + result.stderr
     assert result.returncode != 0, failure_text(result)
-    log = "results/logs/r0_1/seed_1/pack.log"
+    logs = list((directory / "results" / "logs" / "r0_1" / "seed_1").glob("pack_*/pack.log"))
+    assert len(logs) == 1, failure_text(result)
+    log = logs[0].relative_to(directory).as_posix()
     assert log in output, failure_text(result)
     assert "not at rest" in (directory / log).read_text()
     assert "FAILED" in output, failure_text(result)
     states = [state for state, _ in jobs_run_in(cluster, directory)]
     assert states == ["FAILED", "FAILED"], states   # the pack and its retry (profile: retries: 1)
     results = directory / "results"
-    assert not (results / "r0_1" / "seed_1" / "packing.nc").exists()
+    assert not list((results / "r0_1" / "seed_1").glob("pack_*/packing.nc"))
     assert not (results / "summary.nc").exists() and not (results / "summary.csv").exists()
     assert not list(results.rglob("*.png")) and not list(results.rglob("*.nc"))

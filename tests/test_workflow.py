@@ -4,11 +4,14 @@ Runs `snakemake -j2 all --configfile config/tiny.yaml` as a user would (a minute
 then checks results/tiny/summary.nc, the figures and the report, that adding a seed or a mu_r value
 schedules only the new jobs, and that a wrong configuration stops snakemake naming the culprit.
 """
+import json
+
 import numpy as np
 import pytest
 import yaml
 
-from helpers import FIGURES, ROOT, SUMMARY_VARIABLES, TINY, copy_workflow, planned_outputs, snakemake
+from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, copy_workflow, planned_collapses,
+                     planned_outputs, snakemake)
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +39,11 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
     assert np.all(summary["h_inf_over_r0"].values > 0)
     assert np.all(summary["n_particles"].values > 0)
     assert "config" in summary.attrs and "run_configs" in summary.attrs
+    # issue 29: at 100 steps `auto` gives every warm-started step to APGD (the first of each run,
+    # started from the packing's forces, too); Clarabel takes only a step APGD could not finish
+    backends = json.loads(summary.attrs["solver_backends"])
+    assert backends.get("apgd", 0) >= 0.9 * 4 * 100, backends
+    assert summary.attrs["rolling_lever"] == "paper"
     table = (tiny_study / TINY / "summary.csv").read_text().splitlines()
     assert len(table) == 1 + 4 and "h_inf_over_r0" in table[0]
     assert "runout_over_r0_by_tolerance_0.5" in table[0] and "mass_front_over_r0_0.95" in table[0]
@@ -52,6 +60,10 @@ def test_figures_logs_and_benchmarks_exist(tiny_study):
     # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config
     assert len(logs) == 14 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))
+    collapse_logs = list((tiny_study / "results" / "logs").rglob("collapse.log"))
+    assert len(collapse_logs) == 4 and all(" by apgd" in log.read_text() for log in collapse_logs)
+    settings = list((tiny_study / "results").rglob("settings.yaml"))   # 1 packing and 4 runs
+    assert len(settings) == 5 and any("rolling_lever: paper" in s.read_text() for s in settings)
 
 
 @pytest.mark.slow
@@ -65,13 +77,12 @@ def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
     assert result.returncode == 0, result.stderr[-3000:]
     planned = planned_outputs(result)
     simulated = [p for p in planned if p.startswith("results/r0_")]
-    # the tiny study's 40 steps are not the default's, so its runs sit in a folder named for them
-    expected_new = {f"results/r0_1/seed_2/a_{a}/mu_r_{m}/steps_40_t_4/collapse.nc"
-                    for a in ("0.5", "1") for m in ("0", "0.06", "0.12")}
-    expected_new |= {f"results/r0_1/seed_1/a_{a}/mu_r_0.06/steps_40_t_4/collapse.nc" for a in ("0.5", "1")}
-    assert {p for p in simulated if p.endswith("collapse.nc")} == expected_new
-    assert "results/r0_1/seed_2/packing.nc" in simulated
-    assert "results/r0_1/seed_1/packing.nc" not in simulated
+    new = {RUN_PATH.match(p).group("seed", "a", "mu_r") for p in simulated if p.endswith("collapse.nc")}
+    expected = {("2", a, m) for a in ("0.5", "1") for m in ("0", "0.06", "0.12")}
+    expected |= {("1", a, "0.06") for a in ("0.5", "1")}
+    assert new == expected
+    packings = [p for p in simulated if p.endswith("packing.nc")]
+    assert len(packings) == 1 and packings[0].startswith("results/r0_1/seed_2/pack_")
     assert not any(p.startswith("results/r0_1/seed_1/") and p.endswith("column.nc") for p in simulated)
     assert f"{TINY}/summary.nc" in planned
 
@@ -87,7 +98,8 @@ def test_report_describes_the_study_it_shows(tiny_study):
         html = (tiny_study / name).read_text(errors="replace")
         assert len(html) > 10000 and "final_height.png" in html
         for text in ("r0 = 1 (diameters 0.25-0.5)", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
-                     "40 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml"):
+                     "100 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml",
+                     "steps by back-end", "apgd: ", "lever is paper"):
             assert text in html, (name, text)
         assert "77 steps" not in html and "r0 = 2" not in html
         assert "System Message" not in html and "Undefined substitution" not in html
@@ -203,25 +215,32 @@ def test_every_named_configuration_plans(tmp_path, name):
     assert any(path.endswith("collapse.nc") for path in planned_outputs(result))
 
 
+def steps_and_end(collapse: dict) -> tuple[str, str, bool]:
+    """(steps, end time, whether it goes on to rest) of a planned collapse, from its command line."""
+    words = collapse["command"].split()
+    return words[words.index("--steps") + 1], words[words.index("--duration") + 1], "--max-duration" in words
+
+
 def test_the_convergence_study_plans_its_runs(tmp_path):
     directory = copy_workflow(tmp_path)
-    result = snakemake(directory, "-n", "all", "--configfile", "config/convergence.yaml", timeout=120)
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/convergence.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
-    planned = set(planned_outputs(result))
-    run = "results/r0_2/seed_1/a_{a}/mu_r_0.12"
+    runs = {(c["r0"], c["seed"], c["a"], c["mu_r"]) + steps_and_end(c) for c in planned_collapses(result)}
+    assert all(run[3] == "0.12" for run in runs)
     for a in ("2", "5"):   # 1,000 steps stopped at t = 4: not the default study's run to rest
-        for variant in ("steps_250_t_4", "steps_500_t_4", "steps_1000_t_4", "steps_2000_t_4", "steps_2000_t_8"):
-            assert f"{run.format(a=a)}/{variant}/collapse.nc" in planned
-        assert f"{run.format(a=a)}/collapse.nc" not in planned
-    assert "results/r0_3/seed_1/a_2/mu_r_0.12/steps_1000_t_4/collapse.nc" in planned
+        for steps, end in (("250", "4"), ("500", "4"), ("1000", "4"), ("2000", "4"), ("2000", "8")):
+            assert ("2", "1", a, "0.12", steps, end, False) in runs
+        assert ("2", "1", a, "0.12", "1000", "4", True) not in runs
+    assert ("3", "1", "2", "0.12", "1000", "4", False) in runs
     for r0, seeds in (("2", "123"), ("3", "123"), ("4", "1")):   # small columns run on to t = 8
         for a in ("0.5", "1"):
             for seed in seeds:
-                assert f"results/r0_{r0}/seed_{seed}/a_{a}/mu_r_0.12/steps_2000_t_8/collapse.nc" in planned
-    assert "results/r0_4/seed_2/packing.nc" not in planned
-    assert "results/r0_4/seed_1/a_2/mu_r_0.12/collapse.nc" not in planned
-    assert {f"results/r0_2/seed_{s}/a_2/mu_r_0.12/steps_1000_t_4/collapse.nc" for s in range(1, 6)} <= planned
-    assert "results/r0_2/seed_3/a_5/mu_r_0.12/steps_1000_t_4/collapse.nc" in planned
+                assert (r0, seed, a, "0.12", "2000", "8", False) in runs
+    assert not any(run[:2] == ("4", "2") for run in runs)
+    assert not any(run[:3] == ("4", "1", "2") for run in runs)
+    assert {("2", str(s), "2", "0.12", "1000", "4", False) for s in range(1, 6)} <= runs
+    assert ("2", "3", "5", "0.12", "1000", "4", False) in runs
+    planned = set(planned_outputs(result))
     assert {"results/convergence/summary.nc", "results/convergence/lube_table.md",
             "results/convergence/convergence.nc", "results/convergence/figures/convergence.png"} <= planned
 
@@ -234,37 +253,38 @@ def test_a_run_to_rest_and_a_run_stopped_at_its_end_time_keep_separate_folders(t
     to_rest = snakemake(directory, "-n", "-p", "all", timeout=120)
     fixed = snakemake(directory, "-n", "-p", "all", "--configfile", "fixed.yaml", timeout=120)
     assert to_rest.returncode == 0 and fixed.returncode == 0, to_rest.stderr[-3000:] + fixed.stderr[-3000:]
-    rest_runs = {p for p in planned_outputs(to_rest) if p.endswith("collapse.nc")}
-    fixed_runs = {p for p in planned_outputs(fixed) if p.endswith("collapse.nc")}
+    rest_runs = {c["path"] for c in planned_collapses(to_rest)}
+    fixed_runs = {c["path"] for c in planned_collapses(fixed)}
     assert len(rest_runs) == len(fixed_runs) == 48 and not rest_runs & fixed_runs
-    assert all(p.endswith("/steps_1000_t_4/collapse.nc") for p in fixed_runs)
     assert "--max-duration 12 " in to_rest.stdout and "--max-duration" not in fixed.stdout
 
 
 def test_the_friction_law_study_plans_both_laws(tmp_path):
-    """config/friction-law.yaml: each of its 9 runs under both laws (the Coulomb ones in coulomb/,
-    with --friction-law coulomb), and the comparison; a study under coulomb alone keeps its runs
-    there too, so it never overwrites an associated run."""
+    """config/friction-law.yaml: each of its 9 columns under both laws, in folders of their own
+    (the law is part of a run's key), with --friction-law coulomb and its tolerance for the Coulomb
+    ones, and the comparison; a study under coulomb alone plans the Coulomb runs only."""
     directory = copy_workflow(tmp_path)
     result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/friction-law.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
+    collapses = planned_collapses(result)
+    coulomb = [c for c in collapses if "--friction-law coulomb " in c["command"]]
+    associated = [c for c in collapses if "--friction-law associated " in c["command"]]
+    assert len(coulomb) == len(associated) == 9 and len(collapses) == 18
+    columns = {(c["seed"], c["a"]) for c in coulomb}
+    assert columns == {(c["seed"], c["a"]) for c in associated} == {(s, a) for s in "123" for a in ("0.5", "2", "5")}
+    assert not {c["path"] for c in coulomb} & {c["path"] for c in associated}
+    assert all("--friction-tolerance 1e-05" in c["command"] for c in coulomb)
+    assert not any("--friction-tolerance" in c["command"] for c in associated)
     planned = set(planned_outputs(result))
-    run = "results/r0_2/seed_{s}/a_{a}/mu_r_0.12"
-    for s in "123":
-        for a in ("0.5", "2", "5"):
-            assert f"{run.format(s=s, a=a)}/collapse.nc" in planned
-            assert f"{run.format(s=s, a=a)}/coulomb/analysis.nc" in planned
     assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
-    commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
-    assert sum("--friction-law coulomb --friction-tolerance 1e-05" in c and "/coulomb/collapse.nc" in c
-               for c in commands) == 9
-    assert not any("--friction-tolerance" in c for c in commands if "/coulomb/" not in c)
-    assert sum("--friction-law associated" in c and "/coulomb/" not in c for c in commands) == 9
+    # a Coulomb run's cluster time limit comes from its settings: 24 h against 2 h
+    limits = [line for line in result.stdout.splitlines() if "runtime=" in line and "mem_mb=4000" in line]
+    assert sum("runtime=1440" in line for line in limits) == 9 and sum("runtime=120" in line for line in limits) == 9
     (directory / "coulomb.yaml").write_text("friction_law: coulomb\n")
-    alone = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
+    alone = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
     assert alone.returncode == 0, alone.stderr[-3000:]
-    collapses = [p for p in planned_outputs(alone) if p.endswith("collapse.nc")]
-    assert collapses and all(p.endswith("/coulomb/collapse.nc") for p in collapses)
+    runs = planned_collapses(alone)
+    assert runs and all("--friction-law coulomb " in c["command"] for c in runs)
 
 
 def plan_with_and_without(tmp_path, setting: str):
@@ -283,7 +303,7 @@ def test_run_to_rest_reaches_the_collapse_command(tmp_path):
     on, off = plan_with_and_without(tmp_path, "collapse: {max_duration: 8, rest_tolerance: 0.2}\n")
     commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 4
-    assert all("--max-duration 8 --rest-window 1.0 --rest-tolerance 0.2 --rest-energy 0.01" in c for c in commands)
+    assert all("--max-duration 8 --rest-window 1 --rest-tolerance 0.2 --rest-energy 0.01" in c for c in commands)
     assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
 
 
@@ -299,20 +319,25 @@ def test_the_overlap_tolerance_reaches_the_collapse_only_when_set(tmp_path):
 
 
 def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
-    """pi/24 names its folder mu_r_0.1309 but reaches `colsim collapse` with all its digits."""
+    """pi/24 names its folder and reaches `colsim collapse` with all its digits; two values closer
+    than %g shows (0.1000001, 0.1000002) are two runs in two folders."""
     directory = copy_workflow(tmp_path)
     (directory / "hexagon.yaml").write_text("mu_r: [0.1308996938995747]\n")
     result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "hexagon.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
     assert len(commands) == 2 and all("--mu-r 0.1308996938995747 " in c for c in commands), commands
-    assert all("mu_r_0.1309/steps_40_t_4/collapse.nc" in c for c in commands)
+    assert all("/mu_r_0.1308996938995747/run_" in c for c in commands)
+    (directory / "close.yaml").write_text("mu_r: [0.1000001, 0.1000002]\naspect_ratios: [1]\n")
+    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "close.yaml", timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert sorted(c["mu_r"] for c in planned_collapses(result)) == ["0.1000001", "0.1000002"]
 
 
 TINY_CONVERGENCE = """
 convergence:
   mu_r: 0.12
-  time_step: {aspect_ratios: [0.5], steps: [40, 80]}
+  time_step: {aspect_ratios: [0.5], steps: [100, 200]}
   end_time: {aspect_ratios: [0.5], duration: 6.0}
   column_size: [{aspect_ratio: 0.5, r0: [1, 1.25]}, {aspect_ratio: 1, r0: [1.25], duration: 6.0}]
   seeds: {aspect_ratio: 0.5, seeds: [1, 2]}
@@ -341,35 +366,60 @@ def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
     assert "| Lube |" in lube and "| 0.5 | " in lube and "| 1 | " in lube
 
 
-def test_every_simulating_rule_has_its_slurm_resources(tmp_path):
-    """A rule made by `use rule` (collapse_variant, collapse_coulomb, ...) does not get its parent's
-    resources from the SLURM profile: each must be named there, with at least its parent's."""
+def test_the_slurm_profile_names_only_rules_that_exist(tmp_path):
+    """Every rule the SLURM profile sizes exists (one collapse rule serves every run; its time limit
+    comes from the run's settings, test_the_friction_law_study_plans_both_laws), and the rules that
+    simulate are sized there or in the rule."""
     directory = copy_workflow(tmp_path)
     listed = snakemake(directory, "--list-rules", timeout=120)
     assert listed.returncode == 0, listed.stderr[-3000:]
     rules = {line.split()[0] for line in listed.stdout.splitlines() if line.strip()}
     profile = yaml.safe_load((ROOT / "workflow" / "profiles" / "slurm" / "config.yaml").read_text())
     resources = profile["set-resources"]
-    for parent in ("collapse", "analyse"):
-        children = {rule for rule in rules if rule.startswith(parent)}
-        assert {parent, f"{parent}_variant", f"{parent}_coulomb"} <= children
-        for rule in children:
-            assert rule in resources, f"{rule} has no resources in workflow/profiles/slurm"
-            for key in ("runtime", "mem_mb"):
-                assert resources[rule][key] >= resources[parent][key], (rule, key)
+    assert set(resources) <= rules
+    assert {"pack", "analyse"} <= set(resources) and "collapse" in rules
 
 
-def test_a_packing_filled_with_friction_has_its_own_tree(tmp_path):
-    """pack.mu > 0 packs and runs below results/pack_mu_{mu}/ (logs and benchmarks too), with
-    --mu reaching colsim pack: the default packings' runs are never overwritten."""
+def plan_two_studies(tmp_path, other: str):
+    """The simulation outputs of dry runs of the tiny study and of the tiny study with the YAML `other`."""
     directory = copy_workflow(tmp_path)
-    (directory / "loose.yaml").write_text("pack: {mu: 0.2}\n")
-    result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "loose.yaml", timeout=120)
-    assert result.returncode == 0, result.stderr[-3000:]
-    runs = [p for p in planned_outputs(result) if p.endswith(("packing.nc", "column.nc", "collapse.nc", "analysis.nc"))]
-    assert len(runs) == 1 + 2 + 4 + 4
-    assert all(p.startswith("results/pack_mu_0.2/r0_1/seed_1/") for p in runs), runs
-    assert "--mu 0.2 " in result.stdout and "results/pack_mu_0.2/logs/r0_1/seed_1/pack.log" in result.stdout
+    (directory / "other.yaml").write_text(other)
+    first = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", timeout=120)
+    second = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", "other.yaml", timeout=120)
+    assert first.returncode == 0 and second.returncode == 0, first.stderr[-3000:] + second.stderr[-3000:]
+    return ({p for p in planned_outputs(first) if p.startswith("results/r0_")},
+            {p for p in planned_outputs(second) if p.startswith("results/r0_")})
+
+
+@pytest.mark.parametrize("other, shares_packings", [
+    ("study: sb\nmu: 0.3\n", True),
+    ("study: sb\nroot_seed: 7\n", False),
+    ("study: sb\npack: {mu: 0.2}\n", False),
+    ("study: sb\nrolling_lever: effective\n", True),
+    ("study: sb\ncollapse: {frame_every: 2}\n", True),
+    ("study: sb\naspect_ratios: [0.5]\n", False),   # a shorter packing: another computation
+])
+def test_two_studies_share_a_file_only_when_it_is_the_same_computation(tmp_path, other, shares_packings):
+    """Issue 28: a study that differs from the tiny one in one setting plans no collapse of the tiny
+    study's; it shares the packings and columns only when their settings are the same."""
+    first, second = plan_two_studies(tmp_path, other)
+    collapses = [{p for p in plan if p.endswith(("collapse.nc", "analysis.nc"))} for plan in (first, second)]
+    assert collapses[0] and collapses[1] and not collapses[0] & collapses[1]
+    packings = [{p for p in plan if p.endswith(("packing.nc", "column.nc"))} for plan in (first, second)]
+    assert bool(packings[0] & packings[1]) == shares_packings
+
+
+def test_a_folder_whose_settings_the_study_does_not_have_is_an_error(tmp_path):
+    """A target whose key names settings this configuration does not hold is refused, naming the
+    folder, instead of being made with this configuration's settings."""
+    directory = copy_workflow(tmp_path)
+    for target, message in (
+            ("pack_0123456789/a_1/mu_r_0.12/run_0123456789/collapse.nc",
+             "no run of this study has the folder mu_r_0.12/run_0123456789"),
+            ("pack_0123456789/packing.nc", "no packing of this study has the folder r0_1/seed_1/pack_0123456789")):
+        result = snakemake(directory, "-n", f"results/r0_1/seed_1/{target}", "--configfile", "config/tiny.yaml",
+                           timeout=120)
+        assert result.returncode != 0 and message in result.stdout + result.stderr, result.stderr[-2000:]
 
 
 def test_the_friction_tolerance_has_one_default():

@@ -16,6 +16,8 @@ tolerances, and :func:`mass_front`, the radius that holds a given share of the m
 """
 from __future__ import annotations
 
+import json
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -178,6 +180,9 @@ def _run_attributes(trajectory) -> dict:
     attrs["friction_law"] = str(trajectory.attrs.get("friction_law", "associated"))
     # a trajectory written before the option existed was computed with R_eff
     attrs["rolling_lever"] = str(trajectory.attrs.get("rolling_lever", "effective"))
+    if "step_solver_backend" in trajectory:   # how many steps each back-end solved
+        names, counts = np.unique(trajectory["step_solver_backend"].values.astype(str), return_counts=True)
+        attrs["solver_backends"] = json.dumps({str(n): int(c) for n, c in zip(names, counts)})
     if "at_rest" in trajectory.attrs:
         attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     return attrs

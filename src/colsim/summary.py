@@ -4,6 +4,7 @@ measures and the paper's qualitative claims) and the means per column size (:fun
 from __future__ import annotations
 
 import json
+from collections import Counter
 
 import numpy as np
 import xarray as xr
@@ -121,8 +122,17 @@ def collect_analyses(analyses) -> xr.Dataset:
     attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
              "friction_law": str(first.get("friction_law", "associated")),
              "rolling_lever": str(first.get("rolling_lever", "effective")),
+             "solver_backends": json.dumps(solver_backends(analyses)),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def solver_backends(analyses) -> dict:
+    """{back-end: steps it solved} over the runs (runs written before the count existed add none)."""
+    total = Counter()
+    for analysis in analyses:
+        total.update(json.loads(analysis.attrs.get("solver_backends", "{}")))
+    return dict(sorted(total.items()))
 
 
 def means_per_size(study) -> xr.Dataset:

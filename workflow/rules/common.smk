@@ -292,6 +292,19 @@ def convergence_outputs():
     return [f"{STUDY_DIR}/convergence.nc", f"{STUDY_DIR}/convergence.md", f"{STUDY_DIR}/figures/convergence.png"]
 
 
+def collapse_runtime(wildcards):
+    """A collapse's time limit on a cluster (minutes; SLURM's runtime), from config/paper.yaml's
+    measured jobs (r0 = 4, README "The paper-scale study"): 623 s to rest at a = 5 and 773 s at
+    mu_r = 0 (t/sqrt(h0/g) = 12), so 120 at the study's length; 300 for more steps or a later end
+    (a convergence study's 2,000 steps cost twice); 1440 under the Coulomb law (8-18x the CPU).
+    A collapse that runs out of time resumes from its checkpoint (the profile's retries)."""
+    run = run_of(wildcards)
+    if run["friction_law"] == "coulomb":
+        return 1440
+    longer = run["steps"] > STUDY_LENGTH[0] or run["duration"] > STUDY_LENGTH[1]
+    return 300 if longer else 120
+
+
 def collapse_priority(wildcards):
     """Scheduling priority of a collapse: 10 a (times its steps over the study's), so that the
     costliest columns run first."""

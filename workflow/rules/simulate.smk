@@ -79,6 +79,9 @@ rule collapse:
     output:
         f"{RUN_DIR}/collapse.nc",
     priority: collapse_priority
+    resources:
+        mem_mb=4000,
+        runtime=collapse_runtime,
     params:
         mu=config["mu"],
         mu_r=lambda wildcards: run_of(wildcards)["mu_r"],
