@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+import xarray as xr
 import yaml
 
 from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, copy_workflow, planned_collapses,
@@ -24,7 +25,6 @@ def tiny_study(tmp_path_factory):
 
 @pytest.mark.slow
 def test_summary_holds_finite_numbers_with_units(tiny_study):
-    xr = pytest.importorskip("xarray")
     summary = xr.load_dataset(tiny_study / TINY / "summary.nc")
     assert dict(summary.sizes) == {"aspect_ratio": 2, "mu_r": 2, "seed": 1, "contact_tolerance": 4,
                                    "mass_share": 3}
@@ -97,7 +97,7 @@ def test_report_describes_the_study_it_shows(tiny_study):
         assert result.returncode == 0, result.stderr[-3000:]
         html = (tiny_study / name).read_text(errors="replace")
         assert len(html) > 10000 and "final_height.png" in html
-        for text in ("r0 = 1 (diameters 0.25-0.5)", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
+        for text in ("radius r0 = 1 of spheres of diameters 0.25-0.5", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
                      "100 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml",
                      "steps by back-end", "apgd: ", "lever is paper"):
             assert text in html, (name, text)
@@ -153,6 +153,17 @@ def test_a_failed_run_does_not_rewrite_the_study_config(tmp_path):
     ("friction_law: bipotential", "config: friction_law: 'bipotential' is not one of"),
     ("{friction_law: coulomb, friction_law_comparison: true}",
      "config: friction_law_comparison needs friction_law: associated"),
+    # issue 28's probes: NaN and inf pass a schema's minimum and maximum; a name with a final newline
+    # passes a `$` pattern; a size out of reach; an alias bomb and a configuration that refers to itself
+    ("mu_r: [.nan]", "config: mu_r.0: must be a finite number"),
+    ("collapse: {max_duration: .inf}", "config: collapse.max_duration: must be a finite number"),
+    ("figures: {side_view_mu_r: .nan}", "config: figures.side_view_mu_r: must be a finite number"),
+    ('study: "evil\\n"', "config: study: 'evil\\n' may hold only letters"),
+    ("r0: 1000", "config: a packing of r0 1000 for a = 5 would hold about"),
+    ("a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+     "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]\n"
+     "e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]\nf: [*e, *e, *e, *e, *e, *e, *e, *e, *e, *e]",
+     "config: more than 100,000 keys and values once YAML's aliases are expanded"),
 ])
 def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, message):
     """A wrong key or value, or settings that contradict each other, stop snakemake before any job
@@ -171,7 +182,6 @@ def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, mess
 def test_the_schema_the_cli_and_the_readme_offer_the_same_solvers():
     """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the README's
     table of back-ends hold the same names."""
-    yaml = pytest.importorskip("yaml")
     from colsim.cli import build_parser
     from colsim.solvers import SOLVERS
 
@@ -348,7 +358,6 @@ convergence:
 def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
     """The tiny study plus a convergence block: only the new runs are made, and the table, its
     Markdown and the figure hold finite numbers for all four sub-studies."""
-    xr = pytest.importorskip("xarray")
     (tiny_study / "tiny_convergence.yaml").write_text(TINY_CONVERGENCE)
     arguments = ("all", "--configfile", "config/tiny.yaml", "tiny_convergence.yaml")
     result = snakemake(tiny_study, "-j2", *arguments)

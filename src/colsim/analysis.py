@@ -74,6 +74,9 @@ def mass_front(state: ParticleState, share: float) -> float:
     return float(reach[order][np.searchsorted(cumulative, share - 1e-12)])
 
 
+MAX_PROFILE_BINS = 100_000   # a deposit profile's bins: a million diameters of run-out would need more
+
+
 def deposit_profile(state: ParticleState, mask: np.ndarray, bin_width: float, r_max: float):
     """(bin centres, height): max z + R of the selected particles in radial bins (NaN where empty)."""
     edges = np.arange(0.0, r_max + bin_width, bin_width)
@@ -127,6 +130,10 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
     checks = [measure_deposit(final, contact_tolerance(final, f)) for f in fractions]
     shares = sorted(set(settings.mass_shares))
     bin_width = settings.bin_width or 2.0 * float(final.radius.max())
+    bins = (deposit.r_inf + bin_width) / bin_width
+    if bins > MAX_PROFILE_BINS:
+        raise ValueError(f"--bin-width {bin_width:g} cuts the deposit (radius {deposit.r_inf:g}) into {bins:.3g} "
+                         f"bins, more than {MAX_PROFILE_BINS:,}: take a width of a diameter or so")
     centres, height = deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
     top_radius = undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -30,11 +31,14 @@ LENGTH = "length units of the particles (the paper: diameters 0.25-0.5)"
 
 
 def _number(text, kind=float, what="a number"):
-    """`text` as a `kind`; argparse's one-line error naming the value otherwise."""
+    """`text` as a finite `kind`; argparse's one-line error naming the value otherwise."""
     try:
-        return kind(text)
+        value = kind(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
 
 
 def _positive(text):
@@ -106,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at rest when 95%% of the particles have kinetic energy < this times m g d "
                         "and 99%% carry a contact force (default: %(default)s)")
     p.add_argument("--max-steps", type=_positive_int, default=5000, help="give up after this many steps (default: %(default)s)")
+    p.add_argument("--max-spheres", type=_positive_int, default=500_000,
+                   help="refuse, before any work, a packing expected to hold more spheres than this "
+                        "(default: %(default)s, about 4 GB)")
     p.add_argument("--mu", type=_non_negative, default=0.0,
                    help="sliding friction between spheres and with the floor while filling; the paper's "
                         "is 0, a small value gives a looser packing (default: %(default)s)")
@@ -226,9 +233,24 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"colsim {args.command}: interrupted; {_interrupted(args)}", file=sys.stderr)
         return 130
+    except OverflowError as error:
+        print(f"colsim {args.command}: error: a value is too large to compute with ({error}): check the "
+              "lengths, times and step given", file=sys.stderr)
+        return 2
     except (InputError, ValueError) as error:
         print(f"colsim {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except KeyError as error:
+        print(f"colsim {args.command}: error: an input file lacks {error} (not a file colsim wrote?)", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"colsim {args.command}: failed: out of memory (a column or setting too large for this "
+              "machine: fewer spheres, a larger --bin-width, ...)", file=sys.stderr)
+        return 1
+    except OSError as error:
+        print(f"colsim {args.command}: failed: {error.strerror or error} ({error.filename or 'no file'})",
+              file=sys.stderr)
+        return 1
     except (SolverError, OverlapError, RuntimeError) as error:
         print(f"colsim {args.command}: failed: {error}", file=sys.stderr)
         return 1

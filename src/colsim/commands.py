@@ -22,14 +22,41 @@ def _settings(args) -> dict:
     return {k: v for k, v in vars(args).items() if k not in ("verbose",)}
 
 
+INPUT_ARGUMENTS = ("input", "inputs", "summary", "analyses", "trajectories", "time_step", "end_time",
+                   "column_size", "seeds", "associated", "coulomb")
+OUTPUT_ARGUMENTS = ("output", "csv", "markdown", "figure", "checkpoint")
+
+
+def _paths(args, names) -> list[Path]:
+    """The paths the arguments `names` of a command hold (one path or a list each)."""
+    found = []
+    for name in names:
+        value = getattr(args, name, None)
+        if value:
+            found += [Path(v) for v in (value if isinstance(value, list) else [value])]
+    return found
+
+
 def check_outputs(args) -> None:
     """Before any work: InputError (one line) unless every output of the command can be written
-    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder)."""
-    for name in ("output", "csv", "markdown", "figure", "checkpoint"):
-        if getattr(args, name, None):
-            io.check_writable(getattr(args, name))
+    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder), no two
+    outputs are one file (a collapse's checkpoint included) and no output is one of its inputs."""
+    outputs = _paths(args, OUTPUT_ARGUMENTS)
+    if args.command == "collapse" and not args.checkpoint:
+        outputs.append(Path(f"{args.output}.checkpoint"))
+    for path in outputs:
+        io.check_writable(path)
     if getattr(args, "output_dir", None):
         io.check_writable(args.output_dir, directory=True)
+    seen = {}
+    for path in outputs:
+        key = path.resolve()
+        if key in seen:
+            raise io.InputError(f"{path} is given as two outputs ({seen[key]} and {path}): each needs a file of its own")
+        seen[key] = path
+    for path in _paths(args, INPUT_ARGUMENTS):
+        if path.resolve() in seen:
+            raise io.InputError(f"{path} is both an input and an output: the command would write over its input")
 
 
 def _apgd_options(args, tolerance=None) -> dict:
@@ -99,7 +126,8 @@ def pack(args):
     rng = np.random.default_rng([args.seed, args.root_seed])
     solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
-                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu)
+                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu,
+                      max_spheres=args.max_spheres)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_settings(args), "solver_settings": solver.describe()}, args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
@@ -190,22 +218,22 @@ def collect(args):
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
-    io.write_dataset(summary, args.output)
+    writers = {args.output: lambda tmp: io.write_netcdf(summary, tmp)}
     if args.csv:
-        _write_csv(args.csv, one_row_per_run(summary))
+        writers[args.csv] = _csv_writer(one_row_per_run(summary))
     if args.markdown:
-        _write_text(args.markdown, lube_markdown(summary))
+        writers[args.markdown] = _text_writer(lube_markdown(summary))
+    io.write_all(writers)
 
 
-def _write_text(path, text: str) -> None:
-    with io.atomic_path(path) as tmp:
-        Path(tmp).write_text(text)
+def _text_writer(text: str):
+    return lambda tmp: Path(tmp).write_text(text)
 
 
-def _write_csv(path, dataset) -> None:
-    """A Dataset as a CSV table (one row per coordinate combination), written atomically."""
-    with io.atomic_path(path) as tmp:
-        dataset.to_dataframe().to_csv(tmp)
+def _csv_writer(dataset):
+    """A writer of a Dataset as a CSV table (one row per coordinate combination)."""
+    frame = dataset.to_dataframe()
+    return lambda tmp: frame.to_csv(tmp)
 
 
 def convergence(args):
@@ -215,17 +243,18 @@ def convergence(args):
               for name in study.SUB_STUDIES}
     table = study.runs_table(groups, args.default_end)
     table.attrs.update(io.global_attributes("convergence-table", "colsim convergence study", _settings(args)))
-    io.write_dataset(table, args.output)
-    if args.csv:
-        _write_csv(args.csv, table)
     text = study.convergence_markdown(table)
     log.info("convergence:\n%s", text)
+    writers = {args.output: lambda tmp: io.write_netcdf(table, tmp)}
+    if args.csv:
+        writers[args.csv] = _csv_writer(table)
     if args.markdown:
-        _write_text(args.markdown, text)
+        writers[args.markdown] = _text_writer(text)
     if args.figure:
         from .plots import convergence_figure
 
-        convergence_figure(table, Path(args.figure))
+        writers[args.figure] = lambda tmp: convergence_figure(table, tmp)
+    io.write_all(writers)
 
 
 def compare_laws(args):
@@ -241,15 +270,16 @@ def compare_laws(args):
     comparison = friction_law_comparison(summaries)
     comparison.attrs.update(io.global_attributes("friction-law-comparison", "colsim friction law comparison",
                                                  _settings(args)))
-    io.write_dataset(comparison, args.output)
     text = friction_law_markdown(comparison)
     log.info("friction laws:\n%s", text)
+    writers = {args.output: lambda tmp: io.write_netcdf(comparison, tmp)}
     if args.markdown:
-        _write_text(args.markdown, text)
+        writers[args.markdown] = _text_writer(text)
     if args.figure:
         from .plots import friction_law_figure
 
-        friction_law_figure(comparison, Path(args.figure))
+        writers[args.figure] = lambda tmp: friction_law_figure(comparison, tmp)
+    io.write_all(writers)
 
 
 def plot(args):

@@ -66,6 +66,29 @@ def atomic_path(path):
             os.remove(tmp)
 
 
+def write_all(writers: dict) -> None:
+    """All or nothing: writers maps each output path to a callable that writes it to the path it is
+    given. Each writes to a temporary name beside its path; the files are renamed into place only
+    once every one of them is complete, so a failure leaves none of them new."""
+    paths = [Path(path) for path in writers]
+    temporaries = []
+    try:
+        for path, write in zip(paths, writers.values()):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+            os.close(fd)
+            temporaries.append(Path(tmp))
+            write(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp, path in zip(temporaries, paths):
+            os.chmod(tmp, 0o666 & ~umask)
+            os.replace(tmp, path)
+    finally:
+        for tmp in temporaries:
+            tmp.unlink(missing_ok=True)
+
+
 def check_writable(path, directory: bool = False) -> None:
     """InputError (one line) unless a file `path` (or files in the directory `path`) can be written:
     the nearest existing folder on the way must take a new file. Leaves nothing behind."""
@@ -138,7 +161,12 @@ def _json_default(value):
 def write_dataset(dataset, path) -> None:
     """Write an xarray Dataset to netCDF4 atomically, its units made CF (:func:`cf_units`)."""
     with atomic_path(path) as tmp:
-        cf_units(dataset.copy()).to_netcdf(tmp, engine="netcdf4")
+        write_netcdf(dataset, tmp)
+
+
+def write_netcdf(dataset, path) -> None:
+    """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units made CF."""
+    cf_units(dataset.copy()).to_netcdf(path, engine="netcdf4")
 
 
 def open_dataset(path, kind: str):
@@ -193,9 +221,70 @@ def write_state(path, state: ParticleState, attrs: dict, extra: dict | None = No
 
 
 def read_state(path) -> tuple[ParticleState, object]:
-    """(state, dataset) of a particle-state file."""
+    """(state, dataset) of a particle-state file, its geometry checked (:func:`check_geometry`)."""
     dataset = open_dataset(path, STATE_KIND)
-    return state_from_dataset(dataset), dataset
+    try:
+        state = state_from_dataset(dataset)
+    except KeyError as error:
+        raise InputError(f"input file {path} lacks the variable {error}") from None
+    except ValueError as error:   # a radius <= 0, arrays of the wrong shape
+        raise InputError(f"input file {path}: {error}") from None
+    check_geometry(state, dataset, path)
+    return state, dataset
+
+
+OVERLAP_TOLERANCE = 0.01   # of the smallest diameter: the stepper's own (StepSettings.overlap_tolerance)
+
+
+def stated_diameters(dataset) -> tuple[float, float] | None:
+    """(diameter_min, diameter_max) from the configuration chain of a file (the packing's), or None."""
+    config = config_of(dataset)
+    while config:
+        if "diameter_min" in config and "diameter_max" in config:
+            return float(config["diameter_min"]), float(config["diameter_max"])
+        config = config.get("input_config") or {}
+    return None
+
+
+def check_geometry(state: ParticleState, dataset, path) -> None:
+    """InputError naming the first offending sphere unless the spheres are a possible column: at
+    least one; finite positions, velocities and radii; diameters within the file's stated range;
+    nothing below the floor or (r0 given) outside the cylinder, and no two spheres overlapping, by
+    more than 1 % of the smallest diameter (the stepper's own tolerance)."""
+    from .contacts import overlaps
+    from .state import Walls
+
+    if state.n == 0:
+        raise InputError(f"input file {path} holds no spheres")
+    for name in ("position", "velocity", "angular_velocity", "radius"):
+        bad = ~np.isfinite(getattr(state, name).reshape(state.n, -1)).all(axis=1)
+        if bad.any():
+            raise InputError(f"input file {path}: sphere {int(np.argmax(bad))} has a non-finite {name}")
+    diameters = stated_diameters(dataset)
+    if diameters is not None:
+        low, high = (d * (1 + s * 1e-9) for d, s in zip(diameters, (-1, 1)))
+        bad = (2 * state.radius < low) | (2 * state.radius > high)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(f"input file {path}: sphere {k} has diameter {2 * state.radius[k]:g}, outside the "
+                             f"stated {diameters[0]:g}-{diameters[1]:g}")
+    tolerance = OVERLAP_TOLERANCE * 2 * float(state.radius.min())
+    below = state.position[:, 2] - state.radius < -tolerance
+    if below.any():
+        k = int(np.argmax(below))
+        raise InputError(f"input file {path}: sphere {k} reaches below the floor (z = {state.position[k, 2]:g},"
+                         f" radius {state.radius[k]:g})")
+    if "r0" in dataset.attrs:
+        r0 = float(dataset.attrs["r0"])
+        outside = np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius > r0 + tolerance
+        if outside.any():
+            raise InputError(f"input file {path}: sphere {int(np.argmax(outside))} reaches outside the cylinder r0 = {r0:g}")
+    pairs = overlaps(state, Walls(floor=False), tolerance).pairs
+    if len(pairs[0]):
+        i, j = int(pairs[0][0]), int(pairs[1][0])
+        gap = np.linalg.norm(state.position[j] - state.position[i]) - state.radius[i] - state.radius[j]
+        raise InputError(f"input file {path}: spheres {i} and {j} overlap by {-gap:g} (length), more than"
+                         f" 1 % of the smallest diameter")
 
 
 def contact_force_variables(forces: WarmStart) -> dict:

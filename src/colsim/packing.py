@@ -102,12 +102,34 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
     return slow.mean() >= rest_fraction and supported.mean() >= 0.99
 
 
+# The most spheres a packing may hold unless told otherwise: 3x the r0 = 8, a = 5 column's 160,000,
+# about 4 GB of packing; r0 = 20 would pour 2.4 million and run out of memory on a 24 GB machine.
+DEFAULT_MAX_SPHERES = 500_000
+
+
+def mean_sphere_volume(diameter_range) -> float:
+    """Mean volume (length^3) of a sphere with diameter uniform in diameter_range."""
+    d_min, d_max = diameter_range
+    if d_max > d_min:
+        return np.pi / 6.0 * (d_max**4 - d_min**4) / (4.0 * (d_max - d_min))
+    return np.pi / 6.0 * d_max**3
+
+
+def expected_spheres(r0: float, height: float, diameter_range) -> float:
+    """About how many spheres a packing of radius r0 and height `height` holds (the pour's own
+    estimate: SOLID_FRACTION_GUESS of the cylinder, two largest diameters taller)."""
+    return SOLID_FRACTION_GUESS * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
+
+
 def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
          density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
-         max_steps: int = 5000, progress=None, mu: float = 0.0) -> PackingResult:
+         max_steps: int = 5000, progress=None, mu: float = 0.0,
+         max_spheres: int | None = DEFAULT_MAX_SPHERES) -> PackingResult:
     """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
     solving each step with `solver`. mu: sliding friction between the spheres and with the floor
-    while filling (the paper's 0; the cylinder stays frictionless, rolling is free)."""
+    while filling (the paper's 0; the cylinder stays frictionless, rolling is free).
+    max_spheres: ValueError before anything is allocated when the packing would hold more
+    (:func:`expected_spheres`; None: no bound)."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")
@@ -117,7 +139,12 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
         raise ValueError(f"packing height must be positive, got {height}")
     settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -gravity), walls=Walls(cylinder_radius=r0),
                             law=ContactLaw.uniform(mu, 0.0))
-    mean_volume = np.pi / 6.0 * (d_max**4 - d_min**4) / (4.0 * (d_max - d_min)) if d_max > d_min else np.pi / 6 * d_max**3
+    expected = expected_spheres(r0, height, diameter_range)
+    if max_spheres is not None and expected > max_spheres:
+        raise ValueError(f"the packing of r0 = {r0:g} to height {height:g} would hold about {expected:,.0f} "
+                         f"spheres (diameters {d_min:g}-{d_max:g}), above the bound of {max_spheres:,} "
+                         "(raise it with --max-spheres, or pack.max_spheres in a study)")
+    mean_volume = mean_sphere_volume(diameter_range)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
     start, steps, carry, result = time.perf_counter(), 0, Carry(), None
     while column_height(state) < height:

@@ -6,6 +6,9 @@ use a Glyph filter (sphere, scale by `radius`, scale factor 2) to see the grains
 from __future__ import annotations
 
 import base64
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -43,26 +46,33 @@ def write_vtu(path, position, point_data: dict) -> None:
 
 def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
     """Write every frame of a trajectory dataset as NAME_kkkk.vtu plus NAME.pvd; return the .pvd path.
-    Frames NAME_kkkk.vtu of an earlier export into the same directory that this one did not write
-    are removed, so the directory holds exactly this export's frames."""
+    The whole series is written into a temporary folder first and moved into place only once
+    complete, the .pvd last, so a failed export leaves the earlier series as it was. Frames
+    NAME_kkkk.vtu of an earlier export that this one did not write are removed, so the directory
+    holds exactly this export's frames."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     radius = dataset["radius"].values
     initial_height = dataset["initial_height"].values
-    entries = []
-    for k, t in enumerate(dataset["time"].values):
-        frame = f"{name}_{k:04d}.vtu"
-        write_vtu(directory / frame, dataset["position"].values[k], {
-            "radius": radius, "velocity": dataset["velocity"].values[k],
-            "angular_velocity": dataset["angular_velocity"].values[k], "initial_height": initial_height,
-        })
-        entries.append(f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{frame}"/>\n')
-    collection = directory / f"{name}.pvd"
-    with atomic_path(collection) as tmp:
-        Path(tmp).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
-                             '  <Collection>\n' + "".join(entries) + '  </Collection>\n</VTKFile>\n')
-    written = {f"{name}_{k:04d}.vtu" for k in range(len(entries))}
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=directory))
+    try:
+        entries, written = [], []
+        for k, t in enumerate(dataset["time"].values):
+            frame = f"{name}_{k:04d}.vtu"
+            write_vtu(staging / frame, dataset["position"].values[k], {
+                "radius": radius, "velocity": dataset["velocity"].values[k],
+                "angular_velocity": dataset["angular_velocity"].values[k], "initial_height": initial_height,
+            })
+            entries.append(f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{frame}"/>\n')
+            written.append(frame)
+        collection = f"{name}.pvd"
+        (staging / collection).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
+                                          '  <Collection>\n' + "".join(entries) + '  </Collection>\n</VTKFile>\n')
+        for file in written + [collection]:
+            os.replace(staging / file, directory / file)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     for stale in directory.glob(f"{name}_[0-9][0-9][0-9][0-9].vtu"):
         if stale.name not in written:
             stale.unlink()
-    return collection
+    return directory / collection

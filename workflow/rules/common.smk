@@ -1,6 +1,8 @@
 # Configuration check and the helpers that name the study's files (no physics here).
 import hashlib
 import json
+import math
+import re
 
 import jsonschema
 import yaml
@@ -8,6 +10,7 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from colsim.io import atomic_path
+from colsim.packing import expected_spheres
 from colsim.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
@@ -28,8 +31,49 @@ def schema_problem(config, schema):
     return f"config: {where or 'the configuration'}: {error.message}"
 
 
+CONFIG_MAX_ITEMS = 100_000   # far above any study's configuration (the default has about 100)
+
+
+def size_problem(tree, limit=CONFIG_MAX_ITEMS):
+    """One line if `tree` holds more than `limit` keys and values once YAML's aliases are expanded
+    (an alias bomb, a configuration that refers to itself), else None: the validator never walks it."""
+    stack, seen = [tree], 0
+    while stack:
+        node = stack.pop()
+        seen += 1
+        if seen > limit:
+            return (f"config: more than {limit:,} keys and values once YAML's aliases are expanded;"
+                    " is an alias repeated, or does the configuration refer to itself?")
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, list):
+            stack.extend(node)
+    return None
+
+
+def non_finite_number(tree, where=""):
+    """The dotted key of the first number in the configuration that is NaN or infinite (the schema's
+    minimum and maximum let NaN through), or None."""
+    if isinstance(tree, dict):
+        items = tree.items()
+    elif isinstance(tree, list):
+        items = enumerate(tree)
+    else:
+        return where if isinstance(tree, float) and not math.isfinite(tree) else None
+    for key, value in items:
+        found = non_finite_number(value, f"{where}.{key}" if where else str(key))
+        if found is not None:
+            return found
+    return None
+
+
 def cross_field_problem(config):
     """One line naming the first pair of settings that contradict each other, or None."""
+    bad = non_finite_number(config)
+    if bad is not None:
+        return f"config: {bad}: must be a finite number"
+    if not re.fullmatch(r"[A-Za-z0-9_-]*", config["study"]):
+        return f"config: study: {config['study']!r} may hold only letters, digits, _ and -"
     d_min, d_max, r0 = config["diameter_min"], config["diameter_max"], config["r0"]
     if d_min > d_max:
         return f"config: diameter_min {d_min} exceeds diameter_max {d_max}"
@@ -54,12 +98,18 @@ def cross_field_problem(config):
     pack = config["pack_aspect_ratio"]
     if pack is not None and pack < max(config["aspect_ratios"]):
         return f"config: pack_aspect_ratio {pack} is below the largest aspect ratio {max(config['aspect_ratios'])}"
+    limit = config["pack"]["max_spheres"]
+    for a, radius in [(pack or max(config["aspect_ratios"]), r0)] + columns:
+        spheres = expected_spheres(radius, a * radius, (d_min, d_max))
+        if spheres > limit:
+            return (f"config: a packing of r0 {radius:g} for a = {a:g} would hold about {spheres:,.0f} spheres,"
+                    f" above pack.max_spheres {limit:,} (raise it if the machine has the memory)")
     return None
 
 
 with open(SCHEMA) as stream:
     SCHEMA_TREE = yaml.safe_load(stream)
-problem = schema_problem(config, SCHEMA_TREE)
+problem = size_problem(config) or schema_problem(config, SCHEMA_TREE)
 if problem is None:
     validate(config, SCHEMA)   # fills in the defaults
     problem = cross_field_problem(config)
@@ -166,7 +216,8 @@ def packing_settings(r0, seed):
     return {"r0": float(r0), "seed": int(seed), "height": float(pack_height(r0, seed)),
             "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
             "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
-            "gravity": float(config["gravity"]), "pack": dict(config["pack"]), "solver": config["solver"]}
+            "gravity": float(config["gravity"]), "solver": config["solver"],
+            "pack": {key: value for key, value in config["pack"].items() if key != "max_spheres"}}
 
 
 def packing_dir(r0, seed):

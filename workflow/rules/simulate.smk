@@ -39,6 +39,7 @@ rule pack:
         dt=config["pack"]["dt"],
         rest_energy=config["pack"]["rest_energy"],
         max_steps=config["pack"]["max_steps"],
+        max_spheres=config["pack"]["max_spheres"],
         mu=config["pack"]["mu"],
         solver=config["solver"],
     log:
@@ -50,6 +51,7 @@ rule pack:
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
         " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
+        " --max-spheres {params.max_spheres}"
         " --solver {params.solver} --output {output:q} > {log:q} 2>&1"
 
 

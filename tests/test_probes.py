@@ -1,0 +1,182 @@
+"""Issue 28's probes, kept: each bad input, path or file gets one line naming the cause and its exit
+status (2: the input, 1: the computation), and nothing is lost or written half.
+
+The workflow's probes (studies that share folders, NaN in a configuration) are in test_workflow.py.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from colsim import io
+from colsim.vtk import export_trajectory
+
+
+def colsim(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "colsim.cli", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A folder with pack.nc (r0 = 1), column.nc (a = 1), collapse.nc (10 steps) and analysis.nc."""
+    folder = tmp_path_factory.mktemp("probes")
+    for args in (["pack", "--r0", "1", "--height", "1", "--seed", "3", "--output", "pack.nc"],
+                 ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc"],
+                 ["collapse", "--input", "column.nc", "--steps", "10", "--output", "collapse.nc"],
+                 ["analyse", "--input", "collapse.nc", "--output", "analysis.nc"]):
+        assert colsim(*args, cwd=folder).returncode == 0
+    return folder
+
+
+@pytest.fixture
+def work(files, tmp_path):
+    for name in ("pack.nc", "column.nc", "collapse.nc", "analysis.nc"):
+        shutil.copy2(files / name, tmp_path / name)
+    return tmp_path
+
+
+def one_line_error(done, status: int, *words):
+    """The command failed with `status` and a last line naming each of `words`, without a traceback."""
+    assert done.returncode == status, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr, done.stderr[-2000:]
+    last = done.stderr.strip().splitlines()[-1]
+    assert all(word in last for word in words), last
+
+
+class Planted:
+    """Unpickling this writes a file: a checkpoint that runs code when read."""
+
+    def __reduce__(self):
+        return (os.system, ("touch planted_code_ran",))
+
+
+def test_a_planted_pickle_checkpoint_runs_no_code(work):
+    """The checkpoint is an .npz of plain arrays read with allow_pickle=False; a pickle in its place
+    is ignored with a warning and the collapse starts over."""
+    (work / "out.nc.checkpoint").write_bytes(pickle.dumps({"fingerprint": Planted()}))
+    done = colsim("collapse", "--input", "column.nc", "--steps", "5", "--output", "out.nc", cwd=work)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert not (work / "planted_code_ran").exists()
+    assert "ignoring unreadable checkpoint" in done.stderr and (work / "out.nc").exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["collapse", "--input", "column.nc", "--checkpoint", "out.nc", "--output", "out.nc"], ["two outputs"]),
+    (["collapse", "--input", "column.nc", "--checkpoint", "column.nc", "--output", "out.nc"],
+     ["column.nc", "both an input and an output"]),
+    (["collapse", "--input", "column.nc", "--output", "column.nc"], ["both an input and an output"]),
+    (["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "pack.nc"], ["both an input and an output"]),
+    (["analyse", "--input", "collapse.nc", "--output", "collapse.nc"], ["both an input and an output"]),
+    (["collect", "analysis.nc", "--output", "analysis.nc"], ["both an input and an output"]),
+    (["collect", "analysis.nc", "--output", "s.nc", "--csv", "s.nc"], ["two outputs"]),
+])
+def test_no_command_writes_over_its_input_or_one_path_twice(work, args, words):
+    before = {p.name: p.read_bytes() for p in work.iterdir()}
+    one_line_error(colsim(*args, cwd=work), 2, *words)
+    assert {p.name: p.read_bytes() for p in work.iterdir()} == before
+
+
+def spoil(path, how: str):
+    """Rewrite the column file at `path` into an impossible one."""
+    column = xr.load_dataset(path)
+    position, radius = column["position"].values.copy(), column["radius"].values.copy()
+    if how == "overlap":        # sphere 1, made sphere 0's size, overlaps it by 96 % of its diameter
+        inward = np.array([-position[0, 0], -position[0, 1], 0.0])     # towards the axis: inside the wall
+        radius[1] = radius[0]
+        position[1] = position[0] + 0.04 * 2 * radius[0] * inward / np.linalg.norm(inward)
+    elif how == "below":
+        position[3, 2] = -1.0
+    elif how == "huge":
+        radius[2] = 100.0
+    elif how == "nan":
+        position[4, 0] = np.nan
+    column["position"].values[:], column["radius"].values[:] = position, radius
+    if how == "empty":
+        column = column.isel(particle=[])
+        for variable in column.variables.values():
+            variable.encoding = {}          # the stored chunking does not fit an empty dimension
+    if how == "no-radius":
+        column = column.drop_vars("radius")
+    path.unlink()
+    column.to_netcdf(path)
+
+
+@pytest.mark.parametrize("how, words", [
+    ("overlap", ["spheres 0 and 1 overlap"]),
+    ("below", ["sphere 3", "below the floor"]),
+    ("huge", ["sphere 2", "diameter 200", "outside the stated 0.25-0.5"]),
+    ("nan", ["sphere 4", "non-finite position"]),
+    ("empty", ["holds no spheres"]),
+    ("no-radius", ["lacks the variable", "radius"]),
+])
+def test_an_impossible_column_is_refused_before_any_step(work, how, words):
+    spoil(work / "column.nc", how)
+    one_line_error(colsim("collapse", "--input", "column.nc", "--steps", "5", "--output", "out.nc", cwd=work), 2, *words)
+    assert not (work / "out.nc").exists() and not (work / "out.nc.checkpoint").exists()
+
+
+@pytest.mark.parametrize("args, status, words", [
+    (["pack", "--height", "inf", "--output", "x.nc"], 2, ["--height", "finite"]),
+    (["pack", "--height", "nan", "--output", "x.nc"], 2, ["--height", "finite"]),
+    (["pack", "--height", "1", "--dt", "1e300", "--output", "x.nc"], 2, ["too large"]),
+    (["collapse", "--input", "column.nc", "--max-duration", "inf", "--output", "x.nc"], 2, ["--max-duration", "finite"]),
+    (["pack", "--r0", "1e6", "--height", "1", "--output", "x.nc"], 2, ["spheres", "--max-spheres"]),
+    (["pack", "--r0", "20", "--height", "100", "--output", "x.nc"], 2, ["spheres", "--max-spheres"]),
+    (["analyse", "--input", "collapse.nc", "--bin-width", "1e-12", "--output", "x.nc"], 2, ["--bin-width"]),
+])
+def test_numbers_out_of_reach_get_one_line(work, args, status, words):
+    one_line_error(colsim(*args, cwd=work), status, *words)
+    assert not (work / "x.nc").exists()
+
+
+def test_outputs_of_one_command_are_written_all_or_none(tmp_path):
+    """io.write_all renames nothing unless every writer finished: a failing third writer leaves the
+    first two files as they were and no temporary file behind."""
+    (tmp_path / "a.txt").write_text("old a")
+
+    def fail(path):
+        raise OSError(28, "No space left on device", str(path))
+
+    with pytest.raises(OSError):
+        io.write_all({tmp_path / "a.txt": lambda p: p.write_text("new a"),
+                      tmp_path / "b.txt": lambda p: p.write_text("new b"), tmp_path / "c.txt": fail})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+    assert (tmp_path / "a.txt").read_text() == "old a"
+
+
+def test_a_failed_vtk_export_leaves_the_earlier_series(files, tmp_path, monkeypatch):
+    trajectory = io.open_dataset(files / "collapse.nc", io.TRAJECTORY_KIND)
+    export_trajectory(trajectory, tmp_path)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    calls = {"n": 0}
+    from colsim import vtk
+
+    original = vtk.write_vtu
+
+    def fails_on_the_second(path, *args):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise OSError(28, "No space left on device", str(path))
+        original(path, *args)
+
+    monkeypatch.setattr(vtk, "write_vtu", fails_on_the_second)
+    moved = trajectory.assign(position=trajectory["position"] + 1.0)
+    with pytest.raises(OSError):
+        export_trajectory(moved, tmp_path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_a_full_disk_is_one_line(work):
+    """An OSError from the file system (here: the output's folder is a file) is one line, exit 2
+    before any work; at run time it would be exit 1."""
+    (work / "blocked").write_text("")
+    one_line_error(colsim("trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "blocked/c.nc", cwd=work),
+                   2, "blocked")
