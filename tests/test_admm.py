@@ -1,5 +1,6 @@
 """The ADMM back-end (colsim.admm): exact projection onto the gap cone, agreement with Clarabel,
 warm start, errors."""
+import clarabel
 import numpy as np
 import pytest
 
@@ -8,8 +9,6 @@ from colsim.cones import project_gap_cone
 from colsim.program import cone_violation
 from colsim.solvers import SolverError, WarmStart, make_solver
 from solver_cases import against_clarabel, collapse_program, mid_collapse, small_pile
-
-clarabel = pytest.importorskip("clarabel")
 
 
 def _reference_projection(x, a, b):

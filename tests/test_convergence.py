@@ -1,10 +1,9 @@
 """The convergence study's tables and figure, from synthetic analyses with known numbers."""
 import numpy as np
 import pytest
+import xarray as xr
 
-xr = pytest.importorskip("xarray")
-
-from colsim.convergence import converged_steps, fit_converged_steps, time_step_means, convergence_markdown, runs_table  # noqa: E402
+from colsim.convergence import converged_steps, fit_converged_steps, time_step_means, convergence_markdown, runs_table
 
 
 def analysis(a=2.0, r0=2.0, seed=1, steps=100, duration=4.0, h=1.0, runout=1.5, mean_d=0.4):

@@ -225,31 +225,43 @@ def test_coulomb_keeps_loaded_contacts_closed_in_a_collapsing_pile(pile):
     collapse's friction, both laws, Clarabel. (At the pile's own dt the fixed point does not
     converge on the first step: README, "Friction law".)
 
-    Every force lies in its cone (1e-7 of the largest normal force: Clarabel at 1e-8). Under
-    coulomb every contact that carries load ends the step closed, g + du_n within 2e-5 of the mean
-    diameter (the fixed point's tolerance, 1e-6 d rms, times up to sqrt(m), plus the solver's accuracy);
-    under the associated law the sliding ones open by mu |du_t| + mu_r |dphi| (measured 1.6e-4 d
-    over these small first steps, and more as the pile speeds up)."""
+    Every force lies in its cone (1e-7 of the largest normal force: Clarabel at 1e-8).
+
+    Under coulomb every contact that carries load (at least 1e-4 of the largest normal force) ends
+    the step closed to within the fixed point's guarantee: a loaded contact's cone constraint is
+    active, so its end-of-step gap g + du_n is its entry of the last residual (dilation minus
+    correction), whose root mean square over the step's m contacts the stopping rule holds at tol d;
+    hence each entry is at most sqrt(m) tol d, plus the solver's accuracy, taken as 1e-6 d. (An
+    interior point leaves a slack of about its complementarity tolerance over the force: on contacts
+    at 1e-6 of the largest force, gaps of up to 2.9e-5 d were measured, so such contacts count as
+    unloaded; at 1e-4 that slack is a hundred times smaller.) The bound is worked out for each step's
+    own m: the pile is chaotic and its contacts differ by processor.
+    Under the associated law the sliding contacts open by mu |du_t| + mu_r |dphi|, more than that
+    bound allows coulomb (measured 1.3e-4 d over these first steps against a bound of 2.5e-5 d;
+    coulomb's largest 4.8e-6 d)."""
     from colsim.program import assemble, cone_violation
     from helpers import COLLAPSE_LAW
-    dt = 0.002
+    dt, tol = 0.002, 1e-6
     d_mean = 2 * float(pile.settled.radius.mean())
-    opening = {}
+    opening, bound = {}, 0.0
     for name in FRICTION_LAWS:
         settings = StepSettings(dt=dt, walls=Walls(floor=True, cylinder_radius=None), law=COLLAPSE_LAW,
-                                friction=FrictionLaw(name, tolerance=1e-6))
+                                friction=FrictionLaw(name, tolerance=tol))
         state, largest = pile.settled, 0.0
         for result in run(state, settings, 5, ClarabelSolver()):
             program = assemble(state, result.contacts, dt, settings.gravity)
             lam = result.solution.forces
             assert cone_violation(program, result.solution.increments, lam)["dual"] <= 1e-7 * lam[:, 0].max()
             gaps = program.end_of_step_gaps(result.solution.increments)[:, 0]
-            loaded = lam[:, 0] > 1e-6 * lam[:, 0].max()
+            loaded = lam[:, 0] > 1e-4 * lam[:, 0].max()
+            step_bound = np.sqrt(program.m) * tol + 1e-6
+            if name == "coulomb":
+                assert gaps[loaded].max() / d_mean <= step_bound, (result.diagnostics.step, program.m)
+                bound = max(bound, step_bound)
             largest = max(largest, float(gaps[loaded].max()))
             state = result.state
         opening[name] = largest / d_mean
-    assert opening["coulomb"] <= 2e-5
-    assert opening["associated"] > 5 * opening["coulomb"]
+    assert opening["associated"] > bound
 
 
 def test_coulomb_fixed_point_that_does_not_converge_is_an_error():

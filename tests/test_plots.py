@@ -1,16 +1,13 @@
 """colsim.plots on small synthetic datasets shaped like colsim's files (no simulation needed)."""
+import matplotlib
 import numpy as np
 import pytest
+import xarray as xr
+from matplotlib.container import ErrorbarContainer
 
-pytest.importorskip("matplotlib")
-xr = pytest.importorskip("xarray")
-
-import matplotlib  # noqa: E402
-from matplotlib.container import ErrorbarContainer  # noqa: E402
-
-from colsim import plots  # noqa: E402
-from colsim.laws import LAWS  # noqa: E402
-from colsim.summary import SUMMARY_VARIABLES  # noqa: E402
+from colsim import plots
+from colsim.laws import LAWS
+from colsim.summary import SUMMARY_VARIABLES
 
 KEPT = []
 

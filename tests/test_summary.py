@@ -1,12 +1,10 @@
 """The summary: collecting analyses (one run per swept value, the rest equal), its CSV form with one
 row per run, and its tables against Lube's laws."""
 import numpy as np
-import pytest
+import xarray as xr
 
-xr = pytest.importorskip("xarray")
-
-from colsim.laws import lube_height, lube_runout  # noqa: E402
-from colsim.summary import lube_markdown, one_row_per_run  # noqa: E402
+from colsim.laws import lube_height, lube_runout
+from colsim.summary import lube_markdown, one_row_per_run
 
 
 def test_check_variables_become_one_column_per_value():
@@ -88,5 +86,5 @@ def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
     text = friction_law_markdown(comparison)
     r2 = lube_runout(2.0)
     assert f"| 2 | associated | 3 | {lube_height(2.0):.3f} (0.010) | {lube_height(2.0):.3f} | +0 % | {r2:.3f} (0.010) |" in text
-    assert f"| 2 | coulomb | 3 |" in text and f"| {r2 + 0.5:.3f} (0.010) | {r2:.3f} | {100 * 0.5 / r2:+.0f} % | 0.80 | 15.0 | 110 |" in text
+    assert "| 2 | coulomb | 3 |" in text and f"| {r2 + 0.5:.3f} (0.010) | {r2:.3f} | {100 * 0.5 / r2:+.0f} % | 0.80 | 15.0 | 110 |" in text
     assert friction_law_figure(comparison, tmp_path / "friction_law.png").stat().st_size > 10_000
