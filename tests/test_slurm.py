@@ -39,7 +39,7 @@ SLURM_COMMAND = ("--executor", "slurm", "--workflow-profile", "workflow/profiles
                  "--configfile", "config/tiny.yaml")
 TEST_CLUSTER_OPTIONS = ("--slurm-status-command", "squeue",
                         "--slurm-init-seconds-before-status-checks", "2")
-LOCAL_RULES = {"all", "study_config", "packing_settings", "run_settings"}
+LOCAL_RULES = {"all", "paraview", "study_config", "packing_settings", "run_settings"}
 SLURM_JOBS = 13          # pack 1, trim 2, collapse 4, analyse 4, collect, plot
 
 

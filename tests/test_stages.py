@@ -492,7 +492,8 @@ def test_export_vtk_removes_its_own_earlier_frames(tmp_path):
         return xr.Dataset({"position": (("time", "particle", "xyz"), np.zeros((frames, n, 3))),
                            "velocity": (("time", "particle", "xyz"), np.zeros((frames, n, 3))),
                            "angular_velocity": (("time", "particle", "xyz"), np.zeros((frames, n, 3))),
-                           "radius": ("particle", np.full(n, 0.2)), "initial_height": ("particle", np.ones(n))},
+                           "radius": ("particle", np.full(n, 0.2)), "initial_height": ("particle", np.ones(n)),
+                           "scaled_time": ("time", np.arange(frames, dtype=float) / 0.3)},
                           coords={"time": np.arange(frames, dtype=float)})
 
     (tmp_path / "notes.vtu").write_text("not ours")

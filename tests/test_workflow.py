@@ -5,6 +5,7 @@ then checks results/tiny/summary.nc, the figures and the report, that adding a s
 schedules only the new jobs, and that a wrong configuration stops snakemake naming the culprit.
 """
 import json
+import re
 
 import numpy as np
 import pytest
@@ -50,13 +51,40 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
 
 
 @pytest.mark.slow
+def test_paraview_series_read_back_and_leave_the_collapses_alone(tiny_study):
+    """`snakemake paraview` exports the side-view runs (first seed, mu_r nearest 0.12, both a) from
+    their collapse.nc without running any collapse again; meshio (an independent VTK reader) reads
+    every frame back with the netCDF's positions and radii, and the .pvd's times are t/sqrt(h0/g)."""
+    import meshio
+
+    collapses = sorted(tiny_study.glob("results/r0_1/seed_1/pack_*/a_*/mu_r_0.12/run_*/collapse.nc"))
+    assert len(collapses) == 2
+    before = {path: path.stat().st_mtime_ns for path in tiny_study.glob("results/**/collapse.nc")}
+    result = snakemake(tiny_study, "-j2", "paraview", "--configfile", "config/tiny.yaml", timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "colsim collapse" not in result.stdout + result.stderr
+    assert {path: path.stat().st_mtime_ns for path in before} == before
+    for collapse in collapses:
+        trajectory = xr.load_dataset(collapse)
+        pvd = collapse.parent / "vtk" / "collapse.pvd"
+        entries = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text())
+        assert len(entries) == trajectory.sizes["time"]
+        np.testing.assert_allclose([float(t) for t, _ in entries], trajectory["scaled_time"].values, rtol=1e-8)
+        for k, (_, frame) in enumerate(entries):
+            mesh = meshio.read(pvd.parent / frame)
+            np.testing.assert_array_equal(mesh.points, trajectory["position"].values[k])
+            np.testing.assert_array_equal(mesh.point_data["radius"].ravel(), trajectory["radius"].values)
+
+
+@pytest.mark.slow
 def test_figures_logs_and_benchmarks_exist(tiny_study):
     for name in FIGURES:
         path = tiny_study / TINY / "figures" / f"{name}.png"
         assert path.is_file() and path.stat().st_size > 1000, name
     assert (tiny_study / TINY / "study_config.yaml").is_file()
-    logs = list((tiny_study / "results").rglob("*.log"))             # runs' in results/logs, the study's
-    benchmarks = list((tiny_study / "results").rglob("*.tsv"))       # in results/tiny/logs
+    # runs' in results/logs, the study's in results/tiny/logs (the paraview test's exports aside)
+    logs = [p for p in (tiny_study / "results").rglob("*.log") if p.name != "export_vtk.log"]
+    benchmarks = [p for p in (tiny_study / "results").rglob("*.tsv") if p.name != "export_vtk.tsv"]
     # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config
     assert len(logs) == 14 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))

@@ -1,7 +1,10 @@
 """ParaView export: one VTK UnstructuredGrid (.vtu) of points per frame and a .pvd time collection.
 
-Point data: radius, velocity, angular_velocity, initial_height. In ParaView, open the .pvd and
-use a Glyph filter (sphere, scale by `radius`, scale factor 2) to see the grains.
+Point data: radius, velocity, angular_velocity, initial_height; field data: TimeValue (the frame's
+time, in the file's time unit: seconds with g = 9.81) and scaled_time (t/sqrt(h0/g), the time of
+colsim's figures). The .pvd's timesteps are t/sqrt(h0/g), so ParaView's time bar reads like the
+figures. In ParaView, open the .pvd and use a Glyph filter (sphere, scale by `radius`, scale factor
+2) to see the grains.
 """
 from __future__ import annotations
 
@@ -16,20 +19,29 @@ import numpy as np
 from .io import atomic_path
 
 
-def _data_array(name: str, values: np.ndarray, components: int, dtype: str = "Float64") -> str:
-    """A base64 'binary' DataArray: a UInt32 byte count, then the little-endian values."""
+def _data_array(name: str, values: np.ndarray, components: int, dtype: str = "Float64",
+                tuples: int | None = None) -> str:
+    """A base64 'binary' DataArray: a UInt32 byte count, then the little-endian values (tuples:
+    the count a FieldData array states)."""
     raw = np.ascontiguousarray(values, dtype={"Float64": "<f8", "Int64": "<i8", "UInt8": "u1"}[dtype])
     payload = base64.b64encode(np.uint32(raw.nbytes).tobytes() + raw.tobytes()).decode("ascii")
-    return (f'        <DataArray type="{dtype}" Name="{name}" NumberOfComponents="{components}" '
+    count = "" if tuples is None else f'NumberOfTuples="{tuples}" '
+    return (f'        <DataArray type="{dtype}" Name="{name}" {count}NumberOfComponents="{components}" '
             f'format="binary">{payload}</DataArray>\n')
 
 
-def write_vtu(path, position, point_data: dict) -> None:
-    """One point set: positions (n, 3) and point data {name: (n,) or (n, 3)}."""
+def write_vtu(path, position, point_data: dict, field_data: dict | None = None) -> None:
+    """One point set: positions (n, 3), point data {name: (n,) or (n, 3)} and field data
+    {name: number} (one value for the whole frame)."""
     n = len(position)
     body = ['<?xml version="1.0"?>\n',
             '<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt32">\n',
-            '  <UnstructuredGrid>\n', f'    <Piece NumberOfPoints="{n}" NumberOfCells="{n}">\n',
+            '  <UnstructuredGrid>\n']
+    if field_data:
+        body += ['    <FieldData>\n']
+        body += [_data_array(name, np.array([value]), 1, tuples=1) for name, value in field_data.items()]
+        body += ['    </FieldData>\n']
+    body += [f'    <Piece NumberOfPoints="{n}" NumberOfCells="{n}">\n',
             '      <PointData Scalars="radius">\n']
     for name, values in point_data.items():
         values = np.asarray(values)
@@ -54,6 +66,7 @@ def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     radius = dataset["radius"].values
     initial_height = dataset["initial_height"].values
+    scaled = dataset["scaled_time"].values
     staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=directory))
     try:
         entries, written = [], []
@@ -62,8 +75,8 @@ def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
             write_vtu(staging / frame, dataset["position"].values[k], {
                 "radius": radius, "velocity": dataset["velocity"].values[k],
                 "angular_velocity": dataset["angular_velocity"].values[k], "initial_height": initial_height,
-            })
-            entries.append(f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{frame}"/>\n')
+            }, {"TimeValue": float(t), "scaled_time": float(scaled[k])})
+            entries.append(f'    <DataSet timestep="{scaled[k]:.9g}" group="" part="0" file="{frame}"/>\n')
             written.append(frame)
         collection = f"{name}.pvd"
         (staging / collection).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'

@@ -399,6 +399,7 @@ def figures():
 # cheap jobs that a cluster run keeps on the submitting node
 localrules:
     all,
+    paraview,
     study_config,
     packing_settings,
     run_settings,

@@ -133,3 +133,12 @@ rule export_vtk:
         benchmarked(f"{RUN_DIR}/export_vtk.tsv")
     shell:
         "colsim export-vtk --input {input:q} --output-dir {params.directory:q} > {log:q} 2>&1"
+
+
+# `snakemake -j2 paraview` (with the study's --configfile): the ParaView series of the runs the
+# side-view figure shows (the first seed, figures.side_view_mu_r, every a), made from their
+# collapse.nc; a run already computed is only read, never run again. Any other run's series is its
+# folder's vtk/collapse.pvd as a target.
+rule paraview:
+    input:
+        runs("vtk/collapse.pvd", mu_r=side_view_mu_r(), seeds=SEEDS[:1]),
