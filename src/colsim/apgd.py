@@ -50,6 +50,7 @@ import scipy.sparse as sp
 from .cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
                     project_point, row_scaling, scaled_coefficients, scaled_residuals)
 from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from .threads import prange, threads
 
 if HAVE_NUMBA:
     import numba
@@ -61,30 +62,59 @@ log = logging.getLogger(__name__)
 # The iterations: fused numba kernels, or the same steps in numpy
 # --------------------------------------------------------------------------------------------
 
-def _apply_transpose(z, s, ci, cj, nrm, t1, t2, ri, rj, reff, out):
-    """out (6n,) = B' S z without forming B: each contact's force and moments on its bodies."""
-    out[:] = 0.0
-    rot = len(out) // 2
-    for k in range(len(ci)):
+def _body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each body's contacts, for applying B' body by body: body b's are entry[start[b]:start[b + 1]],
+    in increasing contact order, each 2 k for contact k's first body and 2 k + 1 for its second
+    (second < 0: a wall, no second body). Returns (start (n + 1,), entry) as int64."""
+    bodies = np.column_stack([first, second]).ravel().astype(np.int64)   # entry e's body is bodies[e]
+    entry = np.flatnonzero(bodies >= 0)
+    bodies = bodies[entry]
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(bodies, minlength=n), out=start[1:])
+    return start, entry[np.argsort(bodies, kind="stable")]
+
+
+def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work):
+    """work (m, 9): contact k's force on its second body (minus that on its first), its moment on
+    the first body and on the second, from scaled forces z (5m,)."""
+    for k in prange(len(ri)):
         o = 5 * k
         p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
         r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
-        a, b = ci[k], cj[k]
         for d in range(3):
-            force = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
             sliding = q2 * t1[k, d] - q1 * t2[k, d]
             rolling = reff[k] * (r1 * t1[k, d] + r2 * t2[k, d])
-            out[3 * a + d] -= force
-            out[rot + 3 * a + d] += ri[k] * sliding - rolling
-            if b >= 0:
-                out[3 * b + d] += force
-                out[rot + 3 * b + d] += rj[k] * sliding + rolling
+            work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
+            work[k, 3 + d] = ri[k] * sliding - rolling
+            work[k, 6 + d] = rj[k] * sliding + rolling
+
+
+def _apply_transpose(z, s, nrm, t1, t2, ri, rj, reff, start, entry, work, out):
+    """out (6n,) = B' S z without forming B: each body sums its contacts' forces and moments
+    (:func:`_contact_wrenches`) in contact order, so the sums are the same on any number of
+    threads; work: (m, 9) scratch."""
+    _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work)
+    n = len(start) - 1
+    for body in prange(n):
+        for d in range(3):
+            force = 0.0
+            moment = 0.0
+            for e in range(start[body], start[body + 1]):
+                k = entry[e] // 2
+                if entry[e] % 2 == 1:
+                    force += work[k, d]
+                    moment += work[k, 6 + d]
+                else:
+                    force -= work[k, d]
+                    moment += work[k, 3 + d]
+            out[3 * body + d] = force
+            out[3 * n + 3 * body + d] = moment
 
 
 def _apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
     """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion."""
     rot = len(h) // 2
-    for k in range(len(ci)):
+    for k in prange(len(ci)):
         a, b = ci[k], cj[k]
         un = ut1 = ut2 = ur1 = ur2 = 0.0
         for d in range(3):
@@ -111,46 +141,77 @@ def _apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
         out[o + 4] = s[o + 4] * ur2 + c[o + 4]
 
 
-def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, b, inv_mass, lip_decay):
+def _project_step(x, y, g, x_new, step, a, b, blocks):
+    """x_new = Proj_K(y - step g); returns (||x_new - y||^2, g . (x_new - x)), each summed over
+    `blocks` fixed ranges of contacts (one thread each) and then in order: one block gives the
+    plain sum, and the result depends on the block count, never on the threads' timing."""
+    m = len(a)
+    dd_part = np.zeros(blocks)
+    uphill_part = np.zeros(blocks)
+    for block in prange(blocks):
+        dd = 0.0
+        uphill = 0.0
+        for k in range(block * m // blocks, (block + 1) * m // blocks):
+            o = 5 * k
+            pp, q1, q2, r1, r2 = project_point(
+                y[o] - step * g[o], y[o + 1] - step * g[o + 1], y[o + 2] - step * g[o + 2],
+                y[o + 3] - step * g[o + 3], y[o + 4] - step * g[o + 4], a[k], b[k])
+            x_new[o] = pp
+            x_new[o + 1] = q1
+            x_new[o + 2] = q2
+            x_new[o + 3] = r1
+            x_new[o + 4] = r2
+            for l in range(5):
+                d = x_new[o + l] - y[o + l]
+                dd += d * d
+                uphill += g[o + l] * (x_new[o + l] - x[o + l])
+        dd_part[block] = dd
+        uphill_part[block] = uphill
+    dd = 0.0
+    uphill = 0.0
+    for block in range(blocks):
+        dd += dd_part[block]
+        uphill += uphill_part[block]
+    return dd, uphill
+
+
+def _weighted_change(h_new, hy, inv_mass, blocks):
+    """||h_new - hy||^2 weighted by inv_mass, summed as :func:`_project_step` sums."""
+    nb = len(h_new)
+    part = np.zeros(blocks)
+    for block in prange(blocks):
+        total = 0.0
+        for i in range(block * nb // blocks, (block + 1) * nb // blocks):
+            dh = h_new[i] - hy[i]
+            total += dh * dh * inv_mass[i]
+        part[block] = total
+    total = 0.0
+    for block in range(blocks):
+        total += part[block]
+    return total
+
+
+def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, b, inv_mass, lip_decay,
+             blocks):
     """n_iter APGD iterations in place; returns (theta, lip, backtracks, restarts).
 
     x, hx = T x: the iterate; y, hy: the extrapolated point; g = G hy + c: the gradient at y.
-    geometry = (s, i, j, normal, tangent1, tangent2, R_i, R_j, R_eff) gives T = B' S and
-    G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`, :func:`_apply_gradient`).
-    After each iteration lip *= lip_decay. The step 1/lip is accepted when
-    ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
-    descent test of a quadratic), else lip doubles. Restart when g . (x_new - x) > 0.
+    geometry = (s, i, j, normal, tangent1, tangent2, R_i, R_j, lever, start, entry, work) gives
+    T = B' S and G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`,
+    :func:`_apply_gradient`). After each iteration lip *= lip_decay. The step 1/lip is accepted
+    when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact descent test of a
+    quadratic), else lip doubles. Restart when g . (x_new - x) > 0. The loops over contacts and
+    bodies run on numba's threads; the sums over them in `blocks` fixed blocks (one: the serial
+    order), so a result depends on the block count alone.
     """
-    s, ci, cj, nrm, t1, t2, ri, rj, reff = geometry
-    m = len(a)
-    nb = len(hx)
+    s, ci, cj, nrm, t1, t2, ri, rj, reff, start, entry, work = geometry
     backtracks = 0
     restarts = 0
     for _ in range(n_iter):
         while True:
-            step = 1.0 / lip
-            dd = 0.0
-            uphill = 0.0   # g . (x_new - x), for the restart test: summed here, in the same order
-            for k in range(m):
-                o = 5 * k
-                pp, q1, q2, r1, r2 = project_point(
-                    y[o] - step * g[o], y[o + 1] - step * g[o + 1], y[o + 2] - step * g[o + 2],
-                    y[o + 3] - step * g[o + 3], y[o + 4] - step * g[o + 4], a[k], b[k])
-                x_new[o] = pp
-                x_new[o + 1] = q1
-                x_new[o + 2] = q2
-                x_new[o + 3] = r1
-                x_new[o + 4] = r2
-                for l in range(5):
-                    d = x_new[o + l] - y[o + l]
-                    dd += d * d
-                    uphill += g[o + l] * (x_new[o + l] - x[o + l])
-            _apply_transpose(x_new, s, ci, cj, nrm, t1, t2, ri, rj, reff, h_new)
-            wdd = 0.0
-            for i in range(nb):
-                dh = h_new[i] - hy[i]
-                wdd += dh * dh * inv_mass[i]
-            if wdd <= lip * dd * (1.0 + 1e-12):
+            dd, uphill = _project_step(x, y, g, x_new, 1.0 / lip, a, b, blocks)
+            _apply_transpose(x_new, s, nrm, t1, t2, ri, rj, reff, start, entry, work, h_new)
+            if _weighted_change(h_new, hy, inv_mass, blocks) <= lip * dd * (1.0 + 1e-12):
                 break
             lip *= 2.0
             backtracks += 1
@@ -162,10 +223,10 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
             restarts += 1
         theta = theta_new
         lip *= lip_decay
-        for i in range(5 * m):
+        for i in prange(len(x)):
             y[i] = x_new[i] + beta * (x_new[i] - x[i])
             x[i] = x_new[i]
-        for i in range(nb):
+        for i in prange(len(hx)):
             hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
             hx[i] = h_new[i]
         _apply_gradient(hy, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, g)
@@ -173,9 +234,13 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
 
 
 if HAVE_NUMBA:
-    _apply_transpose = numba.njit(cache=True)(_apply_transpose)
-    _apply_gradient = numba.njit(cache=True)(_apply_gradient)
-    _iterate_compiled = numba.njit(cache=True)(_iterate)
+    _parallel = numba.njit(cache=True, parallel=True)
+    _contact_wrenches = _parallel(_contact_wrenches)
+    _apply_transpose = _parallel(_apply_transpose)
+    _apply_gradient = _parallel(_apply_gradient)
+    _project_step = _parallel(_project_step)
+    _weighted_change = _parallel(_weighted_change)
+    _iterate_compiled = _parallel(_iterate)
 
 
 class _Iteration:
@@ -189,7 +254,8 @@ class _Iteration:
             np.ascontiguousarray(scaling.ravel()), contacts.i.astype(np.int64), contacts.j.astype(np.int64),
             *(np.ascontiguousarray(v, dtype=float) for v in (
                 contacts.normal, contacts.tangent1, contacts.tangent2, contacts.radius_i,
-                contacts.radius_j, contacts.rolling_radius)))
+                contacts.radius_j, contacts.rolling_radius)),
+            *_body_contacts(contacts.i, contacts.j, len(inv_mass) // 6), np.empty((len(a), 9)))
         hx = self.apply_T(x)
         self.x, self.hx = x.copy(), hx
         self.y, self.hy = x.copy(), hx.copy()
@@ -204,7 +270,8 @@ class _Iteration:
         if self.geometry is None:
             return self.T @ z
         out = np.empty(len(self.inv_mass))
-        _apply_transpose(z, *self.geometry, out)
+        s, _, _, nrm, t1, t2, ri, rj, lever, start, entry, work = self.geometry
+        _apply_transpose(z, s, nrm, t1, t2, ri, rj, lever, start, entry, work, out)
         return out
 
     def apply_G(self, h: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -212,7 +279,7 @@ class _Iteration:
         if self.geometry is None:
             return self.G @ h + c
         out = np.empty_like(c)
-        _apply_gradient(h, self.inv_mass, *self.geometry, c, out)
+        _apply_gradient(h, self.inv_mass, *self.geometry[:9], c, out)
         return out
 
     def lipschitz_estimate(self, iterations: int = 12) -> float:
@@ -240,7 +307,8 @@ class _Iteration:
         if self.geometry is not None:
             theta, lip, bt, rs = _iterate_compiled(
                 n, self.x, self.hx, self.y, self.hy, self.g, self.x_new, self.h_new,
-                self.theta, self.lip, self.geometry, self.c, self.a, self.b, self.inv_mass, self.lip_decay)
+                self.theta, self.lip, self.geometry, self.c, self.a, self.b, self.inv_mass, self.lip_decay,
+                threads())
         else:
             theta, lip, bt, rs = self._iterate_numpy(n)
         self.theta, self.lip = theta, lip

@@ -72,6 +72,9 @@ def _solver_arguments(parser):
                              "up to dt/sqrt(h0/g) = 0.04, Clarabel otherwise; see the README)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
                         help="solver tolerance (default: the back-end's own; for auto, APGD's)")
+    parser.add_argument("--threads", type=_positive_int, default=1,
+                        help="threads of APGD's loops over contacts and bodies (default: %(default)s; "
+                             "results differ between counts by rounding only, far below the tolerance)")
 
 
 def _length_floor_argument(parser, under_auto: str):

@@ -13,6 +13,7 @@ from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dat
 from .packing import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
 from .solvers import make_solver
 from .state import FRICTION_LAWS
+from .threads import use_threads
 
 log = logging.getLogger("colsim")
 
@@ -124,6 +125,7 @@ def pack(args):
     if args.diameter_min > args.diameter_max:
         raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
     rng = np.random.default_rng([args.seed, args.root_seed])
+    use_threads(args.threads)
     solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu,
@@ -161,6 +163,7 @@ def collapse(args):
     if "h0" not in source.attrs:
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
+    use_threads(args.threads)
     settings = CollapseSettings(
         mu=args.mu, mu_r=args.mu_r, floor_mu=args.floor_mu, floor_mu_r=args.floor_mu_r,
         duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,

@@ -30,7 +30,7 @@ RUN_ATTRIBUTES = {
 # what a run's settings may differ in between the runs of one summary: the swept values, file names
 # and checkpointing (which does not change a result)
 SWEPT = ("aspect_ratio", "mu_r", "seed")
-NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command"}
+NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads"}
 
 
 def run_settings(analysis) -> dict:

@@ -150,6 +150,9 @@ STUDY_LENGTH = (int(config["collapse"]["steps"]), float(config["collapse"]["dura
 RUN_TO_REST = config["collapse"]["max_duration"] is not None
 
 
+NOT_IDENTITY = ("max_spheres", "threads")   # pack.* settings that do not change a packing
+
+
 def settings_key(settings):
     """Ten hex digits of the SHA-256 of `settings` as canonical JSON (a folder name)."""
     text = json.dumps(settings, sort_keys=True, separators=(",", ":"))
@@ -217,7 +220,7 @@ def packing_settings(r0, seed):
             "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
             "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
             "gravity": float(config["gravity"]), "solver": config["solver"],
-            "pack": {key: value for key, value in config["pack"].items() if key != "max_spheres"}}
+            "pack": {key: value for key, value in config["pack"].items() if key not in NOT_IDENTITY}}
 
 
 def packing_dir(r0, seed):

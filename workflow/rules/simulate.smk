@@ -29,6 +29,7 @@ rule pack:
     output:
         f"{PACKING_DIR}/packing.nc",
     priority: 1000
+    threads: config["pack"]["threads"]
     params:
         height=lambda wildcards: fmt(packing_of(wildcards)["height"]),
         root_seed=config["root_seed"],
@@ -52,7 +53,7 @@ rule pack:
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
         " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
         " --max-spheres {params.max_spheres}"
-        " --solver {params.solver} --output {output:q} > {log:q} 2>&1"
+        " --solver {params.solver} --threads {threads} --output {output:q} > {log:q} 2>&1"
 
 
 # A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
@@ -81,6 +82,7 @@ rule collapse:
     output:
         f"{RUN_DIR}/collapse.nc",
     priority: collapse_priority
+    threads: config["collapse"]["threads"]
     resources:
         mem_mb=4000,
         runtime=collapse_runtime,
@@ -95,7 +97,7 @@ rule collapse:
         benchmarked(f"{RUN_DIR}/collapse.tsv")
     shell:
         "colsim collapse --input {input.column:q} --mu {params.mu} --mu-r {params.mu_r} {params.options}"
-        " --checkpoint-every {params.checkpoint_every} --output {output:q} > {log:q} 2>&1"
+        " --checkpoint-every {params.checkpoint_every} --threads {threads} --output {output:q} > {log:q} 2>&1"
 
 
 rule analyse:

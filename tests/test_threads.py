@@ -1,0 +1,87 @@
+"""APGD on several threads (colsim.threads): the same answer as on one, to the solver's tolerance.
+
+The kernels run in a child process started with NUMBA_NUM_THREADS=3, so three threads exist on
+any machine (on one core they take turns; only the arithmetic is tested, never the speed)."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from colsim.threads import use_threads
+
+TESTS = Path(__file__).parent
+
+SOLVE_ON_THREADS = """
+import json, sys
+import numpy as np
+sys.path.insert(0, {tests!r})
+from colsim.apgd import ApgdSolver
+from colsim.solvers import ClarabelSolver
+from colsim.threads import threads, use_threads
+from solver_cases import collapse_program, mid_collapse, small_pile
+
+program, _ = collapse_program(mid_collapse(small_pile()))
+reference = ClarabelSolver(tolerance=1e-10).solve(program).increments
+out = {{}}
+for count in (1, 2, 3, 3):
+    use_threads(count)
+    assert threads() == count
+    solution = ApgdSolver().solve(program)
+    out.setdefault(str(count), []).append({{
+        "increments": solution.increments.tolist(), "primal": solution.info["primal"],
+        "complementarity": solution.info["complementarity"],
+        "error": float(np.linalg.norm(solution.increments - reference) / np.linalg.norm(reference))}})
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def solved():
+    """{thread count: [solutions]} of one mid-collapse program, three threads twice."""
+    env = {**os.environ, "NUMBA_NUM_THREADS": "3"}
+    done = subprocess.run([sys.executable, "-c", SOLVE_ON_THREADS.format(tests=str(TESTS))], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_every_thread_count_solves_to_the_tolerance(solved):
+    """On 1, 2 and 3 threads APGD meets its tolerance (1e-5) and its increments are within the
+    bound of test_apgd.test_agrees_with_clarabel (1e-3 relative) of Clarabel's at 1e-10."""
+    for count, solutions in solved.items():
+        for solution in solutions:
+            assert solution["primal"] <= 1e-5 and solution["complementarity"] <= 1e-5, count
+            assert solution["error"] <= 1e-3, (count, solution["error"])
+
+
+def test_a_thread_count_gives_the_same_bits_every_time(solved):
+    """The sums run in fixed blocks, so the threads' timing never changes a result."""
+    first, second = solved["3"]
+    assert first["increments"] == second["increments"]
+
+
+def test_thread_counts_are_checked():
+    with pytest.raises(ValueError, match="whole number >= 1"):
+        use_threads(0)
+    assert use_threads(1) == 1
+
+
+def test_the_collapse_command_runs_on_threads_and_records_them(tmp_path):
+    """`colsim collapse --threads 2` on a tiny column: it runs, and its file records the count."""
+    import xarray as xr
+
+    def cli(*args):
+        env = {**os.environ, "NUMBA_NUM_THREADS": "2"}
+        done = subprocess.run([sys.executable, "-m", "colsim.cli", *args], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+
+    cli("pack", "--r0", "1", "--height", "1", "--seed", "3", "--threads", "2", "--output", "pack.nc")
+    cli("trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc")
+    cli("collapse", "--input", "column.nc", "--steps", "10", "--duration", "0.1", "--threads", "2",
+        "--output", "collapse.nc")
+    config = json.loads(xr.load_dataset(tmp_path / "collapse.nc").attrs["config"])
+    assert config["threads"] == 2 and config["input_config"]["input_config"]["threads"] == 2
