@@ -14,7 +14,7 @@ memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`
 Printed per run: CPU time of the collapse (user + system, imports excluded), wall time, peak resident memory, the
 steps solved by each back-end, and iterations per step by phase: fast flow (kinetic energy above
 half its peak), slowing (after the peak, 1-50 % of it) and rest (below 1 %). The table at the end
-is markdown, for the README. Time benchmarks on a quiet machine.
+is markdown, for docs/performance.md. Time benchmarks on a quiet machine.
 """
 from __future__ import annotations
 

@@ -69,7 +69,7 @@ def _integer(text):
 def _solver_arguments(parser):
     parser.add_argument("--solver", default="auto", choices=SOLVERS,
                         help="cone-program back-end (default: %(default)s: APGD for warm-started steps "
-                             "up to dt/sqrt(h0/g) = 0.04, Clarabel otherwise; see the README)")
+                             "up to dt/sqrt(h0/g) = 0.04, Clarabel otherwise; see docs/solvers.md)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
                         help="solver tolerance (default: the back-end's own; for auto, APGD's)")
     parser.add_argument("--threads", type=_positive_int, default=1,

@@ -9,7 +9,7 @@ Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks th
   past the default end, where it is also measured;
 - seeds: the same column from several packings.
 
-:func:`convergence_markdown` turns the table into the relative changes the README quotes (the
+:func:`convergence_markdown` turns the table into the relative changes docs/validation/ quotes (the
 column-size runs averaged over seeds by :func:`colsim.summary.means_per_size`).
 """
 from __future__ import annotations

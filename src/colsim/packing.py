@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 LATTICE_FACTOR = 1.04
 SOLID_FRACTION_GUESS = 0.58
 #: APGD's tolerance when `colsim pack` runs under auto. Measured (r0 = 2, height 10, seed 1,
-#: dt 0.02; README, "Packing"): the same rest criterion, solid fraction and step count as Clarabel
+#: dt 0.02; docs/solvers.md, "Packing under auto"): the same rest criterion, solid fraction and step count as Clarabel
 #: in a third of the time; a settled packing is an initial condition, where 1e-3 of the step's
 #: free fall (g dt^2) is 1e-5 of a diameter.
 APGD_TOLERANCE = 1e-3

@@ -63,12 +63,12 @@ class AutoSolver(Solver):
 
     name = "auto"
     uses_warm_start = True
-    #: APGD's tolerance under auto, from the tolerance study (README, "APGD's tolerance")
+    #: APGD's tolerance under auto, from the tolerance study (docs/solvers.md, "APGD's tolerance")
     APGD_TOLERANCE = 1e-5
-    #: APGD's length floor under auto, mean diameters (README, "APGD's tolerance"): with the
+    #: APGD's length floor under auto, mean diameters (docs/solvers.md, "APGD's tolerance"): with the
     #: tolerance, each contact's end-of-step gap to 1e-6 of a mean diameter at least
     APGD_LENGTH_FLOOR = 0.1
-    #: APGD's overlap tolerance under auto in a collapse, mean diameters (README, "The overlap
+    #: APGD's overlap tolerance under auto in a collapse, mean diameters (docs/solvers.md, "The overlap
     #: tolerance"): a step's largest cone violation may reach it while complementarity keeps the
     #: relative tolerance (the packing's own bound, 1e-3 x at least 0.1 d, is as loose already)
     APGD_OVERLAP_TOLERANCE = 1e-4

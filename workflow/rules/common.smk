@@ -348,7 +348,7 @@ def convergence_outputs():
 
 def collapse_runtime(wildcards):
     """A collapse's time limit on a cluster (minutes; SLURM's runtime), from config/paper.yaml's
-    measured jobs (r0 = 4, README "The paper-scale study"): 623 s to rest at a = 5 and 773 s at
+    measured jobs (r0 = 4, docs/validation/paper-scale.md): 623 s to rest at a = 5 and 773 s at
     mu_r = 0 (t/sqrt(h0/g) = 12), so 120 at the study's length; 300 for more steps or a later end
     (a convergence study's 2,000 steps cost twice); 1440 under the Coulomb law (8-18x the CPU).
     A collapse that runs out of time resumes from its checkpoint (the profile's retries)."""

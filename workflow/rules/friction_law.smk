@@ -1,4 +1,4 @@
-# The Coulomb (non-associated) friction law (config key friction_law; README, "Friction law"): its runs
+# The Coulomb (non-associated) friction law (config key friction_law; docs/method.md, "Friction law"): its runs
 # are the rules collapse and analyse at the folders their settings name (the law is one of them);
 # with friction_law_comparison: true, the same runs under both laws in one table and figure.
 
