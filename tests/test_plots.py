@@ -110,11 +110,11 @@ def test_every_figure_plots_the_values_of_its_data(tmp_path):
 
     profiles = figures["deposit_profiles"].axes
     for ax, a in zip(profiles, (0.5, 1.0)):
-        steps = [line for line in ax.lines if line.get_drawstyle() == "steps-mid"]
+        steps = [line for line in ax.lines if line.get_drawstyle() == "steps-post"]
         assert len(steps) == 2                                          # one per mu_r, lowest seed
-        run = analysis(a, 0.0, 1)
-        np.testing.assert_allclose(steps[0].get_xdata(), run.radial_bin.values / R0)
-        np.testing.assert_allclose(steps[0].get_ydata(), run.deposit_height.values / R0)
+        run = analysis(a, 0.0, 1)                                       # bins 0-0.5, 0.5-1, ...
+        np.testing.assert_allclose(steps[0].get_xdata(), np.arange(0.0, 6.25, 0.5) / R0)
+        np.testing.assert_allclose(steps[0].get_ydata()[:-1], run.deposit_height.values / R0)
 
     fronts = figures["front_position"].axes
     for ax in fronts[:2]:
@@ -157,3 +157,172 @@ def test_package_imports_without_matplotlib():
     code = ("import sys; sys.modules['matplotlib'] = None; import colsim, colsim.plots, colsim.laws; "
             "print('ok')")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "ok"
+
+
+def _bar_lengths(ax) -> list:
+    """(lower, upper) error of every marker of each error-bar series of an axes, in drawing order."""
+    lengths = []
+    for container in (c for c in ax.containers if isinstance(c, ErrorbarContainer)):
+        _, y = container.lines[0].get_data()
+        segments = container.lines[2][0].get_segments()
+        lengths.append([(yk - seg[0][1], seg[1][1] - yk) for yk, seg in zip(y, segments)])
+    return lengths
+
+
+def _legend_texts(figure) -> list:
+    legends = [ax.get_legend() for ax in figure.axes if ax.get_legend()] + list(figure.legends)
+    return [text.get_text() for legend in legends for text in [legend.get_title(), *legend.get_texts()]]
+
+
+def settled(ratios=(0.5, 1.0, 2.0), mu_rs=(0.0, 0.12), seeds=(1, 2)):
+    """summary() with every run at rest and a whole main mass (nothing flagged)."""
+    data = summary(ratios, mu_rs, seeds, missing=False)
+    data["final_to_peak_kinetic_energy"][:] = 1e-4
+    data["n_particles"][:] = 100.0
+    data["n_main_mass"][:] = 90.0
+    return data
+
+
+@pytest.mark.parametrize("seeds", [(1, 2), (1, 2, 3)])
+def test_error_bars_are_the_range_below_three_seeds_and_the_standard_error_from_three(tmp_path, seeds):
+    data = settled(seeds=seeds)
+    figures = _drawn_figures(tmp_path, data, [], [])
+    standard_error = len(seeds) >= 3
+    for name, variable in (("final_height", "h_inf_over_r0"), ("runout", "runout_over_r0")):
+        ax = figures[name].axes[0]
+        for k, bars in enumerate(_bar_lengths(ax)):
+            values = data[variable].isel(mu_r=k).values
+            mean = values.mean(axis=-1)
+            if standard_error:
+                expected = np.c_[[values.std(axis=-1, ddof=1) / np.sqrt(len(seeds))] * 2].T
+            else:
+                expected = np.c_[mean - values.min(axis=-1), values.max(axis=-1) - mean]
+            np.testing.assert_allclose(bars, expected, rtol=1e-9, err_msg=name)
+        note = ax.get_legend().get_title().get_text()
+        assert note == (f"mean of {len(seeds)} seeds, bars: standard error" if standard_error
+                        else f"mean of {len(seeds)} seeds, bars: lowest to highest seed")
+    assert any("standard error" in t if standard_error else "lowest to highest" in t
+               for t in _legend_texts(figures["mu_r_effect"]))
+    kind = plots._bar_kind(data.h_inf_over_r0.values)
+    assert kind == ("se", 3, 3) if standard_error else kind == ("range", 2, 2)
+
+
+def test_bars_are_the_range_when_any_point_has_fewer_than_three_seeds():
+    values = np.array([[1.0, 2.0, 3.0], [1.0, 3.0, np.nan]])
+    assert plots._bar_kind(values) == ("range", 2, 3)
+    mean, low, high = plots._bars(values[:1], "se")
+    assert mean[0] == 2.0 and low[0] == high[0] == pytest.approx(1.0 / np.sqrt(3))
+
+
+def test_moving_and_fragment_runs_are_drawn_apart_with_legend_entries(tmp_path):
+    data = settled()
+    data["at_rest"] = xr.full_like(data.h_inf_over_r0, 1.0)
+    data["at_rest"][0, 0, 1] = 0.0                                   # a = 0.5, mu_r = 0: seed 2 still moving
+    data["n_main_mass"][2, 1, 0] = 3.0                               # a = 2, mu_r = 0.12: 3 of 100 grains
+    figures = _drawn_figures(tmp_path, data, [], [])
+    for name, variable in (("final_height", "h_inf_over_r0"), ("runout", "runout_over_r0")):
+        ax = figures[name].axes[0]
+        (x, y), (x2, y2) = _errorbars(ax)
+        opened = [line for line in ax.lines if line.get_label() == "_flag moving"]
+        crossed = [line for line in ax.lines if line.get_label() == "_flag fragment"]
+        assert len(opened) == 1 and len(crossed) == 1
+        np.testing.assert_allclose(opened[0].get_data(), [[x[0]], [y[0]]])
+        assert opened[0].get_markerfacecolor() == "white"
+        np.testing.assert_allclose(crossed[0].get_data(), [[x2[2]], [y2[2]]])
+        assert crossed[0].get_marker() == "x"
+        texts = _legend_texts(figures[name])
+        assert "open: a seed still moving at the end" in texts
+        assert "cross: a seed's main mass < half the grains" in texts
+    texts = _legend_texts(figures["mu_r_effect"])
+    assert "open: a seed still moving at the end" in texts and "cross: a seed's main mass < half the grains" in texts
+    ax = figures["mu_r_effect"].axes[0]
+    assert [line.get_data() for line in ax.lines if line.get_label() == "_flag moving"] == [([0.0], [pytest.approx(
+        data.h_inf_over_r0.isel(aspect_ratio=0, mu_r=0).mean())])]
+
+
+def test_nothing_is_flagged_when_every_run_settled(tmp_path):
+    figures = _drawn_figures(tmp_path, settled(), [], [])
+    for figure in figures.values():
+        assert not any(line.get_label().startswith("_flag") for ax in figure.axes for line in ax.lines)
+        assert not any(t.startswith(("open:", "cross:")) for t in _legend_texts(figure))
+
+
+def test_a_law_that_would_squeeze_the_data_leaves_the_frame_with_a_note(tmp_path):
+    """Lajeunesse's height law as printed (0.74 a, 4.1 at a = 5.5) is not allowed to push heights of
+    about 1 into the bottom quarter; the run-out laws, of the data's size, stay in the frame."""
+    ratios = (0.5, 1.0, 2.0, 3.0, 5.5)
+    data = settled(ratios=ratios)
+    data["h_inf_over_r0"][:] = np.minimum(np.array(ratios), 1.05)[:, None, None]
+    data["runout_over_r0"][:] = 1.5 * np.sqrt(np.array(ratios))[:, None, None]
+    figures = _drawn_figures(tmp_path, data, [], [])
+    ax = figures["final_height"].axes[0]
+    bottom, top = ax.get_ylim()
+    assert bottom == 0 and 1.17 < top < 1.4                          # Lube's 0.88 a^(1/6) reaches 1.19
+    (note,) = [t.get_text() for t in ax.texts]
+    assert note.startswith("The law of Lajeunesse et al. (2004) leaves the frame above a = 1.7")
+    ax = figures["runout"].axes[0]
+    assert not ax.texts and ax.get_ylim()[1] >= np.nanmax(LAWS["runout_over_r0"]["Lajeunesse et al. (2004)"](
+        ax.lines[1].get_xdata()))
+
+
+def test_mu_r_effect_has_lube_lines_a_readable_palette_and_one_legend(tmp_path):
+    data = settled(ratios=(0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0))
+    figure = _drawn_figures(tmp_path, data, [], [])["mu_r_effect"]
+    for ax, variable in zip(figure.axes, ("h_inf_over_r0", "runout_over_r0")):
+        bars = [c.lines[0] for c in ax.containers if isinstance(c, ErrorbarContainer)]
+        for a, line in zip(data.aspect_ratio.values, bars):
+            (lube,) = [law for law in ax.lines if law.get_label() == f"Lube et al. (2004), a = {a:g}"]
+            np.testing.assert_allclose(lube.get_ydata(), LAWS[variable]["Lube et al. (2004)"](a))
+            assert lube.get_color() == line.get_color() and lube.get_linestyle() == "--"
+            r, g, b = matplotlib.colors.to_rgb(line.get_color())
+            assert 0.299 * r + 0.587 * g + 0.114 * b < 0.75               # no pale yellow on white
+        assert ax.get_legend() is None
+    (legend,) = figure.legends
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert [t for t in texts if t.startswith("a = ")] == [f"a = {a:g}" for a in data.aspect_ratio.values]
+    assert any(t.startswith("Lube et al. (2004)") for t in texts)
+
+
+def test_front_only_moves_outward(tmp_path):
+    """The main mass's edge can recede (the largest cluster loses grains): the figure draws the
+    farthest reach so far, and marks the final main mass's edge apart."""
+    run = analysis(1.0, 0.12, 1)
+    receding = np.array([0.0, 0.4, 0.9, 0.3, -0.28])
+    run["front_position"] = ("time", receding)
+    figure = _drawn_figures(tmp_path, settled(), [run], [])["front_position"]
+    ax = figure.axes[0]
+    (front,) = [line for line in ax.get_lines() if line.get_gid() != "end"]
+    np.testing.assert_allclose(front.get_ydata(), [0.0, 0.4, 0.9, 0.9, 0.9])
+    assert np.all(np.diff(front.get_ydata()) >= 0)
+    (end,) = [line for line in ax.get_lines() if line.get_gid() == "end"]
+    np.testing.assert_allclose(end.get_data(), [[4.0], [-0.28]])
+    assert "farthest reach" in ax.get_ylabel()
+    np.testing.assert_allclose(plots.outward_front([np.nan, 1.0, np.nan, 0.5, 2.0]), [np.nan, 1.0, 1.0, 1.0, 2.0])
+
+
+def test_deposit_profile_starts_with_the_bin_at_the_axis(tmp_path):
+    run = analysis(1.0, 0.12, 1)                                        # bins of 0.5 centred at 0.25, 0.75, ...
+    figure = _drawn_figures(tmp_path, settled(), [run], [])["deposit_profiles"]
+    (line,) = [line for line in figure.axes[0].lines if line.get_drawstyle() == "steps-post"]
+    x, y = line.get_data()
+    assert x[0] == 0.0 and x[1] == pytest.approx(0.5 / R0)
+    assert y[0] == pytest.approx(run.deposit_height.values[0] / R0)
+    assert x[-1] == pytest.approx(6.0 / R0)                           # and the last bin to its outer edge
+
+
+def test_flagged_profiles_are_dashed_and_say_why(tmp_path):
+    run = analysis(1.0, 0.12, 1).assign(h_inf_over_r0=1.0, final_to_peak_kinetic_energy=0.2, n_main_mass=10.0,
+                                        n_particles=100.0)
+    figure = _drawn_figures(tmp_path, settled(), [run], [])["deposit_profiles"]
+    (line,) = [line for line in figure.axes[0].lines if line.get_drawstyle() == "steps-post"]
+    assert line.get_linestyle() == "--"
+    assert line.get_label() == "$\\mu_r$ = 0.12 (still moving, main mass < half the grains)"
+
+
+def test_a_negative_run_out_stays_in_the_frame(tmp_path):
+    """A main mass that ends inside r0 (a fragment) has a negative run-out: it is drawn, not cut off."""
+    data = settled()
+    data["runout_over_r0"][0, 0, :] = -0.28
+    ax = _drawn_figures(tmp_path, data, [], [])["runout"].axes[0]
+    assert ax.get_ylim()[0] < -0.28
+    assert ax.get_ylim()[0] == pytest.approx(1.1 * -0.28)

@@ -1,10 +1,12 @@
 """The summary: collecting analyses (one run per swept value, the rest equal), its CSV form with one
 row per run, and its tables against Lube's laws."""
+import json
+
 import numpy as np
 import xarray as xr
 
 from colsim.laws import lube_height, lube_runout
-from colsim.summary import lube_markdown, one_row_per_run
+from colsim.summary import lube_markdown, one_row_per_run, run_flags
 
 
 def test_check_variables_become_one_column_per_value():
@@ -88,3 +90,45 @@ def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
     assert f"| 2 | associated | 3 | {lube_height(2.0):.3f} (0.010) | {lube_height(2.0):.3f} | +0 % | {r2:.3f} (0.010) |" in text
     assert "| 2 | coulomb | 3 |" in text and f"| {r2 + 0.5:.3f} (0.010) | {r2:.3f} | {100 * 0.5 / r2:+.0f} % | 0.80 | 15.0 | 110 |" in text
     assert friction_law_figure(comparison, tmp_path / "friction_law.png").stat().st_size > 10_000
+
+
+def flag_summary():
+    """a = 0.5, 2 (mu_r = 0.12, seeds 1-3): a = 0.5 seed 2 reached max_duration moving; a = 2 ran to a
+    fixed end time (at_rest NaN), seed 1 with energy left, seed 3 with a main mass of 3 of 50 grains."""
+    dims = ("aspect_ratio", "mu_r", "seed")
+    ones = np.ones((2, 1, 3))
+    at_rest = np.array([1.0, 0.0, 1.0, np.nan, np.nan, np.nan]).reshape(2, 1, 3)
+    energy = np.array([0.5, 0.5, 1e-3, 0.2, 1e-3, 1e-3]).reshape(2, 1, 3)   # at_rest decides where it is set
+    main = np.array([50, 50, 50, 50, 50, 3.0]).reshape(2, 1, 3)
+    run_configs = json.dumps([{"command": "analyse", "input_config": {"command": "collapse", "rest_energy": 0.1}}])
+    return xr.Dataset({"h_inf_over_r0": (dims, ones), "runout_over_r0": (dims, ones), "at_rest": (dims, at_rest),
+                       "final_to_peak_kinetic_energy": (dims, energy), "n_main_mass": (dims, main),
+                       "n_particles": (dims, 50 * ones)},
+                      coords={"aspect_ratio": [0.5, 2.0], "mu_r": [0.12], "seed": [1, 2, 3]},
+                      attrs={"run_configs": run_configs})
+
+
+def test_runs_not_at_rest_or_with_a_fragment_for_main_mass_are_flagged():
+    flags = run_flags(flag_summary())
+    assert flags["moving"].dims == ("aspect_ratio", "mu_r", "seed")
+    assert flags["moving"].values.ravel().tolist() == [False, True, False, True, False, False]
+    assert flags["fragment"].values.ravel().tolist() == [False, False, False, False, False, True]
+    default = flag_summary()
+    default.attrs["run_configs"] = "[]"                      # the collapse's default rest_energy, 1e-2
+    assert run_flags(default)["moving"].values.ravel().tolist() == [False, True, False, True, False, False]
+    default["final_to_peak_kinetic_energy"][1, 0, 1] = 0.05
+    assert run_flags(default)["moving"].values[1, 0, 1]
+    bare = flag_summary()[["h_inf_over_r0", "runout_over_r0"]]   # older summaries: nothing to flag by
+    assert not any(flag.any() for flag in run_flags(bare).values())
+
+
+def test_lube_table_flags_runs_and_says_why():
+    text = lube_markdown(flag_summary())
+    assert "| Lajeunesse run-out | error | flags |" in text
+    assert text.splitlines()[4].endswith("| still moving (seed 2) |")
+    assert text.splitlines()[5].endswith("| still moving (seed 1); main mass < half the grains (seed 3) |")
+    assert "Flags: *still moving*: the run was not at rest at its end" in text
+    assert "above 0.1 of its peak" in text and "less than 50 % of the grains" in text
+    settled = flag_summary().assign(at_rest=lambda s: xr.ones_like(s.at_rest), n_main_mass=lambda s: s.n_particles)
+    text = lube_markdown(settled)
+    assert "Flags:" not in text and text.splitlines()[4].endswith("|  |")

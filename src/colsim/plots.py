@@ -2,15 +2,25 @@
 
 :func:`all_figures` writes the files named in :data:`FIGURES` into one directory:
 
-- final_height.png: h_inf/r0 against a, one marker per mu_r (mean over seeds, bars from the lowest
-  to the highest seed), with the laws of Lube et al. and Lajeunesse et al. (the paper's Fig. 6);
+- final_height.png: h_inf/r0 against a, one marker per mu_r (mean over seeds; bars: the standard error
+  of the mean with 3 seeds or more, the lowest to the highest seed with 2, as the legend says), with
+  the laws of Lube et al. and Lajeunesse et al. (the paper's Fig. 6). The frame fits the data and
+  Lube's laws; a law that would squeeze them (Lajeunesse's height law as printed, 0.74 a) leaves it,
+  and a note under the axes says where;
 - runout.png: (r_inf - r0)/r0 against a, the same way (the paper's Fig. 7);
-- mu_r_effect.png: both quantities against mu_r, one line per a;
+- mu_r_effect.png: both quantities against mu_r, one colour per a, Lube's laws (which do not depend on
+  mu_r) as dashed lines in the same colour, one legend for both panels;
 - deposit_profiles.png: deposit height against distance from the axis, one panel per a, one line
-  per mu_r (the lowest seed);
+  per mu_r (the lowest seed), bins drawn from edge to edge (the first from the axis);
 - side_views.png: the particles in a slab |y| < d_max seen from the side before release and at the
   end, coloured by their initial height over h0 (the paper's Figs. 3-5), one row per trajectory;
-- front_position.png: (r_front - r0)/r0 against t/sqrt(h0/g), one panel per mu_r, one colour per a.
+- front_position.png: (r_front - r0)/r0 against t/sqrt(h0/g), one panel per mu_r, one colour per a;
+  r_front is the farthest the main mass's edge has reached so far (the running maximum of the
+  analysis's front_position: the main mass, the largest cluster, can shrink and its edge recede).
+
+In the figures against a and against mu_r, a point whose runs :func:`colsim.summary.run_flags` flags
+is drawn distinctly, with a legend entry: an open marker where a seed was still moving at the end, a
+black cross where a seed's main mass holds less than half the grains.
 
 matplotlib is imported inside the functions (Agg back-end), so colsim imports without it. Every
 function takes xarray Datasets as colsim writes them and tolerates missing runs (NaN in the summary)
@@ -23,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .summary import means_per_size
-from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_runout
+from .summary import FLAGS, means_per_size, run_flags
+from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_height, lube_runout
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +46,14 @@ MARKERS = "osD^vP*X<>"
 QUANTITY_LABELS = {"h_inf_over_r0": "$h_\\infty/r_0$", "runout_over_r0": "$(r_\\infty - r_0)/r_0$"}
 BREAKPOINTS = (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK)
 LAW_STYLES = ("-", "--", ":", "-.")
+LUBE = "Lube et al. (2004)"
+LUBE_LAWS = {"h_inf_over_r0": lube_height, "runout_over_r0": lube_runout}
+STANDARD_ERROR_SEEDS = 3
+"""From this many seeds on, error bars are the standard error of the mean; below, the range."""
+SQUEEZE = 2.0
+"""A law whose curve rises above SQUEEZE times the top of the data and Lube's laws would squeeze them:
+it leaves the frame (Lajeunesse's height law as printed, 0.74 a, reaches 4.1 at a = 5.5 where the
+heights are about 1)."""
 
 
 def _pyplot():
@@ -77,6 +95,74 @@ def _seed_spread(values):
     return mean, np.nan_to_num(low), np.nan_to_num(high)
 
 
+def _bar_kind(*arrays) -> tuple[str, int, int]:
+    """("se" or "range", fewest, most seeds) over the points of `arrays` (each (..., seed)) that have
+    a run: "se" when every such point has STANDARD_ERROR_SEEDS seeds or more."""
+    counts = np.concatenate([np.isfinite(np.asarray(v, dtype=float)).sum(axis=-1).ravel() for v in arrays])
+    counts = counts[counts > 0]
+    fewest, most = (int(counts.min()), int(counts.max())) if counts.size else (0, 0)
+    return ("se" if fewest >= STANDARD_ERROR_SEEDS else "range"), fewest, most
+
+
+def _bars(values, kind: str):
+    """(mean, lower error, upper error) over the last axis, ignoring NaN: the standard error of the
+    mean (sample sd / sqrt(n)) on both sides for kind "se", the spread to the lowest and the highest
+    seed for "range"."""
+    import warnings
+
+    mean, low, high = _seed_spread(values)
+    if kind == "se":
+        values = np.asarray(values, dtype=float)
+        n = np.isfinite(values).sum(axis=-1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            error = np.nanstd(values, axis=-1, ddof=1) / np.sqrt(n)
+        low = high = np.nan_to_num(error)
+    return mean, low, high
+
+
+def _bar_note(kind: str, fewest: int, most: int) -> str:
+    """What the error bars are, for a legend's title."""
+    seeds = f"{fewest}" if fewest == most else f"{fewest}-{most}"
+    if most <= 1:
+        return f"{seeds} seed: no error bars"
+    if kind == "se":
+        return f"mean of {seeds} seeds, bars: standard error"
+    return f"mean of {seeds} seeds, bars: lowest to highest seed"
+
+
+def _flags_of(summary) -> dict:
+    """{flag: bool array over the summary's other dimensions}: any seed of the point flagged."""
+    return {name: flag.any("seed") if "seed" in flag.dims else flag for name, flag in run_flags(summary).items()}
+
+
+def _draw_flags(ax, x, y, flags: dict, colour, marker: str, ms: float = 6) -> None:
+    """Over the markers (x, y) already drawn: open markers where flags["moving"], a black cross where
+    flags["fragment"]."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    moving, fragment = (np.asarray(flags.get(name, np.zeros(len(x), bool)), bool) for name in ("moving", "fragment"))
+    if moving.any():
+        ax.plot(x[moving], y[moving], marker, ls="none", ms=ms, color=colour, mfc="white", zorder=3,
+                label="_flag moving")
+    if fragment.any():
+        ax.plot(x[fragment], y[fragment], "x", ls="none", ms=ms + 1, mew=1.3, color="k", zorder=4,
+                label="_flag fragment")
+
+
+def _flag_handles(flags: dict) -> list:
+    """Legend entries for the flags that are set anywhere in `flags` ({flag: bool array})."""
+    from matplotlib.lines import Line2D
+
+    handles = []
+    if np.any(flags.get("moving", False)):
+        handles.append(Line2D([], [], marker="o", ls="none", mfc="white", mec="0.3",
+                              label=f"open: a seed {FLAGS['moving']} at the end"))
+    if np.any(flags.get("fragment", False)):
+        handles.append(Line2D([], [], marker="x", ls="none", color="k", mew=1.3,
+                              label=f"cross: a seed's {FLAGS['fragment']}"))
+    return handles
+
+
 def _law_abscissa(end: float):
     """Values of a from 0 to `end`, with NaN at the laws' breakpoints so the jumps are not drawn as lines."""
     edges = sorted({0.0, end, *(b for b in BREAKPOINTS if b < end)})
@@ -86,19 +172,57 @@ def _law_abscissa(end: float):
     return np.concatenate(pieces[:-1])
 
 
-def _against_aspect_ratio(ax, ratios, span, series) -> None:
-    """Draw `series`, [(label, values (aspect_ratio, seed))], against a on `ax`: the
-    mean over seeds with min-max bars, side by side so the bars stay readable; then the axes."""
-    for k, (label, values) in enumerate(series):
-        mean, low, high = _seed_spread(values)
+def _against_aspect_ratio(ax, ratios, span, series, outside: bool = False) -> float:
+    """Draw `series`, [(label, values (aspect_ratio, seed), flags {flag: bool (aspect_ratio,)})],
+    against a on `ax`: the mean over seeds with error bars (the standard error or the range, as
+    :func:`_bar_kind` chooses for all of them; the legend's title says which), side by side so the
+    bars stay readable, flagged points drawn as :func:`_draw_flags` does; then the axes, with the
+    legend right of them if `outside` (where it hides no point). Returns the top of the bars (NaN
+    where nothing was drawn)."""
+    kind, fewest, most = _bar_kind(*(values for _, values, _ in series))
+    top, bottom = np.nan, 0.0
+    for k, (label, values, flags) in enumerate(series):
+        mean, low, high = _bars(values, kind)
         dodge = (k - (len(series) - 1) / 2) * 0.012 * span[-1]
-        ax.errorbar(ratios + dodge, mean, yerr=[low, high], fmt=MARKERS[k % len(MARKERS)], ms=6, capsize=3,
-                    label=label)
+        marker = MARKERS[k % len(MARKERS)]
+        bars = ax.errorbar(ratios + dodge, mean, yerr=[low, high], fmt=marker, ms=6, capsize=3, label=label)
+        _draw_flags(ax, ratios + dodge, mean, flags, bars.lines[0].get_color(), marker)
+        if np.isfinite(mean).any():
+            top = np.fmax(top, np.nanmax(mean + high))
+            bottom = min(bottom, float(np.nanmin(mean - low)))
     ax.set_xlabel("aspect ratio a = h0/r0")
     ax.set_xlim(0, span[-1])
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(bottom=0.0 if bottom >= 0 else 1.1 * bottom)   # a run-out below 0: a main mass inside r0
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    handles, _ = ax.get_legend_handles_labels()
+    handles += _flag_handles({name: np.concatenate([np.ravel(f[name]) for _, _, f in series])
+                              for name in FLAGS})
+    where = {"loc": "upper left", "bbox_to_anchor": (1.02, 1.0)} if outside else {}
+    ax.legend(handles=handles, fontsize=7, title=_bar_note(kind, fewest, most), title_fontsize=7, **where)
+    return float(top)
+
+
+def _fit_laws(ax, span, laws: dict, top: float, variable: str) -> None:
+    """Set the top of `ax` to hold the data (up to `top`) and Lube's law; a law rising above SQUEEZE
+    times that is left outside the frame, with a note under the axes saying from where."""
+    values = {name: np.asarray(law(span), dtype=float) for name, law in laws.items()}
+    base = np.nanmax([top, *(np.nanmax(v, initial=0.0) for n, v in values.items() if n == LUBE)])
+    if not np.isfinite(base) or base <= 0:
+        return
+    frame = base
+    notes = []
+    for name, curve in values.items():
+        highest = np.nanmax(curve, initial=0.0)
+        if highest <= SQUEEZE * base:
+            frame = max(frame, highest)
+            continue
+        leaves = span[np.flatnonzero(np.nan_to_num(curve) > 1.05 * frame)[0]]
+        peak = span[np.nanargmax(curve)]
+        notes.append(f"The law of {name} leaves the frame above a = {leaves:.2g}\n(it reaches "
+                     f"{QUANTITY_LABELS.get(variable, variable)} = {highest:.2g} at a = {peak:.2g}).")
+    ax.set_ylim(ax.get_ylim()[0], 1.05 * frame)
+    if notes:
+        ax.annotate("\n".join(notes), xy=(0, -0.17), xycoords="axes fraction", va="top", fontsize=8)
 
 
 def law_figure(summary, variable: str, path: Path) -> Path:
@@ -110,9 +234,12 @@ def law_figure(summary, variable: str, path: Path) -> Path:
     for (name, law), style in zip(LAWS[variable].items(), LAW_STYLES):
         ax.plot(span, law(span), style, color="0.35", lw=1.2, label=name)
     data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
-    _against_aspect_ratio(ax, ratios, span,
-                          [(f"colsim, $\\mu_r$ = {mu_r:g}", data.isel(mu_r=k).values)
-                           for k, mu_r in enumerate(summary["mu_r"].values)])
+    flags = {name: flag.transpose("aspect_ratio", "mu_r").values for name, flag in _flags_of(summary).items()}
+    top = _against_aspect_ratio(ax, ratios, span,
+                                [(f"colsim, $\\mu_r$ = {mu_r:g}", data.isel(mu_r=k).values,
+                                  {name: flag[:, k] for name, flag in flags.items()})
+                                 for k, mu_r in enumerate(summary["mu_r"].values)], outside=True)
+    _fit_laws(ax, span, LAWS[variable], top, variable)
     ax.set_ylabel(_label(summary[variable], variable))
     ax.set_title(f"r0 = {summary.attrs.get('r0', float('nan')):g}, mu = {summary.attrs.get('mu', float('nan')):g}, "
                  f"{summary.sizes['seed']} seed(s)", fontsize=9)
@@ -120,39 +247,67 @@ def law_figure(summary, variable: str, path: Path) -> Path:
 
 
 def friction_law_figure(comparison, path: Path) -> Path:
-    """h_inf/r0 and the run-out against a under each friction law (mean over seeds, bars: min-max),
-    at the comparison's first mu_r, with Lube's laws drawn."""
+    """h_inf/r0 and the run-out against a under each friction law (mean over seeds, bars as in
+    :func:`_against_aspect_ratio`), at the comparison's first mu_r, with Lube's laws drawn."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
     ratios = comparison["aspect_ratio"].values
     span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0))
     mu_r = float(comparison["mu_r"].values[0])
+    flags = {name: flag.sel(mu_r=mu_r).transpose("friction_law", "aspect_ratio")
+             for name, flag in _flags_of(comparison).items()}
     for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
-        ax.plot(span, LAWS[variable]["Lube et al. (2004)"](span), "-", color="0.35", lw=1.2, label="Lube et al. (2004)")
+        ax.plot(span, LAWS[variable][LUBE](span), "-", color="0.35", lw=1.2, label=LUBE)
         data = comparison[variable].sel(mu_r=mu_r).transpose("friction_law", "aspect_ratio", "seed")
         _against_aspect_ratio(ax, ratios, span,
-                              [(f"colsim, {name}", data.sel(friction_law=name).values)
+                              [(f"colsim, {name}", data.sel(friction_law=name).values,
+                                {flag: value.sel(friction_law=name).values for flag, value in flags.items()})
                                for name in comparison["friction_law"].values])
         ax.set_ylabel(_label(comparison[variable], variable))
     fig.suptitle(f"friction laws, r0 = {comparison.attrs.get('r0', float('nan')):g}, mu_r = {mu_r:g}", fontsize=10)
     return _save(fig, path)
 
 
+def _colours(n: int) -> list:
+    """n colours that read on white: tab10's, then tab20's (no pale yellow)."""
+    plt = _pyplot()
+    palette = list(plt.cm.tab10.colors) + [c for k, c in enumerate(plt.cm.tab20.colors) if k % 2]
+    return [palette[k % len(palette)] for k in range(n)]
+
+
 def mu_r_figure(summary, path: Path) -> Path:
-    """h_inf/r0 and run-out against mu_r, one line per aspect ratio (seed spread as bars)."""
+    """h_inf/r0 and run-out against mu_r, one colour per aspect ratio (mean over seeds, bars as in
+    :func:`_against_aspect_ratio`), Lube's law for each a as a dashed line of its colour (the laws do
+    not depend on mu_r), flagged points as :func:`_draw_flags` draws them; one legend for both panels."""
+    from matplotlib.lines import Line2D
+
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
     mu_r = summary["mu_r"].values
-    colours = plt.cm.viridis(np.linspace(0, 0.9, summary.sizes["aspect_ratio"]))
-    for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
+    ratios = summary["aspect_ratio"].values
+    colours = _colours(len(ratios))
+    variables = ("h_inf_over_r0", "runout_over_r0")
+    kind, fewest, most = _bar_kind(*(summary[v].values for v in variables))
+    flags = {name: flag.transpose("aspect_ratio", "mu_r").values for name, flag in _flags_of(summary).items()}
+    for ax, variable in zip(axes, variables):
         data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
-        for k, a in enumerate(summary["aspect_ratio"].values):
-            mean, low, high = _seed_spread(data.isel(aspect_ratio=k).values)
-            ax.errorbar(mu_r, mean, yerr=[low, high], fmt="o-", color=colours[k], capsize=3, label=f"a = {a:g}")
+        for k, a in enumerate(ratios):
+            law = float(LUBE_LAWS[variable](a))
+            if np.isfinite(law):
+                ax.axhline(law, color=colours[k], ls="--", lw=1.0, label=f"{LUBE}, a = {a:g}")
+            mean, low, high = _bars(data.isel(aspect_ratio=k).values, kind)
+            ax.errorbar(mu_r, mean, yerr=[low, high], fmt="o-", color=colours[k], ms=5, capsize=3, label=f"a = {a:g}")
+            _draw_flags(ax, mu_r, mean, {name: flag[k] for name, flag in flags.items()}, colours[k], "o", ms=5)
         ax.set_xlabel("rolling resistance coefficient $\\mu_r$")
         ax.set_ylabel(_label(summary[variable], variable))
+        ax.set_ylim(bottom=min(0.0, ax.get_ylim()[0]))   # from 0, unless a run-out is below it
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
+    handles = [Line2D([], [], color=colours[k], marker="o", ms=5, label=f"a = {a:g}") for k, a in enumerate(ratios)]
+    handles += [Line2D([], [], color="0.3", marker="o", ms=5, label="colsim"),
+                Line2D([], [], color="0.3", ls="--", label=f"{LUBE}\n(independent of $\\mu_r$)")]
+    handles += _flag_handles(flags)
+    fig.legend(handles=handles, loc="outside right upper", fontsize=8, title=_bar_note(kind, fewest, most),
+               title_fontsize=8)
     return _save(fig, path)
 
 
@@ -177,8 +332,35 @@ def _grid(plt, n: int, width: float, height: float):
     return fig, axes.flat
 
 
+def _bin_edges(centres) -> np.ndarray:
+    """The edges of equal radial bins from their centres (the first bin starts on the axis when its
+    centre is half a width out, as colsim.analysis.deposit_profile makes them)."""
+    centres = np.asarray(centres, dtype=float)
+    width = centres[1] - centres[0] if len(centres) > 1 else 2.0 * centres[0]
+    return np.r_[centres - width / 2, centres[-1:] + width / 2]
+
+
+def _analysis_flags(run) -> dict:
+    """{flag: bool} of one analysis, as :func:`colsim.summary.run_flags` flags a run ({} when the
+    analysis lacks h_inf_over_r0)."""
+    import json
+
+    import xarray as xr
+
+    if "h_inf_over_r0" not in run:
+        return {}
+    names = ("h_inf_over_r0", "final_to_peak_kinetic_energy", "n_main_mass", "n_particles")
+    one = xr.Dataset({name: run[name] for name in names if name in run},
+                     attrs={"run_configs": json.dumps([json.loads(run.attrs.get("config", "{}"))])})
+    if "at_rest" in run.attrs:
+        one["at_rest"] = float(run.attrs["at_rest"])
+    return {name: bool(flag) for name, flag in run_flags(one).items()}
+
+
 def deposit_profile_figure(analyses, path: Path) -> Path:
-    """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed."""
+    """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed; each
+    bin drawn over its whole width, from the first (at the axis) to the last; a run that
+    :func:`colsim.summary.run_flags` flags is dashed and its legend entry says why."""
     plt = _pyplot()
     runs = _by_key(analyses)
     ratios = sorted({a for a, _, _ in runs}) or [np.nan]
@@ -191,8 +373,11 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
             continue
         for m, run in chosen.items():
             r0 = float(run.attrs["r0"])
-            ax.step(run["radial_bin"].values / r0, run["deposit_height"].values / r0, where="mid",
-                    label=f"$\\mu_r$ = {m:g}")
+            edges = _bin_edges(run["radial_bin"].values)
+            height = run["deposit_height"].values
+            flagged = [FLAGS[name] for name, flag in _analysis_flags(run).items() if flag]
+            ax.step(edges / r0, np.r_[height, height[-1:]] / r0, where="post", ls="--" if flagged else "-",
+                    label=f"$\\mu_r$ = {m:g}" + (f" ({', '.join(flagged)})" if flagged else ""))
         ax.axhline(a, color="0.6", lw=0.8, ls=":")
         ax.axvline(1.0, color="0.6", lw=0.8, ls=":")
         ax.set_title(f"a = {a:g}", fontsize=9)
@@ -201,8 +386,7 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
         ax.set_xlim(left=0)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
-    if axes[0].get_legend_handles_labels()[0]:
-        axes[0].legend(fontsize=7)
+        ax.legend(fontsize=7)   # each panel's: the flags differ from run to run
     return _save(fig, path)
 
 
@@ -214,6 +398,25 @@ def _slab(run, frame):
     inside = np.abs(position[:, 1]) < 2.0 * float(radius.max())
     return (position[inside, 0] / r0, position[inside, 2] / r0, radius[inside] / r0,
             run["initial_height"].values[inside] / h0)
+
+
+def _end_name(trajectory) -> str:
+    """"deposit" for the last frame of a run at rest, "end (still moving)" otherwise (as
+    :func:`colsim.summary.run_flags` decides: at_rest 0, or with a fixed end time, no at_rest, the
+    kinetic energy at the end above the run's rest_energy of its peak); "end" when it cannot tell."""
+    import json
+
+    from .summary import rest_energy
+
+    if "at_rest" in trajectory.attrs:
+        return "deposit" if int(trajectory.attrs["at_rest"]) else "end (still moving)"
+    if "step_kinetic_energy" not in trajectory:
+        return "end"
+    energy = trajectory["step_kinetic_energy"].values
+    if "step_rotational_energy" in trajectory:
+        energy = energy + trajectory["step_rotational_energy"].values
+    limit = rest_energy([json.loads(trajectory.attrs.get("config", "{}"))])
+    return "end (still moving)" if energy.size and energy[-1] > limit * np.max(energy) else "deposit"
 
 
 def side_view_figure(trajectories, path: Path) -> Path:
@@ -238,7 +441,7 @@ def side_view_figure(trajectories, path: Path) -> Path:
                              squeeze=False, gridspec_kw={"height_ratios": ratios})
     collection = None
     for row, ((a, m, seed), run), view, limit, top in zip(axes, runs, views, limits, tops):
-        for ax, frame, (x, z, r, colour), when in zip(row, (0, -1), view, ("before release", "deposit")):
+        for ax, frame, (x, z, r, colour), when in zip(row, (0, -1), view, ("before release", _end_name(run))):
             collection = EllipseCollection(2 * r, 2 * r, np.zeros_like(r), units="xy", offsets=np.c_[x, z],
                                            offset_transform=ax.transData, cmap="viridis", linewidths=0)
             collection.set_array(colour)
@@ -257,13 +460,20 @@ def side_view_figure(trajectories, path: Path) -> Path:
     return _save(fig, path)
 
 
+def outward_front(front) -> np.ndarray:
+    """The farthest a front has reached so far (running maximum, NaN frames skipped): it never moves back."""
+    front = np.asarray(front, dtype=float)
+    return np.fmax.accumulate(front) if front.size else front
+
+
 def front_figure(analyses, path: Path) -> Path:
-    """(r_front - r0)/r0 against t/sqrt(h0/g): one panel per mu_r, one colour per a, one line per seed."""
+    """(r_front - r0)/r0 against t/sqrt(h0/g): one panel per mu_r, one colour per a, one line per seed;
+    r_front is :func:`outward_front` of the main mass's edge (front_position)."""
     plt = _pyplot()
     runs = _by_key(analyses)
     mu_rs = sorted({m for _, m, _ in runs}) or [np.nan]
     ratios = sorted({a for a, _, _ in runs})
-    colours = dict(zip(ratios, plt.cm.viridis(np.linspace(0, 0.9, max(1, len(ratios))))))
+    colours = dict(zip(ratios, _colours(len(ratios))))
     fig, axes = _grid(plt, len(mu_rs), 4.2, 3.2)
     for ax, m in zip(axes, mu_rs):
         keys = sorted(k for k in runs if k[1] == m)
@@ -273,15 +483,23 @@ def front_figure(analyses, path: Path) -> Path:
         labelled = set()
         for a, _, seed in keys:
             run = runs[(a, m, seed)]
-            ax.plot(run["scaled_time"].values, run["front_position"].values, color=colours[a], lw=1.2,
-                    label=None if a in labelled else f"a = {a:g}")
+            time, front = run["scaled_time"].values, run["front_position"].values
+            ax.plot(time, outward_front(front), color=colours[a], lw=1.2, label=None if a in labelled else f"a = {a:g}")
+            if len(front) and np.isfinite(front[-1]) and front[-1] < np.nanmax(front):   # the end's main mass is behind
+                ax.plot(time[-1:], front[-1:], "o", mfc="none", color=colours[a], ms=5, gid="end")
             labelled.add(a)
         ax.set_title(f"$\\mu_r$ = {m:g}", fontsize=9)
         ax.set_xlabel("t / sqrt(h0/g)")
-        ax.set_ylabel("front (r_front - r0) / r0")
+        ax.set_ylabel("front (r_front - r0) / r0\n(farthest reach of the main mass so far)", fontsize=8)
         ax.grid(alpha=0.3)
-    if axes[0].get_legend_handles_labels()[0]:
-        axes[0].legend(fontsize=7)
+    handles = axes[0].get_legend_handles_labels()[0]
+    if any(line.get_gid() == "end" for ax in axes for line in ax.get_lines()):
+        from matplotlib.lines import Line2D
+
+        handles.append(Line2D([], [], marker="o", mfc="none", color="0.3", ls="none",
+                              label="run-out at the end, where the\nfinal main mass is behind the front"))
+    if handles:
+        fig.legend(handles=handles, loc="outside right upper", fontsize=7)
     return _save(fig, path)
 
 

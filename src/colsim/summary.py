@@ -188,10 +188,75 @@ def runout_measures_markdown(summary) -> str:
     return "\n".join(lines) + "\n"
 
 
+REST_ENERGY = 1e-2
+"""The collapse's default rest test on the kinetic energy (colsim.collapse.CollapseSettings.rest_energy):
+at rest only below this share of its peak."""
+MAIN_MASS_SHARE = 0.5
+"""A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:
+its h_inf and r_inf do not describe the deposit."""
+FLAGS = {"moving": "still moving", "fragment": "main mass < half the grains"}
+"""The flags of :func:`run_flags` -> how tables and figures name them."""
+
+
+def rest_energy(configs) -> float:
+    """The collapse's rest_energy in a list of configurations (a file's `config` attribute, read as
+    JSON, and the chain of its input_config; the first found), else :data:`REST_ENERGY`."""
+    for config in configs:
+        while isinstance(config, dict) and config:
+            if config.get("command") == "collapse" and config.get("rest_energy") is not None:
+                return float(config["rest_energy"])
+            config = config.get("input_config") or {}
+    return REST_ENERGY
+
+
+def _rest_energy(summary) -> float:
+    """:func:`rest_energy` of the summary's run configurations."""
+    return rest_energy(json.loads(summary.attrs.get("run_configs", "[]")))
+
+
+def run_flags(summary) -> dict:
+    """{flag: bool DataArray shaped like h_inf_over_r0} for the runs whose numbers do not describe a
+    deposit at rest (False where a run is missing or the summary lacks what the flag needs):
+
+    - "moving": still moving at the end: at_rest is 0 (the run reached max_duration moving), or, where
+      rest was not checked (a fixed end time: at_rest NaN or absent), its kinetic energy at the end is
+      above the collapse's rest_energy (1e-2 unless the run configurations say otherwise) of its peak;
+    - "fragment": the main mass, the largest connected cluster, holds less than half the grains.
+    """
+    ran = np.isfinite(summary.h_inf_over_r0)
+    none = xr.zeros_like(ran, dtype=bool)
+    checked = none
+    moving = none
+    if "at_rest" in summary:
+        at_rest = summary.at_rest.astype(float)
+        checked = (at_rest == 0) | (at_rest == 1)
+        moving = at_rest == 0
+    if "final_to_peak_kinetic_energy" in summary:
+        energy = summary.final_to_peak_kinetic_energy
+        moving = moving | (~checked & (energy > _rest_energy(summary)))
+    fragment = none
+    if "n_main_mass" in summary and "n_particles" in summary:
+        fragment = summary.n_main_mass < MAIN_MASS_SHARE * summary.n_particles
+    return {"moving": (moving & ran).transpose(*ran.dims), "fragment": (fragment & ran).transpose(*ran.dims)}
+
+
+def _flag_cell(flags, seeds) -> str:
+    """The flags of one (mu_r, a) row over its seeds: "still moving (seeds 1, 2)"; "" when none."""
+    cells = []
+    for name, flagged in flags.items():
+        which = [f"{int(s)}" for s, f in zip(seeds, np.atleast_1d(flagged)) if f]
+        if which:
+            cells.append(f"{FLAGS[name]} (seed{'s' if len(which) > 1 else ''} {', '.join(which)})")
+    return "; ".join(cells)
+
+
 def lube_markdown(summary) -> str:
     """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and
-    a, with the error against Lajeunesse et al. beside (its height law as the paper prints it)."""
+    a, with the error against Lajeunesse et al. beside (its height law as the paper prints it), and a
+    flags column naming the seeds whose runs :func:`run_flags` flags (explained under the tables)."""
     lines = []
+    flags = run_flags(summary)
+    seed_values = summary.seed.values if "seed" in summary.coords else [0]
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
         counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
@@ -199,8 +264,8 @@ def lube_markdown(summary) -> str:
         seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
         lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
-                  "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error | flags |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for a in part.aspect_ratio.values:
             if not _has_runs(part.sel(aspect_ratio=a)):
                 continue
@@ -213,8 +278,18 @@ def lube_markdown(summary) -> str:
                           _error(mean, law)]
             for mean, law in ((h_mean, lajeunesse_height(a)), (r_mean, lajeunesse_runout(a))):
                 cells += [f"{law:.3f}", _error(mean, law)]
+            cells.append(_flag_cell({name: flag.sel(mu_r=m, aspect_ratio=a).values for name, flag in flags.items()},
+                                    seed_values))
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
+    if any(bool(flag.any()) for flag in flags.values()):
+        lines += [f"Flags: *{FLAGS['moving']}*: the run was not at rest at its end (it reached max_duration "
+                  f"moving or, with a fixed end time, its kinetic energy was still above {_rest_energy(summary):g} "
+                  f"of its peak), so its h_inf and run-out are not those of a final deposit; "
+                  f"*{FLAGS['fragment']}*: the main mass (the largest connected cluster) holds less than "
+                  f"{100 * MAIN_MASS_SHARE:g} % of the grains, so its h_inf and run-out describe a fragment. The means "
+                  f"include these runs; the figures draw them with open markers (moving) or a cross (fragment).",
+                  ""]
     if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
         lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
                   runout_measures_markdown(summary)]
