@@ -223,7 +223,7 @@ def test_frictionless_laws_are_identical(pile):
 def test_coulomb_keeps_loaded_contacts_closed_in_a_collapsing_pile(pile):
     """Five steps (dt = 0.002, a tenth of the pile's) of the session pile released under the
     collapse's friction, both laws, Clarabel. (At the pile's own dt the fixed point does not
-    converge on the first step: README, "Friction law".)
+    converge on the first step: docs/method.md, "Friction law".)
 
     Every force lies in its cone (1e-7 of the largest normal force: Clarabel at 1e-8).
 

@@ -1,8 +1,8 @@
 """The cluster path: the tiny study through a real one-node SLURM cluster and the project's profile.
 
 A SLURM cluster (munged, slurmctld, slurmd; tests/slurm_cluster.py) is started on this machine for
-the module and stopped, by pid, at its end. In a copy of the workflow the tests run what README
-"Running on SLURM" shows, with the two options this accounting-free cluster needs:
+the module and stopped, by pid, at its end. In a copy of the workflow the tests run what docs/slurm.md
+shows, with the two options this accounting-free cluster needs:
 
     snakemake --executor slurm --workflow-profile workflow/profiles/slurm all \
         --configfile config/tiny.yaml \
@@ -34,7 +34,7 @@ from helpers import FIGURES, SUMMARY_VARIABLES, TINY, copy_workflow
 pytestmark = pytest.mark.slurm
 
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
-# the command of README "Running on SLURM", with what a cluster without slurmdbd needs
+# the command of docs/slurm.md, with what a cluster without slurmdbd needs
 SLURM_COMMAND = ("--executor", "slurm", "--workflow-profile", "workflow/profiles/slurm", "all",
                  "--configfile", "config/tiny.yaml")
 TEST_CLUSTER_OPTIONS = ("--slurm-status-command", "squeue",

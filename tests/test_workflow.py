@@ -207,9 +207,9 @@ def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, mess
     assert not (directory / "results").exists()
 
 
-def test_the_schema_the_cli_and_the_readme_offer_the_same_solvers():
-    """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the README's
-    table of back-ends hold the same names."""
+def test_the_schema_the_cli_and_the_docs_offer_the_same_solvers():
+    """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the table of
+    back-ends in docs/solvers.md hold the same names."""
     from colsim.cli import build_parser
     from colsim.solvers import SOLVERS
 
@@ -219,7 +219,7 @@ def test_the_schema_the_cli_and_the_readme_offer_the_same_solvers():
     for command in ("pack", "collapse"):
         solver = next(a for a in subcommands[command]._actions if a.dest == "solver")
         assert tuple(solver.choices) == SOLVERS
-    table = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| `")]
+    table = [line for line in (ROOT / "docs" / "solvers.md").read_text().splitlines() if line.startswith("| `")]
     assert {line.split("`")[1] for line in table} >= set(SOLVERS)
 
 
@@ -245,7 +245,7 @@ def test_the_default_study_plans_every_run(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(path.name for path in (ROOT / "config").glob("*.yaml")))
 def test_every_named_configuration_plans(tmp_path, name):
-    """Each study config/*.yaml that the README offers as one command passes the schema and the
+    """Each study config/*.yaml that the docs offer as one command passes the schema and the
     cross-field checks, and plans at least one collapse (a dry run: nothing is simulated)."""
     directory = copy_workflow(tmp_path)
     result = snakemake(directory, "-n", "all", "--configfile", f"config/{name}", timeout=120)
