@@ -6,7 +6,7 @@ import numpy as np
 import xarray as xr
 
 from colsim.laws import lube_height, lube_runout
-from colsim.summary import lube_markdown, one_row_per_run, run_flags
+from colsim.summary import lube_markdown, lube_rst, one_row_per_run, run_flags
 
 
 def test_check_variables_become_one_column_per_value():
@@ -45,6 +45,25 @@ def test_lube_table_reports_zero_error_on_the_law_itself():
     h[0, 0, :] = r[0, 0, :] = np.nan   # and a = 0.5 not at all: its row is left out, not NaN
     text = lube_markdown(summary.assign(h_inf_over_r0=(dims, h), runout_over_r0=(dims, r)))
     assert "| 0.5 |" not in text and "nan" not in text and "mean of 1-2 seeds" in text
+
+
+def test_the_reports_landing_table_is_valid_rst_at_the_nearest_mu_r():
+    """lube_rst: the swept mu_r nearest the one asked for, one row per a with Lube's values and the
+    errors, and a table docutils renders (the report's landing page) without a warning."""
+    import docutils.core
+
+    ratios = np.array([0.5, 2.0])
+    dims = ("aspect_ratio", "mu_r", "seed")
+    h = np.stack([lube_height(ratios)] * 2, axis=-1)[:, None, :] * np.array([1.0, 1.1])[:, None, None]
+    r = np.stack([lube_runout(ratios)] * 2, axis=-1)[:, None, :]
+    summary = xr.Dataset({"h_inf_over_r0": (dims, np.concatenate([h, h], axis=1)),
+                          "runout_over_r0": (dims, np.concatenate([r, r], axis=1))},
+                         coords={"aspect_ratio": ratios, "mu_r": [0.0, 0.12], "seed": [1, 2]})
+    text = lube_rst(summary, 0.13)
+    assert "mu_r = 0.12, mean over seeds" in text
+    settings = {"report_level": 2, "halt_level": 2}   # a warning is an error
+    html = docutils.core.publish_string(text, writer="html", settings_overrides=settings).decode()
+    assert html.count("<tr>") == 3 and "+0 %" in html and "+10 %" in html and "0.620" in html
 
 
 def test_other_runout_measures_are_tabled_against_lube():

@@ -127,7 +127,8 @@ def test_report_describes_the_study_it_shows(tiny_study):
         assert len(html) > 10000 and "final_height.png" in html
         for text in ("radius r0 = 1 of spheres of diameters 0.25-0.5", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
                      "100 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml",
-                     "steps by back-end", "apgd: ", "lever is paper"):
+                     "steps by back-end", "apgd: ", "lever is paper",
+                     "mu_r = 0.12, mean over seeds, against Lube et al. (2004)", "(r_inf - r0)/r0"):
             assert text in html, (name, text)
         assert "77 steps" not in html and "r0 = 2" not in html
         assert "System Message" not in html and "Undefined substitution" not in html

@@ -298,6 +298,26 @@ def lube_markdown(summary) -> str:
     return "\n".join(lines)
 
 
+def lube_rst(summary, mu_r: float) -> str:
+    """reStructuredText list-table of the report's landing page: at the swept mu_r nearest `mu_r`,
+    per a, the mean over seeds of h_inf/r0 and the run-out with Lube's values and the errors."""
+    m = summary.mu_r.values[np.argmin(np.abs(summary.mu_r.values - mu_r))]
+    part = summary.sel(mu_r=m)
+    rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error"]]
+    for a in part.aspect_ratio.values:
+        if not _has_runs(part.sel(aspect_ratio=a)):
+            continue
+        h = float(np.nanmean(part.h_inf_over_r0.sel(aspect_ratio=a).values))
+        r = float(np.nanmean(part.runout_over_r0.sel(aspect_ratio=a).values))
+        rows.append([f"{a:g}", f"{h:.3f}", f"{lube_height(a):.3f}", _error(h, lube_height(a)),
+                     f"{r:.3f}", f"{lube_runout(a):.3f}", _error(r, lube_runout(a))])
+    lines = [f".. list-table:: mu_r = {float(m):g}, mean over seeds, against Lube et al. (2004)",
+             "   :header-rows: 1", ""]
+    for row in rows:
+        lines += [f"   * - {row[0]}"] + [f"     - {cell}" for cell in row[1:]]
+    return "\n".join(lines) + "\n"
+
+
 def _has_runs(part) -> bool:
     """Whether any seed of this part of a summary ran (a partial study leaves NaN rows out)."""
     return bool(np.isfinite(part.h_inf_over_r0.values).any())

@@ -367,15 +367,19 @@ def collapse_priority(wildcards):
 
 def write_study_files(study, summary_path, template, config_path, description_path):
     """Write the study's configuration (YAML) and the report's description rendered from it and from
-    the summary's attributes (r0, mu), each to a temporary name and then renamed."""
+    the summary (its attributes, and the table against Lube at figures.side_view_mu_r), each to a
+    temporary name and then renamed."""
     import jinja2
     import xarray
 
+    from colsim.summary import lube_rst
+
     with xarray.open_dataset(summary_path) as summary:
         attrs = dict(summary.attrs)
+        table = lube_rst(summary, study["figures"]["side_view_mu_r"])
     with open(template) as stream:
         text = jinja2.Template(stream.read(), undefined=jinja2.StrictUndefined, keep_trailing_newline=True).render(
-            study=study, summary=attrs, study_dir=STUDY_DIR)
+            study=study, summary=attrs, study_dir=STUDY_DIR, lube_table=table)
     for path, write in ((config_path, lambda s: yaml.safe_dump(study, s, sort_keys=False)),
                         (description_path, lambda s: s.write(text))):
         with atomic_path(path) as tmp, open(tmp, "w") as stream:
