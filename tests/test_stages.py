@@ -254,6 +254,10 @@ def test_all_stages_through_the_cli(tmp_path):
         done = _run_cli(*args, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
     result = io.open_dataset(tmp_path / "analysis.nc", io.ANALYSIS_KIND)
+    for name, kind in (("pack.nc", io.STATE_KIND), ("column.nc", io.STATE_KIND),
+                       ("collapse.nc", io.TRAJECTORY_KIND), ("analysis.nc", io.ANALYSIS_KIND)):
+        assert_cf_units(io.open_dataset(tmp_path / name, kind))
+    assert "scaled_time" in result.coords
     for name in ("h_inf_over_r0", "runout_over_r0", "solid_fraction", "final_to_peak_kinetic_energy"):
         assert np.isfinite(result[name].values), name
         assert "units" in result[name].attrs and "long_name" in result[name].attrs
@@ -290,11 +294,13 @@ def test_all_stages_through_the_cli(tmp_path):
 
 # Runs the CLI with a hook on the checkpoint: once the first checkpoint is on disk, the process sends
 # itself a signal. The signal lands mid-run on every machine, however fast or loaded (no race with
-# the run's end, no polling).
+# the run's end, no polling). Ctrl-C is Python's own KeyboardInterrupt handler, as in a terminal: a
+# process started in the background by a shell without job control inherits SIGINT ignored.
 _SIGNAL_AFTER_FIRST_CHECKPOINT = """
 import os, signal, sys
 import colsim.collapse as collapse
 from colsim.cli import main
+signal.signal(signal.SIGINT, signal.default_int_handler)
 save = collapse._save_checkpoint
 def save_then_signal(*args, **kwargs):
     save(*args, **kwargs)
@@ -472,13 +478,25 @@ def test_associated_runs_are_collected_whatever_their_unused_friction_tolerance(
     assert _main_in(tmp_path, ["collect", "a.nc", "b.nc", "--output", "summary.nc"]) == 0
 
 
+#: every unit colsim writes: UDUNITS strings (SI, with g = 9.81 m s-2) and "1"
+CF_UNITS = set(io.SI_UNITS.values()) | {"1", "s"}
+
+
+def assert_cf_units(dataset):
+    """Every variable and coordinate of `dataset` has a long_name and units colsim writes (CF:
+    UDUNITS strings; "1" for dimensionless numbers and text)."""
+    for name, variable in dataset.variables.items():
+        assert variable.attrs.get("long_name"), name
+        assert variable.attrs.get("units") in CF_UNITS, (name, variable.attrs.get("units"))
+
+
 def test_files_carry_cf_units_versions_and_long_names(tmp_path):
     _tiny_files(tmp_path)
     column = io.open_dataset(tmp_path / "column.nc", io.STATE_KIND)
-    assert column["position"].attrs["units"] == "1" and "length" in column["position"].attrs["comment"]
-    assert column["velocity"].attrs["comment"].startswith("length/time")
-    assert "long_name" in column["xyz"].attrs
-    assert "unit_system" in column.attrs
+    assert column["position"].attrs["units"] == "m" and column["velocity"].attrs["units"] == "m s-1"
+    assert column["xyz"].attrs["units"] == "1" and "long_name" in column["xyz"].attrs
+    assert "SI" in column.attrs["unit_system"]
+    assert_cf_units(column)
     for name in ("colsim_version", "clarabel_version", "numpy_version"):
         assert column.attrs[name] and column.attrs[name] != "not installed", name
     assert column.attrs["numpy_version"] == np.__version__
