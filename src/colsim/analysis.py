@@ -169,10 +169,11 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
         "mass_front_over_r0": ("mass_share", [(mass_front(final, share) - r0) / r0 for share in shares],
                                {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
         "mean_diameter": _scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
-        "scaled_time": ("time", trajectory["scaled_time"].values, {"units": "1", "long_name": "time over sqrt(h0/g)"}),
         "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
     }
     coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
+              "scaled_time": ("time", trajectory["scaled_time"].values,
+                              {"units": "1", "long_name": "time over sqrt(h0/g)"}),
               "step": trajectory["step"],
               "contact_tolerance": ("contact_tolerance", fractions,
                                     {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),

@@ -265,6 +265,15 @@ def _restore(arrays) -> dict:
             "elapsed": float(arrays["elapsed"])}
 
 
+#: long names of per-step diagnostics: the wall-clock times (s) apart from the simulation's time
+STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
+                   "detection_time": "wall-clock time of the step's contact detection",
+                   "assembly_time": "wall-clock time of the step's assembly",
+                   "setup_time": "wall-clock time of the solver's set-up in the step",
+                   "solve_time": "wall-clock time of the solver in the step",
+                   "step_time": "wall-clock time of the whole step"}
+
+
 def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
     """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
     steps = np.array([k for k, _ in run.frames])
@@ -281,8 +290,6 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
         "initial_height": ("particle", run.initial.position[:, 2],
                            {"units": "length", "long_name": "height of the particle centre at release"}),
         "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
-        "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
-                        {"units": "1", "long_name": "time over sqrt(h0/g)"}),
     }
     units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
              "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
@@ -293,14 +300,16 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
             continue
         values = np.array([getattr(d, name) for d in run.diagnostics])
         data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
-                                                  "long_name": name.replace("_", " ") + " per step"})
+                                                  "long_name": STEP_LONG_NAMES.get(name, name.replace("_", " ") + " per step")})
     for name, long_name in TEXT_DIAGNOSTICS.items():
         data[f"step_{name}"] = ("step", np.array([getattr(d, name) for d in run.diagnostics], dtype=object),
                                 {"long_name": long_name})
     coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
+              "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
+                              {"units": "1", "long_name": "time over sqrt(h0/g)"}),
               "step": ("step", np.array([d.step for d in run.diagnostics]),
                        {"units": "1", "long_name": "step number"}),
-              "xyz": ("xyz", ["x", "y", "z"], {"long_name": "Cartesian component"})}
+              "xyz": ("xyz", ["x", "y", "z"], {"units": "1", "long_name": "Cartesian component"})}
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "friction_law": settings.friction_law,

@@ -2,9 +2,10 @@
 
 Every file is CF-style: global `Conventions`, `title`, `source` ("colsim X.Y"), `history`, the
 versions of colsim, Clarabel and numpy, the run's configuration as JSON in `config` and its `seed`;
-every variable has `units` and `long_name`. The simulation's lengths, times and masses are numbers
-in the paper's unit system (`unit_system`), which UDUNITS cannot name: such variables have units
-"1" and a `comment` naming their dimension (e.g. "length in the paper's units"); wall times are "s".
+every variable has `units` and `long_name`. The simulation's lengths, times and masses are in SI
+units (`unit_system`): gravity 9.81 makes lengths metres and times seconds, and the density (in
+kg m-3) makes masses kilograms; scaled quantities (over r0, t/sqrt(h0/g)) have units "1". Wall-clock
+times are "s" too, and their long names say "wall-clock".
 Files are written to a temporary name beside the target and renamed
 when complete, so a killed run never leaves a file that looks finished.
 """
@@ -37,11 +38,13 @@ PARTICLE_VARIABLES = {
 
 
 #: dimensions that the stages write as units; :func:`write_dataset` turns each into units "1" and a comment
-PAPER_DIMENSIONS = ("length", "time", "length/time", "rad/time", "length/time^2", "mass", "mass/length^3",
-                    "mass length/time^2", "mass length^2/time^2")
-UNIT_SYSTEM = ("the paper's: dimensionless numbers in one consistent system of length, time and mass in "
-               "which the particle diameters are 0.25-0.5, gravity 9.81 and the density 1 (by default); "
-               "variables in it have units '1' and a comment naming their dimension")
+#: the units colsim's code writes (dimensions) and the SI units they are stored with
+SI_UNITS = {"length": "m", "time": "s", "length/time": "m s-1", "rad/time": "rad s-1",
+            "length/time^2": "m s-2", "mass": "kg", "mass/length^3": "kg m-3",
+            "mass length/time^2": "kg m s-2", "mass length^2/time^2": "kg m2 s-2"}
+UNIT_SYSTEM = ("SI: with gravity 9.81 m s-2 (the default) lengths are metres (particle diameters 0.25-0.5 m "
+               "by default) and times seconds; masses are kilograms for the density in kg m-3 (1 by default); "
+               "dimensionless and scaled quantities (over r0, t/sqrt(h0/g)) have units '1'")
 
 
 class InputError(ValueError):
@@ -136,15 +139,16 @@ def versions() -> dict:
 
 
 def cf_units(dataset):
-    """`dataset` with every variable in the paper's units given as units "1" and a comment naming its
-    dimension (CF: UDUNITS has no unit for them); the unit system in the global attributes."""
+    """`dataset` with every variable's dimension ("length", "mass/length^3", ...) written as its SI
+    unit (:data:`SI_UNITS`, UDUNITS strings), text variables given units "1" (CF leaves their units
+    free; colsim gives every variable some), and the unit system in the global attributes."""
     for variable in dataset.variables.values():
         dimension = variable.attrs.get("units")
-        if dimension in PAPER_DIMENSIONS:
+        if dimension in SI_UNITS:
+            variable.attrs["units"] = SI_UNITS[dimension]
+        elif dimension is None and variable.dtype.kind in "OUS":
             variable.attrs["units"] = "1"
-            note = f"{dimension} in the paper's units (global attribute unit_system)"
-            variable.attrs["comment"] = "; ".join(filter(None, (note, variable.attrs.get("comment"))))
-    dataset.attrs.setdefault("unit_system", UNIT_SYSTEM)
+    dataset.attrs["unit_system"] = UNIT_SYSTEM
     return dataset
 
 
