@@ -71,25 +71,13 @@ def atomic_path(path):
 
 def write_all(writers: dict) -> None:
     """All or nothing: writers maps each output path to a callable that writes it to the path it is
-    given. Each writes to a temporary name beside its path; the files are renamed into place only
-    once every one of them is complete, so a failure leaves none of them new."""
-    paths = [Path(path) for path in writers]
-    temporaries = []
-    try:
-        for path, write in zip(paths, writers.values()):
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-            os.close(fd)
-            temporaries.append(Path(tmp))
-            write(Path(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        for tmp, path in zip(temporaries, paths):
-            os.chmod(tmp, 0o666 & ~umask)
-            os.replace(tmp, path)
-    finally:
-        for tmp in temporaries:
-            tmp.unlink(missing_ok=True)
+    given. Each writes to a temporary name beside its path (:func:`atomic_path`); the files are
+    renamed into place, in the dict's order, only once every one of them is complete, so a failure
+    leaves none of them new."""
+    with contextlib.ExitStack() as stack:   # exits last-entered first: enter in reverse order
+        temporaries = {path: stack.enter_context(atomic_path(path)) for path in reversed(list(writers))}
+        for path, write in writers.items():
+            write(temporaries[path])
 
 
 def check_writable(path, directory: bool = False) -> None:

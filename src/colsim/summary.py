@@ -38,12 +38,10 @@ def run_settings(analysis) -> dict:
     chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS and the
     Coulomb fixed point's tolerance of an associated run (which does not use it)."""
     settings = {name: float(analysis.attrs[name]) for name in ("r0", "mu") if name in analysis.attrs}
-    # runs made before the option existed used R_eff: they differ from the paper's lever's
-    settings["rolling_lever"] = str(analysis.attrs.get("rolling_lever", "effective"))
     config = json.loads(analysis.attrs.get("config", "{}"))
     while config:
         stage = config.get("command", "stage")
-        if stage == "collapse":   # written before the option existed: R_eff
+        if stage == "collapse":   # runs made before the option existed used R_eff
             config = {"rolling_lever": "effective", **config}
         unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
         settings |= {f"{stage}.{key}": value for key, value in config.items()

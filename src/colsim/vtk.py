@@ -9,14 +9,11 @@ figures. In ParaView, open the .pvd and use a Glyph filter (sphere, scale by `ra
 from __future__ import annotations
 
 import base64
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_path
+from .io import write_all
 
 
 def _data_array(name: str, values: np.ndarray, components: int, dtype: str = "Float64",
@@ -31,8 +28,8 @@ def _data_array(name: str, values: np.ndarray, components: int, dtype: str = "Fl
 
 
 def write_vtu(path, position, point_data: dict, field_data: dict | None = None) -> None:
-    """One point set: positions (n, 3), point data {name: (n,) or (n, 3)} and field data
-    {name: number} (one value for the whole frame)."""
+    """One point set at `path` (as it is: the caller makes it atomic): positions (n, 3), point data
+    {name: (n,) or (n, 3)} and field data {name: number} (one value for the whole frame)."""
     n = len(position)
     body = ['<?xml version="1.0"?>\n',
             '<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt32">\n',
@@ -52,40 +49,37 @@ def write_vtu(path, position, point_data: dict, field_data: dict | None = None) 
              _data_array("offsets", np.arange(1, n + 1), 1, "Int64"),
              _data_array("types", np.ones(n), 1, "UInt8"),
              '      </Cells>\n', '    </Piece>\n', '  </UnstructuredGrid>\n', '</VTKFile>\n']
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text("".join(body))
+    Path(path).write_text("".join(body))
 
 
 def export_trajectory(dataset, directory, name: str = "collapse") -> Path:
     """Write every frame of a trajectory dataset as NAME_kkkk.vtu plus NAME.pvd; return the .pvd path.
-    The whole series is written into a temporary folder first and moved into place only once
-    complete, the .pvd last, so a failed export leaves the earlier series as it was. Frames
-    NAME_kkkk.vtu of an earlier export that this one did not write are removed, so the directory
-    holds exactly this export's frames."""
+    All or nothing (:func:`colsim.io.write_all`, the .pvd renamed last), so a failed export leaves
+    the earlier series as it was. Frames NAME_kkkk.vtu of an earlier export that this one did not
+    write are removed, so the directory holds exactly this export's frames."""
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     radius = dataset["radius"].values
     initial_height = dataset["initial_height"].values
     scaled = dataset["scaled_time"].values
-    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".part", dir=directory))
-    try:
-        entries, written = [], []
-        for k, t in enumerate(dataset["time"].values):
-            frame = f"{name}_{k:04d}.vtu"
-            write_vtu(staging / frame, dataset["position"].values[k], {
-                "radius": radius, "velocity": dataset["velocity"].values[k],
-                "angular_velocity": dataset["angular_velocity"].values[k], "initial_height": initial_height,
-            }, {"TimeValue": float(t), "scaled_time": float(scaled[k])})
-            entries.append(f'    <DataSet timestep="{scaled[k]:.9g}" group="" part="0" file="{frame}"/>\n')
-            written.append(frame)
-        collection = f"{name}.pvd"
-        (staging / collection).write_text('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n'
-                                          '  <Collection>\n' + "".join(entries) + '  </Collection>\n</VTKFile>\n')
-        for file in written + [collection]:
-            os.replace(staging / file, directory / file)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+
+    def frame_writer(k: int, t: float):
+        return lambda tmp: write_vtu(tmp, dataset["position"].values[k], {
+            "radius": radius, "velocity": dataset["velocity"].values[k],
+            "angular_velocity": dataset["angular_velocity"].values[k], "initial_height": initial_height,
+        }, {"TimeValue": float(t), "scaled_time": float(scaled[k])})
+
+    writers, entries = {}, []
+    for k, t in enumerate(dataset["time"].values):
+        frame = f"{name}_{k:04d}.vtu"
+        writers[directory / frame] = frame_writer(k, t)
+        entries.append(f'    <DataSet timestep="{scaled[k]:.9g}" group="" part="0" file="{frame}"/>\n')
+    collection = directory / f"{name}.pvd"
+    writers[collection] = lambda tmp: Path(tmp).write_text(
+        '<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n  <Collection>\n'
+        + "".join(entries) + '  </Collection>\n</VTKFile>\n')
+    write_all(writers)
+    written = {path.name for path in writers}
     for stale in directory.glob(f"{name}_[0-9][0-9][0-9][0-9].vtu"):
         if stale.name not in written:
             stale.unlink()
-    return directory / collection
+    return collection

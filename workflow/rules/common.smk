@@ -134,7 +134,7 @@ PACK_ASPECT_RATIO = config["pack_aspect_ratio"] or max(config["aspect_ratios"])
 # A run's identity is every setting that changes its result. Its folder names the swept values for
 # a reader (r0, seed, a, mu_r) and a key: the first ten hex digits of the SHA-256 of its settings
 # (settings_key), written out beside it as settings.yaml. A packing's key covers its height, seeds,
-# diameters, density, gravity, pack.* and the solver; a collapse's covers mu, mu_r, the rolling lever,
+# diameters, density, gravity, pack.* but NOT_IDENTITY, and the solver; a collapse's covers mu, mu_r, the rolling lever,
 # the friction law, steps, end time, the rest settings, the solver and frame_every (not
 # checkpoint_every, which does not change a result). Two studies share a file only when it is the
 # same computation; the key of a setting changed means a new folder, never an overwrite.
