@@ -8,8 +8,9 @@ import pytest
 from colsim.contacts import detect
 from colsim.program import assemble, cone_violation
 from colsim.solvers import ClarabelSolver
-from colsim.state import FLOOR, StepSettings, Walls
+from colsim.state import FLOOR, PARTICLE, FixedSpheres, ParticleState, StepSettings, Walls
 from colsim.stepper import predicted_displacement, run, step
+from colsim.warm_start import WarmStart
 
 from helpers import COLLAPSE_LAW, DT, G, max_speed
 
@@ -159,3 +160,55 @@ def test_forms_agree_on_forces_of_a_determinate_stack():
                                        atol=1e-3 * np.abs(a.increments).max())
     assert gaps[1e-12] <= gaps[1e-8] / 5
     assert np.all(np.abs(a.forces[:, 1:]) > 1e-3 * mg)  # every component is exercised
+
+
+def test_fixed_spheres_carry_the_weight_of_what_rests_on_them(pile):
+    """The settled pile with its lower half fixed (colsim.state.FixedSpheres, as the packing's
+    buried part while it fills): the upper half steps on them as on walls.
+
+    Force balance as in test_floor_carries_the_weight: the frictionless vertical cylinder takes no
+    vertical load, so the vertical support of the fixed spheres and the floor on the moving ones
+    equals their weight plus their change of momentum, to 1e-8 (Clarabel's tolerance), and the
+    weight within 1e-5 (the pile is at rest). Contacts with fixed sphere k have j = -2 - k, the
+    particle law's family and the fixed sphere's radius; nothing passes into a fixed sphere."""
+    state = pile.settled
+    fixed = state.position[:, 2] < np.median(state.position[:, 2])
+    upper = state.subset(~fixed)
+    walls = Walls(floor=True, cylinder_radius=pile.cylinder_radius,
+                  fixed=FixedSpheres(state.position[fixed], state.radius[fixed]))
+    settings = StepSettings(dt=DT, walls=walls, law=COLLAPSE_LAW)
+    result = step(upper, settings, ClarabelSolver(), step_number=1)
+    c, forces = result.contacts, result.solution.forces
+    on_fixed = c.j <= -2
+    assert np.count_nonzero(on_fixed & (forces[:, 0] > 1e-3 * pile.weight_scale)) > 10
+    k = -2 - c.j[on_fixed]
+    assert np.all(c.family[on_fixed] == PARTICLE)
+    np.testing.assert_array_equal(c.radius_j[on_fixed], state.radius[fixed][k])
+    below = on_fixed | (c.family == FLOOR)
+    force = forces[:, :1] * c.normal + forces[:, 1:2] * c.tangent1 + forces[:, 2:3] * c.tangent2
+    support = -force[below, 2].sum()
+    weight = upper.mass.sum() * G
+    momentum_change = np.sum(upper.mass * (result.state.velocity[:, 2] - upper.velocity[:, 2])) / DT
+    assert support == pytest.approx(weight + momentum_change, rel=1e-8)
+    assert support == pytest.approx(weight, rel=1e-5)
+    assert result.diagnostics.largest_overlap <= settings.overlap_tolerance * 2 * state.radius.min()
+    # a warm start tells apart the fixed spheres a particle touches (many touch two or more)
+    assert np.bincount(c.i[on_fixed]).max() >= 2
+    again = WarmStart.from_step(c, forces).match(c, upper.n)
+    np.testing.assert_allclose(again, forces, rtol=0, atol=1e-12 * np.abs(forces).max())
+
+
+def test_a_sphere_never_passes_into_a_fixed_one():
+    """A sphere dropped at 3 sqrt(g d) onto a fixed sphere of the same radius, off-centre: the
+    stepper's overlap check counts fixed spheres, so every step ends within 1 % of the diameter."""
+    radius = 0.2
+    fixed = FixedSpheres(np.array([[0.0, 0.0, radius]]), np.array([radius]))
+    state = ParticleState(np.array([[0.1, 0.0, 3.0 * radius + 0.05]]),
+                          np.array([[0.0, 0.0, -3.0 * np.sqrt(G * 2 * radius)]]), np.zeros((1, 3)), np.array([radius]))
+    settings = StepSettings(dt=0.02, walls=Walls(floor=True, fixed=fixed), law=COLLAPSE_LAW)
+    touched = False
+    for result in run(state, settings, 30, ClarabelSolver()):
+        gap = np.linalg.norm(result.state.position[0] - fixed.position[0]) - 2 * radius
+        assert gap >= -0.01 * 2 * radius
+        touched |= bool(np.any(result.contacts.j == -2) and result.solution.forces[:, 0].max() > 0)
+    assert touched

@@ -1,6 +1,7 @@
-"""Contact detection: potential contacts between spheres, the floor and the cylinder.
+"""Contact detection: potential contacts between spheres, the floor, the cylinder and fixed spheres.
 
-A potential contact k joins particle i to body j (another particle, or a wall, j = -1). Its unit
+A potential contact k joins particle i to body j (another particle, a wall, j = -1, or fixed
+sphere k, j = -2 - k: :class:`colsim.state.FixedSpheres`). Its unit
 normal points from i to j, its gap is the surface distance along that normal at the start of the
 step (negative when overlapping), and (t1, t2, n) is a right-handed orthonormal frame. A pair is
 listed when its predicted relative motion within the step brings it within a margin of contact
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, ParticleState, Walls, rolling_lever
+from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, rolling_lever
 
 WALL = -1  # index of the other body for a particle-wall contact
 
@@ -22,11 +23,11 @@ WALL = -1  # index of the other body for a particle-wall contact
 class Contacts:
     """Potential contacts, m of them.
 
-    i, j: (m,) int, particle indices (j = -1 for a wall)
+    i, j: (m,) int, particle indices (j = -1 for a wall, -2 - k for fixed sphere k)
     family: (m,) int, PARTICLE, FLOOR or CYLINDER
     normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
     gap: (m,) float, length, surface distance at the start of the step
-    radius_i, radius_j: (m,) float, length (radius_j = 0 for walls)
+    radius_i, radius_j: (m,) float, length (radius_j = 0 for walls, the fixed sphere's radius)
     rolling_radius: (m,) float, length, the lever L of the rolling moment L r (law.rolling_lever:
         the paper's 2 R_i R_j/(R_i + R_j) or R_eff = R_i R_j/(R_i + R_j)), R_i for a wall
     mu, mu_r: (m,) float, sliding and rolling coefficients
@@ -125,6 +126,21 @@ def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylind
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
 
 
+def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndarray):
+    """Particle-fixed sphere pairs with a gap below reach[i] (length): (i, k, normal from i to k
+    (m, 3), gap (m,))."""
+    if fixed is None or fixed.n == 0 or state.n == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
+    far = float(state.radius.max() + fixed.radius.max() + max(float(np.max(reach)), 0.0))
+    found = cKDTree(state.position).sparse_distance_matrix(cKDTree(fixed.position), far, output_type="ndarray")
+    i, k, dist = found["i"].astype(np.int64), found["j"].astype(np.int64), found["v"]
+    gap = dist - state.radius[i] - fixed.radius[k]
+    close = gap < reach[i]
+    i, k, dist, gap = i[close], k[close], dist[close], gap[close]
+    normal = (fixed.position[k] - state.position[i]) / np.maximum(dist, 1e-300)[:, None]
+    return i, k, normal, gap
+
+
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None) -> Contacts:
     """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
@@ -152,16 +168,18 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
         d = state.position[pj] - state.position[pi]
     pair_gap = np.einsum("ij,ij->i", pair_normal, d) - state.radius[pi] - state.radius[pj]
     speed = np.linalg.norm(predicted, axis=1)
-    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, margin + (1.0 + slack) * speed,
-                                                cylinder_margin)
+    reach = margin + (1.0 + slack) * speed
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin)
+    fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
 
-    i = np.concatenate([pi, wi]).astype(np.int64)
-    j = np.concatenate([pj, np.full(len(wi), WALL)]).astype(np.int64)
-    family = np.concatenate([np.full(len(pi), PARTICLE), wfamily]).astype(np.int64)
-    normal = np.concatenate([pair_normal, wnormal]).reshape(-1, 3)
-    gap = np.concatenate([pair_gap, wgap])
+    i = np.concatenate([pi, wi, fi]).astype(np.int64)
+    j = np.concatenate([pj, np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64)
+    family = np.concatenate([np.full(len(pi), PARTICLE), wfamily, np.full(len(fi), PARTICLE)]).astype(np.int64)
+    normal = np.concatenate([pair_normal, wnormal, fnormal]).reshape(-1, 3)
+    gap = np.concatenate([pair_gap, wgap, fgap])
     radius_i = state.radius[i]
-    radius_j = np.where(j >= 0, state.radius[np.maximum(j, 0)], 0.0)
+    radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
+                               walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
     rolling_radius = rolling_lever(radius_i, radius_j, law.rolling_lever)
     t1, t2 = tangent_basis(normal)
     return Contacts(
@@ -176,7 +194,8 @@ class Overlaps:
     """Overlaps (length, >= 0) after a step.
 
     pairs: (i, j, normal (k, 3)) particle pairs that overlap by more than `tolerance`
-    largest_pair, largest_floor: largest particle-particle and particle-floor overlap
+    largest_pair, largest_floor, largest_fixed: largest particle-particle, particle-floor and
+    particle-fixed sphere overlap
     cylinder: (n,) overlap of each particle with the cylinder
     """
 
@@ -184,10 +203,12 @@ class Overlaps:
     largest_pair: float
     largest_floor: float
     cylinder: np.ndarray
+    largest_fixed: float = 0.0
 
     @property
     def largest(self) -> float:
-        return max(self.largest_pair, self.largest_floor, float(self.cylinder.max(initial=0.0)))
+        return max(self.largest_pair, self.largest_floor, self.largest_fixed,
+                   float(self.cylinder.max(initial=0.0)))
 
 
 def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Overlaps:
@@ -204,7 +225,9 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Over
     if walls.cylinder_radius is not None and state.n:
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
-    return Overlaps(pairs, max(0.0, float(overlap.max(initial=0.0))), largest_floor, cylinder)
+    _, _, _, fixed_gap = fixed_pairs(state, walls.fixed, np.zeros(state.n))
+    return Overlaps(pairs, max(0.0, float(overlap.max(initial=0.0))), largest_floor, cylinder,
+                    max(0.0, float(-fixed_gap.min(initial=0.0))))
 
 
 def touching_pairs(state: ParticleState, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

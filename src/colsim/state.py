@@ -85,15 +85,47 @@ class ParticleState:
         return self.subset(np.arange(self.n))
 
 
+@dataclass(frozen=True, eq=False)
+class FixedSpheres:
+    """Spheres that never move and carry no unknowns: the buried part of a packing while it fills
+    (:func:`colsim.packing.pack`). position: (k, 3) length; radius: (k,) length.
+
+    A contact with fixed sphere k has j = -2 - k (:func:`fixed_code`): a wall to the cone program,
+    a pair to the warm start, with the particle law's friction and the lever between two spheres."""
+
+    position: np.ndarray
+    radius: np.ndarray
+
+    def __post_init__(self):
+        position = np.ascontiguousarray(self.position, dtype=float).reshape(-1, 3)
+        radius = np.ascontiguousarray(self.radius, dtype=float).reshape(len(position))
+        if np.any(radius <= 0):
+            raise ValueError("every fixed sphere's radius must be positive")
+        object.__setattr__(self, "position", position)
+        object.__setattr__(self, "radius", radius)
+
+    @property
+    def n(self) -> int:
+        return len(self.radius)
+
+
+def fixed_code(k: np.ndarray) -> np.ndarray:
+    """The body index j = -2 - k of a contact with fixed sphere k (and back: k = -2 - j)."""
+    return -2 - np.asarray(k, dtype=np.int64)
+
+
 @dataclass(frozen=True)
 class Walls:
-    """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder.
+    """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder
+    and a set of fixed spheres.
 
     cylinder_radius: radius r0 of the cylinder about the z axis (length), or None when it is removed.
+    fixed: spheres that never move (:class:`FixedSpheres`), or None.
     """
 
     floor: bool = True
     cylinder_radius: float | None = None
+    fixed: FixedSpheres | None = None
 
 
 @dataclass(frozen=True)

@@ -141,7 +141,8 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         log.debug("step %d: overlap %.3g exceeds %.3g (%d pairs); redoing",
                  step_number, overlap.largest, tolerance, len(overlap.pairs[0]))
         margin *= settings.margin_growth
-        missed += len(overlap.pairs[0]) + int(overlap.largest_floor > tolerance)
+        missed += (len(overlap.pairs[0]) + int(overlap.largest_floor > tolerance)
+                   + int(overlap.largest_fixed > tolerance))
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
     else:

@@ -1,7 +1,8 @@
 """Contact forces carried from one step (or stage) to the next, by contact pair.
 
 A warm start stores each contact's force and rolling force in the global frame, with the pair that
-carries it: particle i, and particle j or a wall (j = -1 with the wall's family). The next step's
+carries it: particle i, and particle j, a wall (j = -1 with the wall's family) or a fixed sphere
+(j = -2 - k, :class:`colsim.state.FixedSpheres`). The next step's
 contacts are matched by pair and get the stored forces re-expressed in their own frames, projected
 onto their cones (zeros for new pairs). The pairs survive a change of the particle set: pouring
 more spheres keeps the indices, and trimming renumbers them (:meth:`WarmStart.subset`). So a packing's
@@ -21,7 +22,7 @@ from .program import ROWS_PER_CONTACT
 class WarmStart:
     """Forces of m contact pairs, in the global frame.
 
-    i: (m,) int particle; j: (m,) int particle, or -1 for a wall; family: (m,) int (state.PARTICLE,
+    i: (m,) int particle; j: (m,) int particle, -1 for a wall, -2 - k for fixed sphere k; family: (m,) int (state.PARTICLE,
     FLOOR or CYLINDER). force: (m, 3) p n + q1 t1 + q2 t2; rolling: (m, 3) r1 t1 + r2 t2 (force units).
     """
 
@@ -74,12 +75,14 @@ class WarmStart:
         new_index = np.full(len(keep), -1, dtype=np.int64)
         new_index[keep] = np.arange(np.count_nonzero(keep))
         stays = keep[self.i] & ((self.j < 0) | keep[np.maximum(self.j, 0)])
-        j = np.where(self.j < 0, -1, new_index[np.maximum(self.j, 0)])
+        j = np.where(self.j < 0, self.j, new_index[np.maximum(self.j, 0)])
         return WarmStart(new_index[self.i[stays]], j[stays], self.family[stays].copy(),
                          self.force[stays].copy(), self.rolling[stays].copy())
 
 
 def _pair_keys(i, j, family, n_particles: int) -> np.ndarray:
-    """(m,) int64 key unique to each (i, j or wall family) among n_particles particles."""
-    other = np.where(j < 0, n_particles + family, j)
-    return np.asarray(i, dtype=np.int64) * (n_particles + 3) + other
+    """(m,) int64 key unique to each (i, j, wall family or fixed sphere) among n_particles particles
+    (fewer than 2^31, as fixed spheres)."""
+    j = np.asarray(j, dtype=np.int64)
+    other = np.where(j >= 0, j, np.where(j == -1, n_particles + family, n_particles + 1 - j))
+    return np.asarray(i, dtype=np.int64) * (1 << 32) + other
