@@ -271,7 +271,7 @@ STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
                    "assembly_time": "wall-clock time of the step's assembly",
                    "setup_time": "wall-clock time of the solver's set-up in the step",
                    "solve_time": "wall-clock time of the solver in the step",
-                   "step_time": "wall-clock time of the whole step"}
+                   "wall_time": "wall-clock time of the step"}
 
 
 def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
@@ -294,7 +294,7 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
     units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
              "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
              "setup_time": "s", "solve_time": "s",
-             "detection_margin": "length", "step_time": "s"}
+             "detection_margin": "length", "wall_time": "s"}
     for name in DIAGNOSTIC_FIELDS:
         if name == "step":
             continue
