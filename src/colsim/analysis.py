@@ -26,7 +26,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .contacts import touching_pairs
-from .io import state_from_dataset
+from .io import at_rest_flag, at_rest_variable, state_from_dataset
 from .state import ParticleState
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
@@ -119,8 +119,8 @@ def _scalar(value, units: str, long_name: str):
 def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> xr.Dataset:
     """The analysis Dataset of a trajectory Dataset: deposit scalars, the run-out at every check
     tolerance and mass share, the deposit profile over `radial_bin`, histories over `time` and the
-    kinetic energy over `step`; `attrs` plus the run's (aspect_ratio, mu_r, mu, r0, h0, duration,
-    n_steps, at_rest) as global attributes."""
+    kinetic energy over `step`, the run's at_rest flag; `attrs` plus the run's (aspect_ratio, mu_r,
+    mu, r0, h0, duration, n_steps) as global attributes."""
     r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
     initial, final = state_from_dataset(trajectory, 0), state_from_dataset(trajectory, -1)
     tolerance = contact_tolerance(final, settings.contact_tolerance)
@@ -170,8 +170,10 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
                                {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
         "mean_diameter": _scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
         "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
+        "at_rest": at_rest_variable((), at_rest_flag(trajectory)),
     }
     coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
+              "time": ("time", trajectory["time"].values, dict(trajectory["time"].attrs)),
               "scaled_time": ("time", trajectory["scaled_time"].values,
                               {"units": "1", "long_name": "time over sqrt(h0/g)"}),
               "step": trajectory["step"],
@@ -191,6 +193,4 @@ def _run_attributes(trajectory) -> dict:
     if "step_solver_backend" in trajectory:   # how many steps each back-end solved
         names, counts = np.unique(trajectory["step_solver_backend"].values.astype(str), return_counts=True)
         attrs["solver_backends"] = json.dumps({str(n): int(c) for n, c in zip(names, counts)})
-    if "at_rest" in trajectory.attrs:
-        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     return attrs

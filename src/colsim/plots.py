@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .io import AT_REST_FLAGS, at_rest_flag
 from .summary import FLAGS, means_per_size, run_flags
 from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_height, lube_runout
 
@@ -352,8 +353,7 @@ def _analysis_flags(run) -> dict:
     names = ("h_inf_over_r0", "final_to_peak_kinetic_energy", "n_main_mass", "n_particles")
     one = xr.Dataset({name: run[name] for name in names if name in run},
                      attrs={"run_configs": json.dumps([json.loads(run.attrs.get("config", "{}"))])})
-    if "at_rest" in run.attrs:
-        one["at_rest"] = float(run.attrs["at_rest"])
+    one["at_rest"] = at_rest_flag(run)
     return {name: bool(flag) for name, flag in run_flags(one).items()}
 
 
@@ -408,8 +408,9 @@ def _end_name(trajectory) -> str:
 
     from .summary import rest_energy
 
-    if "at_rest" in trajectory.attrs:
-        return "deposit" if int(trajectory.attrs["at_rest"]) else "end (still moving)"
+    flag = at_rest_flag(trajectory)
+    if flag != AT_REST_FLAGS["not_checked"]:
+        return "deposit" if flag == AT_REST_FLAGS["at_rest"] else "end (still moving)"
     if "step_kinetic_energy" not in trajectory:
         return "end"
     energy = trajectory["step_kinetic_energy"].values
