@@ -13,7 +13,8 @@ import xarray as xr
 
 from colsim import io
 from colsim.cli import main
-from colsim.state import ParticleState
+from colsim.state import FLOOR, PARTICLE, ParticleState
+from colsim.warm_start import WarmStart
 from colsim.summary import run_flags
 
 from helpers import cf_check_failures
@@ -29,8 +30,11 @@ def _column(path, top_offset: float, h0: float) -> None:
     resistance); h0 and a = h0 as the column's attributes."""
     lift = np.sqrt(0.25 - top_offset ** 2) + 1e-3
     state = ParticleState.at_rest([[0, 0, 0.25], [top_offset, 0, 0.25 + lift]], [0.25, 0.25])
+    weight = state.mass * 9.81   # the contact forces a column carries from its packing: sphere on sphere, on floor
+    forces = WarmStart(np.array([0, 0]), np.array([1, -1]), np.array([PARTICLE, FLOOR]),
+                       np.array([[0, 0, -weight[1]], [0, 0, weight.sum()]]), np.zeros((2, 3)))
     io.write_state(path, state, {**io.global_attributes(io.STATE_KIND, "two spheres", {}), "r0": 1.0, "h0": h0,
-                                 "aspect_ratio": h0, "solid_fraction": 0.1})
+                                 "aspect_ratio": h0, "solid_fraction": 0.1}, io.contact_force_variables(forces))
 
 
 def _cli(directory, *args) -> None:
@@ -83,6 +87,15 @@ def test_the_cf_check_sees_what_breaks_cf(outputs, tmp_path):
     assert "radial_bin" in failures and "_FillValue" in failures
     assert "n_particles" in failures and "int64" in failures
     assert "flag_meanings" in failures
+
+
+def test_flag_values_are_stored_with_their_variable_s_type(outputs):
+    """CF: flag_values of the variable's own type, as stored (contact_family: int32, at_rest: int8)."""
+    column = io.open_dataset(outputs / "still.nc", io.STATE_KIND)
+    assert column.sizes["contact"] == 2
+    for variable in (column["contact_family"], xr.load_dataset(outputs / "summary.nc")["at_rest"]):
+        assert variable.attrs["flag_values"].dtype == variable.dtype
+        assert len(variable.attrs["flag_values"]) == len(variable.attrs["flag_meanings"].split())
 
 
 def test_at_rest_is_a_flag_variable_in_every_output(outputs):

@@ -182,7 +182,12 @@ def write_dataset(dataset, path) -> None:
 def write_netcdf(dataset, path) -> None:
     """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units made CF."""
     dataset = cf_units(dataset.copy())
-    dataset.to_netcdf(path, engine="netcdf4", encoding=cf_encoding(dataset))
+    encoding = cf_encoding(dataset)
+    for name, variable in dataset.variables.items():   # CF: flag_values of the type stored
+        if "flag_values" in variable.attrs:
+            stored = encoding.get(name, {}).get("dtype", variable.dtype)
+            variable.attrs["flag_values"] = np.asarray(variable.attrs["flag_values"], dtype=stored)
+    dataset.to_netcdf(path, engine="netcdf4", encoding=encoding)
 
 
 INT32 = np.iinfo(np.int32)
