@@ -222,8 +222,8 @@ def run_flags(summary) -> dict:
 
     - "moving": still moving at the end: at_rest is 0 (the run reached max_duration moving), or, where
       rest was not checked (a fixed end time: at_rest -1, or in older summaries NaN or absent), its
-      kinetic energy at the end is
-      above the collapse's rest_energy (1e-2 unless the run configurations say otherwise) of its peak;
+      kinetic energy at the end is above the collapse's rest_energy (1e-2 unless the run
+      configurations say otherwise) of its peak;
     - "fragment": the main mass, the largest connected cluster, holds less than half the grains.
     """
     ran = np.isfinite(summary.h_inf_over_r0)
