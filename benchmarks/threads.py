@@ -59,7 +59,7 @@ def collapse(column: Path, steps: int, threads: int) -> dict:
         run = xr.load_dataset(output)
         return {"wall": wall, "cpu": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
                 "iterations": float(run["step_solver_iterations"].mean()),
-                "solve_share": float(run["step_solve_time"].sum() / run["step_step_time"].sum())}
+                "solve_share": float(run["step_solve_time"].sum() / run["step_wall_time"].sum())}
 
 
 def main(argv=None):

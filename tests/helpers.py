@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +17,8 @@ from colsim.plots import FIGURES
 from colsim.state import ContactLaw, ParticleState
 from colsim.summary import SUMMARY_VARIABLES
 
-__all__ = ["COLLAPSE_LAW", "DT", "FIGURES", "G", "ROOT", "SUMMARY_VARIABLES", "TINY", "copy_workflow", "max_speed",
-           "planned_outputs", "snakemake"]
+__all__ = ["COLLAPSE_LAW", "DT", "FIGURES", "G", "ROOT", "SUMMARY_VARIABLES", "TINY", "cf_check_failures",
+           "copy_workflow", "max_speed", "planned_outputs", "snakemake"]
 
 # the session pile (conftest.pile): gravity, time step, and the friction that locks it and collapses it
 G = 9.81
@@ -78,3 +79,38 @@ def planned_collapses(result: subprocess.CompletedProcess) -> list[dict]:
             match = RUN_PATH.search(line.split("--output", 1)[1])
             found.append({**match.groupdict(), "path": match.group(0), "command": line})
     return found
+
+
+#: what the CF checker reports that CF-1.8 does not ask of colsim's files: the IOOS checker takes a
+#: dimension named `time` for CF's time axis and wants standard_name "time" on it, but CF identifies
+#: time coordinates by units with a reference date ("s since ..."), an axis or a standard name, not by
+#: name, and colsim's `time` is the elapsed time since release in s (giving it standard_name "time"
+#: would make CF ask for a reference date, and xarray would read the times as dates)
+CF_CHECKER_NAME_HEURISTICS = ("Coordinate variable 'time' should have standard_name='time', found: 'None'",)
+
+
+def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
+    """What the IOOS compliance checker (an independent CF checker, offline) finds wrong with the
+    netCDF file `path` at high and medium priority (its errors and warnings), less
+    :data:`CF_CHECKER_NAME_HEURISTICS`; a check that raised is a failure too."""
+    from compliance_checker.base import BaseCheck
+    from compliance_checker.suite import CheckSuite
+
+    suite = CheckSuite()
+    with warnings.catch_warnings():   # the checker's own deprecations (of its SOS checkers) are not ours
+        warnings.simplefilter("ignore", DeprecationWarning)
+        suite.load_all_available_checkers()
+    dataset = suite.load_dataset(str(path))
+    try:
+        results, raised = suite.run_all(dataset, [checker], skip_checks=[])[checker]
+    finally:
+        dataset.close()
+    failures = [f"{name} raised {error}" for name, error in raised.items()]
+    for result in results:
+        passed = result.value[0] == result.value[1] if isinstance(result.value, tuple) else bool(result.value)
+        if passed or result.weight < BaseCheck.MEDIUM:
+            continue
+        messages = [m for m in result.msgs if m not in CF_CHECKER_NAME_HEURISTICS]
+        if messages or not result.msgs:
+            failures.append(f"{result.name}: {'; '.join(messages) or 'failed'}")
+    return failures

@@ -1,9 +1,13 @@
-"""The documentation (issue 32, item 1): README.md stays short and keeps the two set-up commands, and
-every relative link in README.md and docs/**/*.md points at a file or folder that exists. Fast: no
-simulation, no Snakemake."""
+"""The documentation (issue 32, item 1): README.md stays short and keeps the two set-up commands,
+every relative link in README.md and docs/**/*.md points at a file or folder that exists, and the
+site (mkdocs.yml) builds with `mkdocs build --strict`: every page in the nav, every link and anchor
+resolving inside docs/. Fast: no simulation, no Snakemake (a build takes seconds)."""
 from __future__ import annotations
 
 import re
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -66,3 +70,39 @@ def test_the_link_finder_sees_links_and_skips_code():
             "`[e](not/a/link.md)`\n```\n[f](inside/a/fence.md)\n```\n[g]: docs/g.md\n")
     assert links(text) == ["docs/a.md", "figures/b.png", "https://x.org", "#anchor", "docs/g.md"]
     assert [t for t in links(text) if is_relative(t)] == ["docs/a.md", "figures/b.png", "docs/g.md"]
+
+
+def _mkdocs_build(root: Path, site: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(root / "mkdocs.yml"),
+                           "--site-dir", str(site)], capture_output=True, text=True, timeout=300)
+
+
+def test_the_site_builds_strictly(tmp_path):
+    """Bound: mkdocs exits 0 in strict mode, where mkdocs.yml makes a page left out of the nav, a
+    link to nothing (or out of docs/) and an anchor that no heading has each a warning, so a
+    failure; and every page of docs/ becomes a page of the site."""
+    done = _mkdocs_build(ROOT, tmp_path / "site")
+    assert done.returncode == 0, done.stderr[-3000:]
+    for page in PAGES[1:]:
+        relative = page.relative_to(ROOT / "docs").with_suffix("")
+        built = tmp_path / "site" / (relative.parent if relative.name == "README" else relative) / "index.html"
+        assert built.is_file(), built
+    # headings get GitHub's anchors, which the pages link to: "Why r0 = 3" keeps its double hyphen
+    assert 'id="why-r0--3"' in (tmp_path / "site" / "getting-started" / "index.html").read_text(encoding="utf-8")
+
+
+@pytest.mark.parametrize("link, warning", [
+    ("[x](method.md#no-such-heading)", "does not contain an anchor '#no-such-heading'"),
+    ("[x](../config.yaml)", "'../config.yaml', but the target is not found"),
+    ("[x](no-such-page.md)", "'no-such-page.md', but the target is not found"),
+])
+def test_the_strict_build_fails_on_a_broken_link(tmp_path, link, warning):
+    """The site test is not blind: a copy of the docs with one broken link (an anchor no heading of
+    the page has, GitHub's anchors being the site's; a file outside docs/; a missing page) fails."""
+    shutil.copytree(ROOT / "docs", tmp_path / "docs")
+    shutil.copy(ROOT / "mkdocs.yml", tmp_path / "mkdocs.yml")
+    with open(tmp_path / "docs" / "cli.md", "a", encoding="utf-8") as page:
+        page.write(f"\nSee {link}.\n")
+    done = _mkdocs_build(tmp_path, tmp_path / "site")
+    assert done.returncode != 0 and warning in done.stderr, done.stderr[-3000:]
+

@@ -300,6 +300,30 @@ def test_front_only_moves_outward(tmp_path):
     np.testing.assert_allclose(plots.outward_front([np.nan, 1.0, np.nan, 0.5, 2.0]), [np.nan, 1.0, 1.0, 1.0, 2.0])
 
 
+def test_front_figure_draws_the_mass_share_front_above_the_main_mass_edge(tmp_path):
+    """With the analyses' mass_front_95_over_r0 (issue 32, item 3): a top row of it as measured, frame
+    by frame (one line per run, its values exactly), above the main mass's edge as before; an
+    analysis made before the variable existed is drawn in the bottom row only."""
+    from colsim.analysis import FRONT_MASS_VARIABLE
+
+    runs = [analysis(a, m, 1) for a in (0.5, 2.0) for m in (0.0, 0.12)]
+    for run in runs:
+        run[FRONT_MASS_VARIABLE] = ("time", np.linspace(0, 1.5 * run.attrs["aspect_ratio"], 5))
+    older = analysis(1.0, 0.12, 1)                          # no mass front: bottom row only
+    figure = _drawn_figures(tmp_path, settled(), runs + [older], [])["front_position"]
+    top, bottom = figure.axes[:2], figure.axes[2:4]
+    assert len(figure.axes) == 4                            # 2 rows x 2 mu_r
+    for ax, m in zip(top, (0.0, 0.12)):
+        assert "95%" in ax.get_ylabel() and f"= {m:g}" in ax.get_title()
+        lines = ax.get_lines()
+        assert len(lines) == 2                              # a = 0.5, 2; the older run has none
+        for line, a in zip(lines, (0.5, 2.0)):
+            np.testing.assert_allclose(line.get_ydata(), np.linspace(0, 1.5 * a, 5))
+    assert [len(ax.get_lines()) for ax in bottom] == [2, 3]  # the older run at mu_r = 0.12 too
+    for ax in bottom:
+        assert "farthest reach" in ax.get_ylabel() and ax.get_xlabel() == "t / sqrt(h0/g)"
+
+
 def test_deposit_profile_starts_with_the_bin_at_the_axis(tmp_path):
     run = analysis(1.0, 0.12, 1)                                        # bins of 0.5 centred at 0.25, 0.75, ...
     figure = _drawn_figures(tmp_path, settled(), [run], [])["deposit_profiles"]

@@ -12,8 +12,8 @@ import pytest
 import xarray as xr
 import yaml
 
-from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, copy_workflow, planned_collapses,
-                     planned_outputs, snakemake)
+from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, cf_check_failures, copy_workflow,
+                     planned_collapses, planned_outputs, snakemake)
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +48,20 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
     table = (tiny_study / TINY / "summary.csv").read_text().splitlines()
     assert len(table) == 1 + 4 and "h_inf_over_r0" in table[0]
     assert "runout_over_r0_by_tolerance_0.5" in table[0] and "mass_front_over_r0_0.95" in table[0]
+
+
+@pytest.mark.slow
+def test_the_study_files_pass_the_cf_checker(tiny_study):
+    """Bound: no error or warning of the IOOS checker's CF-1.8 suite (tests/test_netcdf.py) in the
+    tiny study's packing, column, trajectory, analysis and summary; at_rest is a flag everywhere."""
+    run = sorted(tiny_study.glob("results/r0_1/seed_1/pack_*/a_*/mu_r_0.12/run_*"))[0]
+    paths = [run.parents[2] / "packing.nc", run.parents[1] / "column.nc", run / "collapse.nc", run / "analysis.nc",
+             tiny_study / TINY / "summary.nc"]
+    for path in paths:
+        assert cf_check_failures(path) == [], path
+    for path in paths[2:]:
+        at_rest = xr.load_dataset(path)["at_rest"]
+        assert at_rest.dtype == np.int8 and set(np.unique(at_rest.values)) <= set(at_rest.attrs["flag_values"])
 
 
 @pytest.mark.slow

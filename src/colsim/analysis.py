@@ -26,10 +26,14 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .contacts import touching_pairs
-from .io import state_from_dataset
+from .io import at_rest_flag, at_rest_variable, state_from_dataset
 from .state import ParticleState
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
+#: the front followed frame by frame: the radius holding this share of the mass (:func:`mass_front`),
+#: stored in the analysis as FRONT_MASS_VARIABLE over time
+FRONT_MASS_SHARE = 0.95
+FRONT_MASS_VARIABLE = "mass_front_95_over_r0"
 
 
 @dataclass
@@ -119,12 +123,16 @@ def _scalar(value, units: str, long_name: str):
 def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> xr.Dataset:
     """The analysis Dataset of a trajectory Dataset: deposit scalars, the run-out at every check
     tolerance and mass share, the deposit profile over `radial_bin`, histories over `time` and the
-    kinetic energy over `step`; `attrs` plus the run's (aspect_ratio, mu_r, mu, r0, h0, duration,
-    n_steps, at_rest) as global attributes."""
+    kinetic energy over `step`, the run's at_rest flag; `attrs` plus the run's (aspect_ratio, mu_r,
+    mu, r0, h0, duration, n_steps) as global attributes."""
     r0, h0 = float(trajectory.attrs["r0"]), float(trajectory.attrs["h0"])
     initial, final = state_from_dataset(trajectory, 0), state_from_dataset(trajectory, -1)
     tolerance = contact_tolerance(final, settings.contact_tolerance)
-    history = [measure_deposit(state_from_dataset(trajectory, k), tolerance) for k in range(trajectory.sizes["time"])]
+    history, mass_fronts = [], []
+    for k in range(trajectory.sizes["time"]):   # each frame: the main mass's edge, the mass-share front
+        state = state_from_dataset(trajectory, k)
+        history.append(measure_deposit(state, tolerance))
+        mass_fronts.append(mass_front(state, FRONT_MASS_SHARE))
     deposit = history[-1]
     fractions = sorted(set(settings.check_tolerances) | {settings.contact_tolerance})
     checks = [measure_deposit(final, contact_tolerance(final, f)) for f in fractions]
@@ -160,7 +168,10 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
         "undisturbed_top_radius": _scalar(top_radius / r0, "1", "radius of the top disc that did not move, over r0"),
         "deposit_height": ("radial_bin", height, {"units": "length", "long_name": "deposit height (main mass)"}),
         "front_position": ("time", (np.array([d.r_inf for d in history]) - r0) / r0,
-                           {"units": "1", "long_name": "front (r_front - r0) over r0"}),
+                           {"units": "1", "long_name": "edge of the main mass: (its run-out radius - r0) over r0"}),
+        FRONT_MASS_VARIABLE: ("time", (np.array(mass_fronts) - r0) / r0,
+                              {"units": "1", "long_name": f"front: (radius holding {FRONT_MASS_SHARE:.0%} of the "
+                                                          "mass - r0) over r0"}),
         "height_history": ("time", np.array([d.h_inf for d in history]),
                            {"units": "length", "long_name": "height of the main mass"}),
         "runout_over_r0_by_tolerance": ("contact_tolerance", [(d.r_inf - r0) / r0 for d in checks],
@@ -170,8 +181,10 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
                                {"units": "1", "long_name": "(radius holding a share of the mass - r0) over r0"}),
         "mean_diameter": _scalar(2.0 * float(final.radius.mean()), "length", "mean particle diameter"),
         "kinetic_energy": ("step", energy, {"units": "mass length^2/time^2", "long_name": "kinetic energy"}),
+        "at_rest": at_rest_variable((), at_rest_flag(trajectory)),
     }
     coords = {"radial_bin": ("radial_bin", centres, {"units": "length", "long_name": "distance from the axis"}),
+              "time": ("time", trajectory["time"].values, dict(trajectory["time"].attrs)),
               "scaled_time": ("time", trajectory["scaled_time"].values,
                               {"units": "1", "long_name": "time over sqrt(h0/g)"}),
               "step": trajectory["step"],
@@ -191,6 +204,4 @@ def _run_attributes(trajectory) -> dict:
     if "step_solver_backend" in trajectory:   # how many steps each back-end solved
         names, counts = np.unique(trajectory["step_solver_backend"].values.astype(str), return_counts=True)
         attrs["solver_backends"] = json.dumps({str(n): int(c) for n, c in zip(names, counts)})
-    if "at_rest" in trajectory.attrs:
-        attrs["at_rest"] = int(trajectory.attrs["at_rest"])
     return attrs

@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 
 from .analysis import measure_deposit
-from .io import atomic_path
+from .io import AT_REST_FLAGS, at_rest_variable, atomic_path, component_coordinate
 from .solvers import Solver, WarmStart
 from .state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
 from .stepper import Carry, StepDiagnostics, run
@@ -271,7 +271,7 @@ STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
                    "assembly_time": "wall-clock time of the step's assembly",
                    "setup_time": "wall-clock time of the solver's set-up in the step",
                    "solve_time": "wall-clock time of the solver in the step",
-                   "step_time": "wall-clock time of the whole step"}
+                   "wall_time": "wall-clock time of the step"}
 
 
 def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
@@ -290,11 +290,12 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
         "initial_height": ("particle", run.initial.position[:, 2],
                            {"units": "length", "long_name": "height of the particle centre at release"}),
         "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
+        "at_rest": at_rest_variable((), AT_REST_FLAGS["not_checked"] if run.at_rest is None else int(run.at_rest)),
     }
     units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
              "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
              "setup_time": "s", "solve_time": "s",
-             "detection_margin": "length", "step_time": "s"}
+             "detection_margin": "length", "wall_time": "s"}
     for name in DIAGNOSTIC_FIELDS:
         if name == "step":
             continue
@@ -309,7 +310,7 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
                               {"units": "1", "long_name": "time over sqrt(h0/g)"}),
               "step": ("step", np.array([d.step for d in run.diagnostics]),
                        {"units": "1", "long_name": "step number"}),
-              "xyz": ("xyz", ["x", "y", "z"], {"units": "1", "long_name": "Cartesian component"})}
+              **component_coordinate()}
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
                           "mu_r": settings.mu_r, "friction_law": settings.friction_law,
@@ -320,8 +321,7 @@ def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: Collaps
                           "wall_time": run.wall_time, "density": float(run.initial.density)})
     if settings.friction_law == "coulomb":   # the fixed point's stopping rule, mean diameters
         dataset.attrs["friction_tolerance"] = settings.friction_tolerance
-    if settings.max_duration is not None:   # the run went on towards rest: say how far and whether
+    if settings.max_duration is not None:   # the run went on towards rest: how far (whether: at_rest)
         dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
-                              "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy,
-                              "at_rest": int(bool(run.at_rest))})
+                              "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy})
     return dataset

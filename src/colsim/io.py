@@ -47,6 +47,29 @@ UNIT_SYSTEM = ("SI: with gravity 9.81 m s-2 (the default) lengths are metres (pa
                "dimensionless and scaled quantities (over r0, t/sqrt(h0/g)) have units '1'")
 
 
+#: whether a run came to rest: a CF flag variable (int8, never a float with NaN) in trajectories,
+#: analyses and summaries. not_checked: a fixed end time (no max_duration), or no run (a summary's gap)
+AT_REST_FLAGS = {"not_checked": -1, "still_moving": 0, "at_rest": 1}
+
+
+def at_rest_variable(dims, values) -> tuple:
+    """The (dims, values, attrs) of an `at_rest` flag variable (:data:`AT_REST_FLAGS`)."""
+    return (dims, np.asarray(values, dtype=np.int8),
+            {"units": "1", "long_name": "whether the run came to rest before its end",
+             "flag_values": np.array(list(AT_REST_FLAGS.values()), dtype=np.int8),
+             "flag_meanings": " ".join(AT_REST_FLAGS)})
+
+
+def at_rest_flag(dataset) -> int:
+    """The at_rest flag (:data:`AT_REST_FLAGS`) of a trajectory or analysis: its `at_rest` variable,
+    or in files written before the variable existed the attribute (0 or 1, absent when not checked)."""
+    if "at_rest" in dataset.variables:
+        return int(dataset["at_rest"].values)
+    if "at_rest" in dataset.attrs:
+        return int(bool(int(dataset.attrs["at_rest"])))
+    return AT_REST_FLAGS["not_checked"]
+
+
 class InputError(ValueError):
     """An input file that is missing, unreadable or of the wrong kind."""
 
@@ -158,7 +181,35 @@ def write_dataset(dataset, path) -> None:
 
 def write_netcdf(dataset, path) -> None:
     """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units made CF."""
-    cf_units(dataset.copy()).to_netcdf(path, engine="netcdf4")
+    dataset = cf_units(dataset.copy())
+    encoding = cf_encoding(dataset)
+    for name, variable in dataset.variables.items():   # CF: flag_values of the type stored
+        if "flag_values" in variable.attrs:
+            stored = encoding.get(name, {}).get("dtype", variable.dtype)
+            variable.attrs["flag_values"] = np.asarray(variable.attrs["flag_values"], dtype=stored)
+    dataset.to_netcdf(path, engine="netcdf4", encoding=encoding)
+
+
+INT32 = np.iinfo(np.int32)
+
+
+def cf_encoding(dataset) -> dict:
+    """The encodings that keep a file CF-1.8: 64-bit integers stored as 32-bit ones (CF-1.8 has no
+    int64; colsim's counts, steps and indices fit), and no _FillValue on a coordinate (xarray gives
+    every float one; CF forbids missing values in coordinate variables)."""
+    encoding = {}
+    for name, variable in dataset.variables.items():
+        wanted = {}
+        if variable.dtype == np.int64:
+            values = variable.values
+            if values.size and (values.min() < INT32.min or values.max() > INT32.max):
+                raise ValueError(f"{name} holds integers beyond 32 bits, which CF-1.8 cannot store")
+            wanted["dtype"] = "int32"
+        if name in dataset.coords and variable.dtype.kind == "f":
+            wanted["_FillValue"] = None
+        if wanted:
+            encoding[name] = wanted
+    return encoding
 
 
 def open_dataset(path, kind: str):
@@ -190,11 +241,17 @@ def state_dataset(state: ParticleState, attrs: dict, extra: dict | None = None):
     data["radius"] = ("particle", state.radius, {"units": "length", "long_name": "particle radius"})
     for name, (dims, values, var_attrs) in (extra or {}).items():
         data[name] = (dims, values, var_attrs)
-    dataset = xr.Dataset(data, coords={"xyz": ("xyz", ["x", "y", "z"], {"long_name": "Cartesian component"})},
-                         attrs=dict(attrs))
+    dataset = xr.Dataset(data, coords=component_coordinate(), attrs=dict(attrs))
     dataset.attrs["density"] = float(state.density)
     dataset.attrs["time"] = float(state.time)
     return dataset
+
+
+def component_coordinate() -> dict:
+    """The labels of the dimension xyz: an auxiliary coordinate `component` ("x", "y", "z"; CF labels),
+    not a coordinate variable named xyz (CF's coordinate variables are numeric and monotonic)."""
+    return {"component": ("xyz", np.array(["x", "y", "z"], dtype=object),
+                          {"units": "1", "long_name": "Cartesian component"})}
 
 
 def state_from_dataset(dataset, frame: int | None = None) -> ParticleState:

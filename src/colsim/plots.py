@@ -14,9 +14,12 @@
   per mu_r (the lowest seed), bins drawn from edge to edge (the first from the axis);
 - side_views.png: the particles in a slab |y| < d_max seen from the side before release and at the
   end, coloured by their initial height over h0 (the paper's Figs. 3-5), one row per trajectory;
-- front_position.png: (r_front - r0)/r0 against t/sqrt(h0/g), one panel per mu_r, one colour per a;
-  r_front is the farthest the main mass's edge has reached so far (the running maximum of the
-  analysis's front_position: the main mass, the largest cluster, can shrink and its edge recede).
+- front_position.png: the front against t/sqrt(h0/g), one column per mu_r, one colour per a; top
+  row: (r_95 - r0)/r0, the radius holding 95 % of the mass at each frame (the analysis's
+  mass_front_95_over_r0), which moves outward as the grains spread; bottom row: (r_front - r0)/r0,
+  the farthest the main mass's edge has reached so far (the running maximum of front_position: the
+  main mass, the largest cluster, can shrink and its edge recede). Analyses made before the mass
+  front existed get the bottom row only.
 
 In the figures against a and against mu_r, a point whose runs :func:`colsim.summary.run_flags` flags
 is drawn distinctly, with a legend entry: an open marker where a seed was still moving at the end, a
@@ -33,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .analysis import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
+from .io import AT_REST_FLAGS, at_rest_flag
 from .summary import FLAGS, means_per_size, run_flags
 from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_height, lube_runout
 
@@ -352,8 +357,7 @@ def _analysis_flags(run) -> dict:
     names = ("h_inf_over_r0", "final_to_peak_kinetic_energy", "n_main_mass", "n_particles")
     one = xr.Dataset({name: run[name] for name in names if name in run},
                      attrs={"run_configs": json.dumps([json.loads(run.attrs.get("config", "{}"))])})
-    if "at_rest" in run.attrs:
-        one["at_rest"] = float(run.attrs["at_rest"])
+    one["at_rest"] = at_rest_flag(run)
     return {name: bool(flag) for name, flag in run_flags(one).items()}
 
 
@@ -408,8 +412,9 @@ def _end_name(trajectory) -> str:
 
     from .summary import rest_energy
 
-    if "at_rest" in trajectory.attrs:
-        return "deposit" if int(trajectory.attrs["at_rest"]) else "end (still moving)"
+    flag = at_rest_flag(trajectory)
+    if flag != AT_REST_FLAGS["not_checked"]:
+        return "deposit" if flag == AT_REST_FLAGS["at_rest"] else "end (still moving)"
     if "step_kinetic_energy" not in trajectory:
         return "end"
     energy = trajectory["step_kinetic_energy"].values
@@ -466,34 +471,51 @@ def outward_front(front) -> np.ndarray:
     return np.fmax.accumulate(front) if front.size else front
 
 
+#: the front_position figure's rows: the analysis variable, the y label, whether to draw its running maximum
+FRONT_ROWS = {
+    FRONT_MASS_VARIABLE: (f"front (r_{FRONT_MASS_SHARE * 100:.0f} - r0) / r0\n"
+                          f"(radius holding {FRONT_MASS_SHARE:.0%} of the mass)", False),
+    "front_position": ("front (r_front - r0) / r0\n(farthest reach of the main mass so far)", True),
+}
+
+
 def front_figure(analyses, path: Path) -> Path:
-    """(r_front - r0)/r0 against t/sqrt(h0/g): one panel per mu_r, one colour per a, one line per seed;
-    r_front is :func:`outward_front` of the main mass's edge (front_position)."""
+    """The front against t/sqrt(h0/g): one column of panels per mu_r, one colour per a, one line per
+    seed. Top row (when the analyses have it): the radius holding 95 % of the mass, frame by frame
+    (FRONT_MASS_VARIABLE: every grain counts, no contact graph); it moves outward as the grains
+    spread. Bottom row: :func:`outward_front` of the main mass's edge (front_position), the run-out's
+    own measure, with an open circle at the end where the final main mass is behind that front."""
     plt = _pyplot()
     runs = _by_key(analyses)
     mu_rs = sorted({m for _, m, _ in runs}) or [np.nan]
     ratios = sorted({a for a, _, _ in runs})
     colours = dict(zip(ratios, _colours(len(ratios))))
-    fig, axes = _grid(plt, len(mu_rs), 4.2, 3.2)
-    for ax, m in zip(axes, mu_rs):
-        keys = sorted(k for k in runs if k[1] == m)
-        if not keys:
-            _empty(ax, "no analyses")
-            continue
-        labelled = set()
-        for a, _, seed in keys:
-            run = runs[(a, m, seed)]
-            time, front = run["scaled_time"].values, run["front_position"].values
-            ax.plot(time, outward_front(front), color=colours[a], lw=1.2, label=None if a in labelled else f"a = {a:g}")
-            if len(front) and np.isfinite(front[-1]) and front[-1] < np.nanmax(front):   # the end's main mass is behind
-                ax.plot(time[-1:], front[-1:], "o", mfc="none", color=colours[a], ms=5, gid="end")
-            labelled.add(a)
-        ax.set_title(f"$\\mu_r$ = {m:g}", fontsize=9)
+    rows = [name for name in FRONT_ROWS if name == "front_position" or any(name in run for run in runs.values())]
+    fig, axes = plt.subplots(len(rows), len(mu_rs), figsize=(4.2 * len(mu_rs), 3.2 * len(rows)), squeeze=False,
+                             layout="constrained", sharex="col")
+    for row, name in zip(axes, rows):
+        label, outward = FRONT_ROWS[name]
+        for ax, m in zip(row, mu_rs):
+            keys = sorted(k for k in runs if k[1] == m and name in runs[k])
+            if not keys:
+                _empty(ax, "no analyses")
+                continue
+            labelled = set()
+            for a, _, seed in keys:
+                run = runs[(a, m, seed)]
+                time, front = run["scaled_time"].values, run[name].values
+                ax.plot(time, outward_front(front) if outward else front, color=colours[a], lw=1.2,
+                        label=None if a in labelled else f"a = {a:g}")
+                if outward and len(front) and np.isfinite(front[-1]) and front[-1] < np.nanmax(front):
+                    ax.plot(time[-1:], front[-1:], "o", mfc="none", color=colours[a], ms=5, gid="end")
+                labelled.add(a)
+            ax.set_title(f"$\\mu_r$ = {m:g}", fontsize=9)
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(alpha=0.3)
+    for ax in axes[-1]:
         ax.set_xlabel("t / sqrt(h0/g)")
-        ax.set_ylabel("front (r_front - r0) / r0\n(farthest reach of the main mass so far)", fontsize=8)
-        ax.grid(alpha=0.3)
-    handles = axes[0].get_legend_handles_labels()[0]
-    if any(line.get_gid() == "end" for ax in axes for line in ax.get_lines()):
+    handles = axes.flat[0].get_legend_handles_labels()[0]
+    if any(line.get_gid() == "end" for ax in axes.flat for line in ax.get_lines()):
         from matplotlib.lines import Line2D
 
         handles.append(Line2D([], [], marker="o", mfc="none", color="0.3", ls="none",

@@ -37,7 +37,7 @@ class OverlapError(RuntimeError):
 class StepDiagnostics:
     """What one step reports. Times in seconds (wall clock); energies in mass length^2/time^2.
 
-    The detection, assembly, setup and solve times are those of the accepted attempt; step_time is
+    The detection, assembly, setup and solve times are those of the accepted attempt; wall_time is
     the whole step, redone attempts included. detection_margin: of the accepted attempt (length).
     solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`).
     solver_iterations: summed over the cone programs of the step; friction_iterations: how many
@@ -61,7 +61,7 @@ class StepDiagnostics:
     redone: int
     missed_contacts: int
     detection_margin: float
-    step_time: float
+    wall_time: float
 
 
 @dataclass
@@ -159,7 +159,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         detection_time=t1 - t0, assembly_time=t2 - t1,
         setup_time=solution.setup_time, solve_time=solution.solve_time, redone=attempt,
         missed_contacts=missed,
-        detection_margin=margin, step_time=time.perf_counter() - started,
+        detection_margin=margin, wall_time=time.perf_counter() - started,
     )
     return StepResult(new_state, found, solution, diagnostics)
 

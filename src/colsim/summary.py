@@ -9,6 +9,7 @@ from collections import Counter
 import numpy as np
 import xarray as xr
 
+from .io import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 from .laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
@@ -22,8 +23,6 @@ CHECK_VARIABLES = {"runout_over_r0_by_tolerance": "contact_tolerance", "mass_fro
 # attribute -> (variable, its attributes)
 RUN_ATTRIBUTES = {
     "duration": ("end_time", {"units": "1", "long_name": "end time of the collapse over sqrt(h0/g)"}),
-    "at_rest": ("at_rest", {"units": "1", "long_name": "1: the run went on to rest, 0: it stopped at "
-                                                       "max_duration still moving, NaN: fixed end time"}),
 }
 
 
@@ -111,6 +110,11 @@ def collect_analyses(analyses) -> xr.Dataset:
             coords[dim] = reference[dim]
     for name, (variable, attrs) in RUN_ATTRIBUTES.items():
         data[variable] = (dims, grid(lambda a, name=name: float(a.attrs.get(name, np.nan))), dict(attrs))
+    # the at_rest flag: not_checked where a run is missing (a flag variable holds no NaN)
+    at_rest = np.full((len(ratios), len(mu_rs), len(seeds)), AT_REST_FLAGS["not_checked"], dtype=np.int8)
+    for (a, m, s), analysis in zip(keys, analyses):
+        at_rest[ratios.index(a), mu_rs.index(m), seeds.index(s)] = at_rest_flag(analysis)
+    data["at_rest"] = at_rest_variable(dims, at_rest)
     coords |= {
         "aspect_ratio": ("aspect_ratio", ratios, {"units": "1", "long_name": "aspect ratio h0/r0"}),
         "mu_r": ("mu_r", mu_rs, {"units": "1", "long_name": "rolling resistance coefficient"}),
@@ -217,8 +221,9 @@ def run_flags(summary) -> dict:
     deposit at rest (False where a run is missing or the summary lacks what the flag needs):
 
     - "moving": still moving at the end: at_rest is 0 (the run reached max_duration moving), or, where
-      rest was not checked (a fixed end time: at_rest NaN or absent), its kinetic energy at the end is
-      above the collapse's rest_energy (1e-2 unless the run configurations say otherwise) of its peak;
+      rest was not checked (a fixed end time: at_rest -1, or in older summaries NaN or absent), its
+      kinetic energy at the end is above the collapse's rest_energy (1e-2 unless the run
+      configurations say otherwise) of its peak;
     - "fragment": the main mass, the largest connected cluster, holds less than half the grains.
     """
     ran = np.isfinite(summary.h_inf_over_r0)
