@@ -2,9 +2,11 @@
 
     python benchmarks/collapse.py --r0 2 3 4                 # a = 5, seed 1, the three runs below
     python benchmarks/collapse.py --r0 2 --runs auto-1000    # one run
+    python benchmarks/collapse.py --r0 6 --runs auto-1000 --threads 2   # issue 30's r0 = 6 target
 
-Columns are made as a user makes them: `colsim pack` (cached under benchmarks/.cache/, with its
-wall and CPU time in a .json beside it) and `colsim trim`. Each run is a separate process (so peak
+Columns are made as a user makes them: `colsim pack` (in layers unless --pack-layer-height none;
+cached under benchmarks/.cache/, with its wall and CPU time, peak memory and steps in a .json
+beside it, printed with the runs) and `colsim trim`. --threads: of the packing and of each run. Each run is a separate process (so peak
 memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`colsim.collapse.collapse`:
 
 - clarabel-100: Clarabel, 100 steps (the paper's dt/sqrt(h0/g) = 0.04);
@@ -28,26 +30,38 @@ from pathlib import Path
 
 import numpy as np
 
+from colsim.packing import LAYER_HEIGHT
+
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache"
 RUNS = {"clarabel-100": ("clarabel", 100, None), "auto-1000": ("auto", 1000, None),
         "clarabel-1000": ("clarabel", 1000, 20)}
 
 
-def column_file(r0: float, aspect_ratio: float, seed: int, pack_solver: str, pack_dt: float) -> Path:
+def column_file(r0: float, aspect_ratio: float, seed: int, pack_solver: str, pack_dt: float,
+                layer_height: str = "none", threads: int = 1) -> Path:
     """The trimmed column (made once with the colsim CLI and cached)."""
     CACHE.mkdir(exist_ok=True)
-    stem = f"r0_{r0:g}_seed_{seed}_{pack_solver}_dt{pack_dt:g}"
+    layers = "" if layer_height == "none" else f"_layers{float(layer_height):g}"
+    stem = f"r0_{r0:g}_seed_{seed}_{pack_solver}_dt{pack_dt:g}{layers}"
     packing = CACHE / f"packing_{stem}_h{aspect_ratio * r0:g}.nc"
     if not packing.exists():
         start, cpu = time.perf_counter(), _children_cpu()
         subprocess.run(["colsim", "pack", "--r0", f"{r0:g}", "--height", f"{aspect_ratio * r0:g}",
                         "--seed", str(seed), "--root-seed", "2024", "--dt", f"{pack_dt:g}",
-                        "--solver", pack_solver, "--max-steps", "20000", "--output", str(packing)],
+                        "--solver", pack_solver, "--max-steps", "20000", "--layer-height", layer_height,
+                        "--threads", str(threads), "--output", str(packing)],
                        check=True)
         record = {"wall_s": time.perf_counter() - start, "cpu_s": _children_cpu() - cpu,
-                  "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}
+                  "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+                  "threads": threads}
         packing.with_suffix(".json").write_text(json.dumps(record))
+    record = json.loads(packing.with_suffix(".json").read_text())
+    import xarray as xr
+    with xr.open_dataset(packing) as source:
+        record.update(spheres=int(source.sizes["particle"]), steps=int(source.attrs["steps"]),
+                      solid_fraction=float(source.attrs["solid_fraction"]))
+    print("packing", packing.name, json.dumps(record), flush=True)
     column = CACHE / f"column_{stem}_a{aspect_ratio:g}.nc"
     if not column.exists():
         subprocess.run(["colsim", "trim", "--input", str(packing), "--aspect-ratio", f"{aspect_ratio:g}",
@@ -60,11 +74,14 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run_one(column: Path, name: str) -> dict:
-    """One run in this process; returns its record."""
+def run_one(column: Path, name: str, threads: int = 1) -> dict:
+    """One run in this process on `threads` threads; returns its record."""
     from colsim import io
     from colsim.collapse import CollapseSettings, collapse
     from colsim.solvers import make_solver
+    from colsim.threads import use_threads
+
+    use_threads(threads)
 
     solver_name, n_steps, timed_steps = RUNS[name]
     state, source = io.read_state(column)
@@ -80,7 +97,7 @@ def run_one(column: Path, name: str) -> dict:
     energy = np.array([x.kinetic_energy + x.rotational_energy for x in d])
     iterations = np.array([x.solver_iterations for x in d])
     backends = [x.solver_backend for x in d]
-    return {"run": name, "spheres": state.n, "steps": len(d), "n_steps": n_steps,
+    return {"run": name, "spheres": state.n, "steps": len(d), "n_steps": n_steps, "threads": threads,
             "cpu_s": cpu, "wall_s": wall,
             "peak_mb": usage.ru_maxrss / 1024, "contacts": int(np.mean([x.n_contacts for x in d])),
             "backends": {b: backends.count(b) for b in sorted(set(backends))},
@@ -108,22 +125,26 @@ def main(argv=None):
     parser.add_argument("--pack-solver", default="auto",
                         help="solver of `colsim pack` (default: %(default)s, as a user packs; clarabel: the reference)")
     parser.add_argument("--pack-dt", type=float, default=0.02)
+    parser.add_argument("--pack-layer-height", default=str(LAYER_HEIGHT),
+                        help="colsim pack --layer-height (default: %(default)s; none: one pour)")
+    parser.add_argument("--threads", type=int, default=1, help="threads of the packing and of each run")
     parser.add_argument("--clarabel-100-up-to", type=float, default=3.0, metavar="R0",
                         help="run clarabel-100 only up to this r0 (at r0 = 4 it takes 10-20 hours; "
                              "clarabel-1000's 20 timed steps stand for it there)")
     parser.add_argument("--one", nargs=2, metavar=("COLUMN", "RUN"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
-        print(json.dumps(run_one(Path(args.one[0]), args.one[1])))
+        print(json.dumps(run_one(Path(args.one[0]), args.one[1], args.threads)))
         return
     records = []
     for r0 in args.r0:
-        column = column_file(r0, args.aspect_ratio, args.seed, args.pack_solver, args.pack_dt)
+        column = column_file(r0, args.aspect_ratio, args.seed, args.pack_solver, args.pack_dt,
+                             args.pack_layer_height, args.threads)
         for name in args.runs:
             if name == "clarabel-100" and r0 > args.clarabel_100_up_to:
                 print(f"skipping clarabel-100 at r0 = {r0:g} (--clarabel-100-up-to {args.clarabel_100_up_to:g})")
                 continue
-            out = subprocess.run([sys.executable, __file__, "--one", str(column), name],
+            out = subprocess.run([sys.executable, __file__, "--one", str(column), name, "--threads", str(args.threads)],
                                  check=True, capture_output=True, text=True).stdout
             record = json.loads(out.strip().splitlines()[-1])
             record["r0"] = r0

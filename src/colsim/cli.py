@@ -22,6 +22,7 @@ import math
 import sys
 from pathlib import Path
 
+from .packing import FREEZE_DEPTH, LAYER_HEIGHT
 from .solvers import SOLVERS, AutoSolver
 from .state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
 
@@ -53,6 +54,11 @@ def _non_negative(text):
     if not value >= 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
     return value
+
+
+def _positive_or_none(text):
+    """A positive number, or None for 'none'."""
+    return None if text.strip().lower() in ("none", "null") else _positive(text)
 
 
 def _positive_int(text):
@@ -119,6 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mu", type=_non_negative, default=0.0,
                    help="sliding friction between spheres and with the floor while filling; the paper's "
                         "is 0, a small value gives a looser packing (default: %(default)s)")
+    p.add_argument("--layer-height", type=_positive_or_none, default=LAYER_HEIGHT,
+                   help="fill in clouds that each add about this settled thickness, length; 'none': one "
+                        "cloud for the whole height (default: %(default)s)")
+    p.add_argument("--freeze-depth", type=_non_negative, default=FREEZE_DEPTH,
+                   help="while filling in layers, spheres at rest more than this below the settled "
+                        "surface are fixed and leave the program, length (default: %(default)s)")
     _solver_arguments(p)
     _length_floor_argument(p, "under auto 0.1: with the packing's tolerance 1e-3, each contact's gap to "
                               "1e-4 of a mean diameter at least")

@@ -129,11 +129,13 @@ def pack(args):
     solver = _pack_solver(args)
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu,
-                      max_spheres=args.max_spheres)
+                      max_spheres=args.max_spheres, layer_height=args.layer_height,
+                      freeze_depth=args.freeze_depth)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_settings(args), "solver_settings": solver.describe()}, args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
-                  "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity})
+                  "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity,
+                  "clouds": result.clouds, "most_fixed": result.most_fixed})
     io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
     log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s",
              result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time)

@@ -7,6 +7,11 @@ between the spheres and with the floor, for a looser packing than the paper's.) 
 spacing 1.04 d_max: each sphere moves at random inside its own lattice cell, so no two overlap.
 Clouds are added until the settled packing is taller than the requested height.
 
+In layers (the default): each cloud adds about `layer_height` of settled packing and falls a few
+diameters, not the column's height; before it falls, the spheres at rest more than `freeze_depth`
+below the surface are fixed and leave the cone program, so a step costs what the top of the
+packing costs, not the whole column (docs/validation/packing-layers.md measures both ways).
+
 "At rest" means 95 % of the particles have a translational kinetic energy below `rest_energy` times
 m g d (1e-3 by default: a speed below 0.045 sqrt(g d)) and 99 % carry a contact force; see
 :func:`is_at_rest`. Velocities are then set to zero.
@@ -15,12 +20,14 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .contacts import fixed_pairs
+from .program import SolverError
 from .solvers import Solver, WarmStart
-from .state import ContactLaw, ParticleState, StepSettings, Walls
+from .state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
 from .stepper import Carry, run
 
 log = logging.getLogger(__name__)
@@ -37,7 +44,8 @@ APGD_TOLERANCE = 1e-3
 @dataclass
 class PackingResult:
     """The settled packing and what it took. solid_fraction: of the column up to `height`.
-    contact_forces: the last step's contact forces (to warm-start what comes next)."""
+    contact_forces: the last step's contact forces (to warm-start what comes next). clouds: how
+    many clouds were poured; most_fixed: the most spheres fixed at once while filling."""
 
     state: ParticleState
     height: float
@@ -45,6 +53,8 @@ class PackingResult:
     steps: int
     wall_time: float
     contact_forces: WarmStart
+    clouds: int = 1
+    most_fixed: int = 0
 
 
 def lattice_cloud(r0: float, n_target: int, z_bottom: float, diameter_range, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -121,15 +131,33 @@ def expected_spheres(r0: float, height: float, diameter_range) -> float:
     return SOLID_FRACTION_GUESS * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
 
 
+#: Filling in layers (:func:`pack`): the settled thickness each cloud adds, and the depth below
+#: the settled surface from which slow spheres are fixed (length, the paper's diameters 0.25-0.5).
+LAYER_HEIGHT = 2.5
+FREEZE_DEPTH = 3.5
+#: A layer has landed (the next cloud may come) at the rest criterion with this many times
+#: rest_energy: speeds 10x those of rest. Only the last cloud must come to rest.
+LANDED_ENERGY_FACTOR = 100.0
+
+
 def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
          density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
          max_steps: int = 5000, progress=None, mu: float = 0.0,
-         max_spheres: int | None = DEFAULT_MAX_SPHERES) -> PackingResult:
+         max_spheres: int | None = DEFAULT_MAX_SPHERES, layer_height: float | None = LAYER_HEIGHT,
+         freeze_depth: float = FREEZE_DEPTH) -> PackingResult:
     """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
     solving each step with `solver`. mu: sliding friction between the spheres and with the floor
     while filling (the paper's 0; the cylinder stays frictionless, rolling is free).
     max_spheres: ValueError before anything is allocated when the packing would hold more
-    (:func:`expected_spheres`; None: no bound)."""
+    (:func:`expected_spheres`; None: no bound).
+
+    layer_height: each cloud adds about this settled thickness (length; None: one cloud for the
+    whole height). Before a cloud falls, the spheres more than freeze_depth (length) below the
+    settled surface that are at rest become fixed (:class:`colsim.state.FixedSpheres`): they leave
+    the program, and the cloud and the top of the packing settle on them. A cloud is followed by
+    the next once it has landed (:data:`LANDED_ENERGY_FACTOR`); the last one and the spheres not
+    fixed step until :func:`is_at_rest` (the fixed ones were at rest when fixed). The forces
+    handed on are the last step's, and between fixed spheres those of when they last moved."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")
@@ -137,6 +165,10 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
         raise ValueError(f"cylinder radius r0 = {r0} is smaller than the largest particle (diameter {d_max})")
     if height <= 0:
         raise ValueError(f"packing height must be positive, got {height}")
+    if layer_height is not None and not layer_height > 0:
+        raise ValueError(f"layer height must be positive (or None: one cloud), got {layer_height}")
+    if not freeze_depth >= 0:
+        raise ValueError(f"freeze depth must be >= 0, got {freeze_depth}")
     settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -gravity), walls=Walls(cylinder_radius=r0),
                             law=ContactLaw.uniform(mu, 0.0))
     expected = expected_spheres(r0, height, diameter_range)
@@ -146,33 +178,144 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                          "(raise it with --max-spheres, or pack.max_spheres in a study)")
     mean_volume = mean_sphere_volume(diameter_range)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
-    start, steps, carry, result = time.perf_counter(), 0, Carry(), None
+    fixed = np.zeros(0, dtype=bool)
+    start, steps, warm = time.perf_counter(), 0, None
+    clouds, most_fixed = 0, 0
     while column_height(state) < height:
-        missing = height + 2 * d_max - column_height(state)
-        n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * missing / mean_volume))
+        surface = column_height(state)
+        missing = height + 2 * d_max - surface
+        last = layer_height is None or missing <= layer_height + 2 * d_max
+        thickness = missing if last else layer_height
+        n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * thickness / mean_volume))
         z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
+        if layer_height is not None:
+            fixed |= _buried_at_rest(state, surface - freeze_depth, gravity, rest_energy)
         position, radius = lattice_cloud(r0, n_new, z_bottom, diameter_range, rng)
         state = _add(state, position, radius)
-        log.info("pouring %d spheres (%d in all) from z = %.2f", len(radius), state.n, z_bottom)
-        for result in run(state, settings, max_steps - steps, solver, first_step=steps, carry=carry):
-            state, steps = result.state, steps + 1
-            if progress is not None:
-                progress(result.diagnostics, state)
-            if steps % 50 == 0:
-                d = result.diagnostics
-                log.info("pack step %d: %d contacts, kinetic energy %.3g, %.2f s solve",
-                         steps, d.n_contacts, d.kinetic_energy + d.rotational_energy, d.solve_time)
-            if is_at_rest(result, gravity, rest_energy):
-                break
-        else:
-            raise RuntimeError(f"packing not at rest after {max_steps} steps (raise max_steps or dt)")
-        carry = Carry(result.carry.warm_start)  # the poured spheres keep their numbers: keep the forces
+        fixed = np.concatenate([fixed, np.zeros(len(radius), dtype=bool)])
+        clouds, most_fixed = clouds + 1, max(most_fixed, int(np.count_nonzero(fixed)))
+        log.info("pouring %d spheres (%d in all, %d fixed) from z = %.2f", len(radius), state.n,
+                 np.count_nonzero(fixed), z_bottom)
+        energy = rest_energy if last else LANDED_ENERGY_FACTOR * rest_energy
+        try:
+            state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress)
+        except SolverError as error:
+            if not fixed.any():
+                raise
+            # a moving sphere caged by fixed ones that overlap it from opposite sides has no
+            # feasible step: this cloud settles again with nothing fixed
+            log.warning("%s; settling this cloud again with nothing fixed", error)
+            fixed[:] = False
+            state, warm, steps = _settle(state, fixed, settings, solver, warm, error.step or steps,
+                                         max_steps, energy, progress)
     state.velocity[:] = 0.0
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
                          steps, time.perf_counter() - start,
-                         WarmStart.from_step(result.contacts, result.solution.forces))
+                         warm, clouds, most_fixed)
+
+
+def _buried_at_rest(state: ParticleState, depth_z: float, gravity: float, rest_energy: float) -> np.ndarray:
+    """(n,) bool: spheres whose top is below depth_z (length) and whose kinetic energy of
+    translation is below rest_energy m g d."""
+    speed2 = np.einsum("ij,ij->i", state.velocity, state.velocity)
+    slow = 0.5 * speed2 / (gravity * 2.0 * state.radius) < rest_energy
+    return slow & (state.position[:, 2] + state.radius < depth_z)
+
+
+def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
+            warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress):
+    """Step the spheres not `fixed` ((n,) bool) on the fixed ones until :func:`is_at_rest` with
+    rest_energy. warm: forces by pair in the numbering of `state` (None: cold). Returns the new
+    state, the forces by pair (numbering of `state`: the last step's, and those of pairs of fixed
+    spheres from when they last moved) and the step count."""
+    moving = np.flatnonzero(~fixed)
+    below = state.position[moving, 2] - state.radius[moving]
+    near = fixed & (state.position[:, 2] + state.radius > float(below.min()) - 2.0 * state.radius.max())
+    supports = np.flatnonzero(near)
+    walls = replace(settings.walls, fixed=FixedSpheres(state.position[supports], state.radius[supports]))
+    local = replace(settings, walls=walls)
+    carry = Carry(None if warm is None else _renumber(warm, moving, supports, state.n))
+    sub = state.subset(moving)
+    gravity = -settings.gravity[2]
+    for result in run(sub, local, max_steps - steps, solver, first_step=steps, carry=carry):
+        sub, steps = result.state, steps + 1
+        if progress is not None:
+            progress(result.diagnostics, sub)
+        if steps % 50 == 0:
+            d = result.diagnostics
+            log.info("pack step %d: %d moving, %d contacts, kinetic energy %.3g, %.2f s solve",
+                     steps, sub.n, d.n_contacts, d.kinetic_energy + d.rotational_energy, d.solve_time)
+        if is_at_rest(result, gravity, rest_energy):
+            break
+    else:
+        raise RuntimeError(f"packing not at rest after {max_steps} steps (raise max_steps or dt)")
+    _check_clear_of_fixed(sub, state.subset(fixed), settings.overlap_tolerance)
+    state = _place(state, moving, sub)
+    forces = _number_back(WarmStart.from_step(result.contacts, result.solution.forces), moving, supports)
+    return state, _merge(_between_fixed(warm, fixed), forces), steps
+
+
+def _place(state: ParticleState, moving: np.ndarray, sub: ParticleState) -> ParticleState:
+    """`state` with the particles `moving` (indices) replaced by those of `sub`, at sub's time."""
+    out = state.copy()
+    out.position[moving], out.velocity[moving] = sub.position, sub.velocity
+    out.angular_velocity[moving] = sub.angular_velocity
+    out.time = sub.time
+    return out
+
+
+def _renumber(warm: WarmStart, moving: np.ndarray, supports: np.ndarray, n: int) -> WarmStart:
+    """The pairs of `warm` (numbered as the n particles) between a moving particle and a moving
+    one, a wall or a support, numbered as the step numbers them: moving in order, supports as fixed
+    spheres (j = -2 - k)."""
+    as_moving = np.full(n, -1, dtype=np.int64)
+    as_moving[moving] = np.arange(len(moving))
+    as_support = np.full(n, -1, dtype=np.int64)
+    as_support[supports] = np.arange(len(supports))
+    i = as_moving[warm.i]
+    other = np.maximum(warm.j, 0)
+    j = np.where(warm.j < 0, warm.j,
+                 np.where(as_moving[other] >= 0, as_moving[other], fixed_code(as_support[other])))
+    keep = (i >= 0) & ((warm.j < 0) | (as_moving[other] >= 0) | (as_support[other] >= 0))
+    return WarmStart(i[keep], j[keep], warm.family[keep], warm.force[keep], warm.rolling[keep])
+
+
+def _number_back(forces: WarmStart, moving: np.ndarray, supports: np.ndarray) -> WarmStart:
+    """The inverse of :func:`_renumber`: a step's forces in the numbering of the whole packing."""
+    i = moving[forces.i]
+    j = np.where(forces.j >= 0, moving[np.maximum(forces.j, 0)],
+                 np.where(forces.j == -1, -1, supports[np.maximum(-2 - forces.j, 0)] if len(supports) else -1))
+    return WarmStart(i, j, forces.family.copy(), forces.force.copy(), forces.rolling.copy())
+
+
+def _between_fixed(warm: WarmStart | None, fixed: np.ndarray) -> WarmStart | None:
+    """The pairs of `warm` whose bodies are all fixed (or walls): their forces from when they last moved."""
+    if warm is None:
+        return None
+    keep = fixed[warm.i] & ((warm.j == -1) | fixed[np.maximum(warm.j, 0)])
+    return WarmStart(warm.i[keep], warm.j[keep], warm.family[keep], warm.force[keep], warm.rolling[keep])
+
+
+def _merge(old: WarmStart | None, new: WarmStart) -> WarmStart:
+    """The pairs of two warm starts with no pair in both."""
+    if old is None:
+        return new
+    return WarmStart(*(np.concatenate([getattr(old, name), getattr(new, name)])
+                       for name in ("i", "j", "family", "force", "rolling")))
+
+
+def _check_clear_of_fixed(moving: ParticleState, fixed: ParticleState, tolerance: float) -> None:
+    """RuntimeError when a moving sphere overlaps a fixed one by more than `tolerance` of the
+    smallest diameter: one that sank below the supports given to the program."""
+    if fixed.n == 0 or moving.n == 0:
+        return
+    allowed = tolerance * 2.0 * float(min(moving.radius.min(), fixed.radius.min()))
+    _, _, _, gap = fixed_pairs(moving, FixedSpheres(fixed.position, fixed.radius), np.zeros(moving.n))
+    if gap.size and -gap.min() > allowed:
+        raise RuntimeError(f"a settling sphere overlaps a fixed one by {-gap.min():.3g} (allowed {allowed:.3g}): "
+                           "it sank below the supports; raise pack.freeze_depth")
 
 
 def _add(state: ParticleState, position, radius) -> ParticleState:

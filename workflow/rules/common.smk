@@ -151,6 +151,9 @@ RUN_TO_REST = config["collapse"]["max_duration"] is not None
 
 
 NOT_IDENTITY = ("max_spheres", "threads")   # pack.* settings that do not change a packing
+# ... nor do the layers' settings of a packing poured in one cloud (layer_height null), which so
+# keeps the folder it had before layers existed
+ONE_CLOUD_NOT_IDENTITY = NOT_IDENTITY + ("layer_height", "freeze_depth")
 
 
 def settings_key(settings):
@@ -216,11 +219,12 @@ def pack_height(r0, seed):
 
 def packing_settings(r0, seed):
     """Everything `colsim pack` is given for the packing of (r0, seed): its identity."""
+    not_identity = NOT_IDENTITY if config["pack"]["layer_height"] is not None else ONE_CLOUD_NOT_IDENTITY
     return {"r0": float(r0), "seed": int(seed), "height": float(pack_height(r0, seed)),
             "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
             "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
             "gravity": float(config["gravity"]), "solver": config["solver"],
-            "pack": {key: value for key, value in config["pack"].items() if key not in NOT_IDENTITY}}
+            "pack": {key: value for key, value in config["pack"].items() if key not in not_identity}}
 
 
 def packing_dir(r0, seed):

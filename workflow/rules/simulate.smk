@@ -42,6 +42,8 @@ rule pack:
         max_steps=config["pack"]["max_steps"],
         max_spheres=config["pack"]["max_spheres"],
         mu=config["pack"]["mu"],
+        layer_height=config["pack"]["layer_height"],
+        freeze_depth=config["pack"]["freeze_depth"],
         solver=config["solver"],
     log:
         logged(f"{PACKING_DIR}/pack.log"),
@@ -52,7 +54,7 @@ rule pack:
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
         " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
-        " --max-spheres {params.max_spheres}"
+        " --max-spheres {params.max_spheres} --layer-height {params.layer_height} --freeze-depth {params.freeze_depth}"
         " --solver {params.solver} --threads {threads} --output {output:q} > {log:q} 2>&1"
 
 
