@@ -26,7 +26,7 @@ DT = 0.02
 COLLAPSE_LAW = ContactLaw.uniform(0.577, 0.12)
 
 ROOT = Path(__file__).resolve().parents[1]
-WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow")
+WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow", "profiles")
 #: where the tiny study (config/tiny.yaml, study: tiny) writes its summary, tables and figures
 TINY = "results/tiny"
 

@@ -130,6 +130,25 @@ def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
 
 
 @pytest.mark.slow
+def test_a_rewritten_rule_does_not_redo_its_results(tiny_study):
+    """profiles/default: a rule whose command or parameters were edited (here the pack rule gains
+    a parameter and an option, as when pack.layer_height came) redoes nothing: a result's settings
+    are its folder's key, so only a missing or outdated file is made again."""
+    rules = tiny_study / "workflow" / "rules" / "simulate.smk"
+    original = rules.read_text()
+    edited = original.replace('        solver=config["solver"],\n', '        solver=config["solver"],\n        edited=1,\n', 1)
+    edited = edited.replace('" --solver {params.solver} --threads {threads}', '" --solver {params.solver} --verbose --threads {threads}', 1)
+    assert edited.count("edited=1") == 1 and "--verbose --threads" in edited
+    rules.write_text(edited)
+    try:
+        result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml")
+    finally:
+        rules.write_text(original)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert planned_outputs(result) == [], result.stdout
+
+
+@pytest.mark.slow
 def test_report_describes_the_study_it_shows(tiny_study):
     """Issue 16, defect 1: the report's text comes from the tiny study's own files, also when the
     configuration that builds the report says otherwise; no Docutils error box."""
