@@ -102,3 +102,34 @@ def test_convergence_figure_is_written(tmp_path):
               "seeds": [analysis(seed=s) for s in (1, 2)]}
     path = convergence_figure(runs_table(groups, 4.0), tmp_path / "convergence.png")
     assert path.stat().st_size > 10000
+
+
+def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
+    """Runs made on X = X_inf + k d/r0 exactly (r0 = 2, 3, 4, three seeds, d = 0.375, a = 2 and 5)
+    give X_inf to 1e-9 (a least-squares fit of noise-free data) with a zero-width interval; the
+    r0 within 5 % solves |k| (d/r0) = 0.05 X_inf; the laws are those of colsim.laws at each a
+    (no Lajeunesse height above a = 0.74); the table and the figure are written."""
+    from colsim.convergence import column_size_limit_markdown, column_size_limits
+    from colsim.laws import lube_height, lube_runout
+    from colsim.plots import column_size_limit_figure
+
+    d, truth = 0.375, {"h": (0.9, -1.2), "runout": (3.5, -4.0)}
+    runs = [analysis(a=a, r0=r0, seed=seed, mean_d=d, h=truth["h"][0] + truth["h"][1] * d / r0,
+                     runout=truth["runout"][0] + truth["runout"][1] * d / r0)
+            for a in (2.0, 5.0) for r0 in (2.0, 3.0, 4.0) for seed in (1, 2, 3)]
+    limits = column_size_limits(runs_table({"column_size": runs}, 4.0), replicates=200)
+    for a in (2.0, 5.0):
+        h = limits.sel(aspect_ratio=a, measure="h_inf_over_r0")
+        r = limits.sel(aspect_ratio=a, measure="runout_over_r0")
+        assert float(h.limit) == pytest.approx(0.9, abs=1e-9)
+        assert float(r.limit) == pytest.approx(3.5, abs=1e-9)
+        assert float(r.limit_high) - float(r.limit_low) == pytest.approx(0.0, abs=1e-9)
+        assert float(r.r0_for_5_percent) == pytest.approx(4.0 * d / (0.05 * 3.5))
+        assert float(h.lube) == pytest.approx(float(lube_height(a)))
+        assert float(r.lube) == pytest.approx(float(lube_runout(a)))
+        assert np.isnan(float(h.lajeunesse))
+    text = column_size_limit_markdown(limits)
+    assert "| 5 | runout_over_r0 | 3 | 4 | 3.500 [3.500, 3.500] |" in text
+    assert column_size_limit_figure(runs_table({"column_size": runs}, 4.0), limits, tmp_path / "f.png").stat().st_size > 0
+    one_size = runs_table({"column_size": [analysis(r0=2.0, seed=s) for s in (1, 2)]}, 4.0)
+    assert column_size_limits(one_size) is None

@@ -206,6 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", default=None, help="also write the table as CSV here")
     p.add_argument("--markdown", default=None, help="also write the relative changes as Markdown here")
     p.add_argument("--figure", default=None, help="also draw the figure (PNG) here")
+    p.add_argument("--limits", default=None,
+                   help="also write the column-size limits (X = X_inf + k (d/r0)^p per a; netCDF) here")
+    p.add_argument("--size-figure", default=None,
+                   help="also draw the column-size runs, fits and limits against Lube and Lajeunesse (PNG) here")
 
     p = sub.add_parser("compare-laws", help="the same runs under the associated and the Coulomb friction law: "
                                             "one table against Lube's laws and a figure")

@@ -25,7 +25,7 @@ def _settings(args) -> dict:
 
 INPUT_ARGUMENTS = ("input", "inputs", "summary", "analyses", "trajectories", "time_step", "end_time",
                    "column_size", "seeds", "associated", "coulomb")
-OUTPUT_ARGUMENTS = ("output", "csv", "markdown", "figure", "checkpoint")
+OUTPUT_ARGUMENTS = ("output", "csv", "markdown", "figure", "checkpoint", "limits", "size_figure")
 
 
 def _paths(args, names) -> list[Path]:
@@ -248,9 +248,24 @@ def convergence(args):
               for name in study.SUB_STUDIES}
     table = study.runs_table(groups, args.default_end)
     table.attrs.update(io.global_attributes("convergence-table", "colsim convergence study", _settings(args)))
+    limits = study.column_size_limits(table) if groups["column_size"] else None
     text = study.convergence_markdown(table)
+    if groups["column_size"]:
+        text += "\n" + study.column_size_limit_markdown(limits)
     log.info("convergence:\n%s", text)
     writers = {args.output: lambda tmp: io.write_netcdf(table, tmp)}
+    if args.limits:
+        if limits is None:
+            import xarray as xr
+
+            limits = xr.Dataset(attrs={"comment": "no aspect ratio has column-size runs of two r0 or more: "
+                                                  "no limit fitted"})
+        limits.attrs.update(io.global_attributes("column-size-limits", "colsim column-size limits", _settings(args)))
+        writers[args.limits] = lambda tmp: io.write_netcdf(limits, tmp)
+    if args.size_figure:
+        from .plots import column_size_limit_figure
+
+        writers[args.size_figure] = lambda tmp: column_size_limit_figure(table, limits, tmp)
     if args.csv:
         writers[args.csv] = _csv_writer(table)
     if args.markdown:

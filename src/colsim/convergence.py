@@ -235,3 +235,103 @@ def convergence_markdown(table) -> str:
         if study.sizes.get("run", 0):
             lines += section(study) + [""]
     return "\n".join(lines)
+
+
+LIMIT_MEASURES = ("h_inf_over_r0", "runout_over_r0")
+#: Accuracies for which :func:`column_size_limits` states the r0 a study needs.
+LIMIT_ACCURACIES = (0.05, 0.02)
+
+
+def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed: int = 0):
+    """The column-size limit X_inf of h_inf/r0 and the run-out at each aspect ratio of the
+    column_size sub-study with at least 2 sizes (:func:`colsim.size_limit.size_limit`: X(r0) =
+    X_inf + k (d/r0)^p, its interval by bootstrap over seeds and sizes), beside Lube's and
+    Lajeunesse's laws, and the r0 (length) at which the fit is within 5 % and 2 % of X_inf.
+
+    Returns a Dataset over (aspect_ratio, measure); None when no aspect ratio has 2 sizes."""
+    import xarray as xr
+
+    from .laws import LAJEUNESSE_BREAK, LAWS
+    from .size_limit import size_limit
+
+    study = table.where(table.study == "column_size", drop=True)
+    if study.sizes.get("run", 0) == 0:
+        return None
+    rows = {}
+    for a in np.unique(study.aspect_ratio.values):
+        part = study.isel(run=np.flatnonzero(study.aspect_ratio.values == a))
+        r0 = part.r0.values
+        if len(np.unique(r0)) < 2:
+            continue
+        diameter = float(np.mean(r0 / part.r0_over_mean_diameter.values))
+        for measure in LIMIT_MEASURES:
+            values = part[measure].values
+            runs = {float(r): values[r0 == r] for r in np.unique(r0)}
+            limit = size_limit(runs, diameter, replicates, level, seed)
+            fit = limit.fit
+            laws = {name.split()[0]: float(law(a)) for name, law in LAWS[measure].items()}
+            if measure == "h_inf_over_r0" and a > LAJEUNESSE_BREAK:
+                laws["Lajeunesse"] = np.nan   # its height law as printed (0.74 a) is no final height there
+            needed = [diameter * (abs(fit.k) / (accuracy * abs(fit.x_inf))) ** (1.0 / fit.p)
+                      if fit.x_inf else np.nan for accuracy in LIMIT_ACCURACIES]
+            rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, float(fit.p_fitted),
+                                         laws["Lube"], laws["Lajeunesse"], len(runs), float(max(runs)),
+                                         diameter, *needed]
+    if not rows:
+        return None
+    names = ["limit", "limit_low", "limit_high", "slope", "exponent", "exponent_fitted", "lube", "lajeunesse",
+             "n_sizes", "largest_r0", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"]
+    long_names = {
+        "limit": "column-size limit X_inf of the fit X = X_inf + k (d/r0)^p",
+        "limit_low": f"lower end of the {level:.0%} bootstrap interval of X_inf",
+        "limit_high": f"upper end of the {level:.0%} bootstrap interval of X_inf",
+        "slope": "k of the fit", "exponent": "p of the fit (1 unless fitted)",
+        "exponent_fitted": "whether p was fitted (1) or fixed at 1 (0)",
+        "lube": "Lube et al. (2004) at this a",
+        "lajeunesse": "Lajeunesse et al. (2004) at this a (no height above a = 0.74: its printed law is none)",
+        "n_sizes": "column sizes fitted", "largest_r0": "largest r0 measured",
+        "mean_diameter": "mean particle diameter d",
+        "r0_for_5_percent": "r0 at which the fit is within 5 % of X_inf",
+        "r0_for_2_percent": "r0 at which the fit is within 2 % of X_inf"}
+    lengths = {"largest_r0", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"}
+    aspect = sorted({a for a, _ in rows})
+    data = {}
+    for k, name in enumerate(names):
+        grid = np.full((len(aspect), len(LIMIT_MEASURES)), np.nan)
+        for (a, measure), values in rows.items():
+            grid[aspect.index(a), LIMIT_MEASURES.index(measure)] = values[k]
+        data[name] = (("aspect_ratio", "measure"), grid,
+                      {"long_name": long_names[name], "units": "length" if name in lengths else "1"})
+    limits = xr.Dataset(data, coords={
+        "aspect_ratio": ("aspect_ratio", aspect, {"long_name": "aspect ratio h0/r0", "units": "1"}),
+        "measure": ("measure", list(LIMIT_MEASURES), {"long_name": "deposit measure X"})})
+    limits.attrs.update(replicates=replicates, level=level, bootstrap_seed=seed)
+    return limits
+
+
+def column_size_limit_markdown(limits) -> str:
+    """The limits of :func:`column_size_limits` as a Markdown table."""
+    if limits is None:
+        return "### Column-size limits\n\nFewer than two column sizes at every aspect ratio: no limit fitted.\n"
+    level = float(limits.attrs["level"])
+    lines = ["### Column-size limits (X = X_inf + k (d/r0)^p over every seed)", "",
+             f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | p | Lube | X_inf vs Lube | "
+             "Lajeunesse | X_inf vs Lajeunesse | r0 for 5 % | r0 for 2 % |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for a in limits.aspect_ratio.values:
+        for measure in limits.measure.values:
+            row = limits.sel(aspect_ratio=a, measure=measure)
+            if np.isnan(float(row.limit)):
+                continue
+            x, lube, laj = float(row.limit), float(row.lube), float(row.lajeunesse)
+            p = f"{float(row.exponent):.2f}" + (" (fitted)" if float(row.exponent_fitted) else "")
+            lines.append(f"| {a:g} | {measure} | {int(row.n_sizes)} | {float(row.largest_r0):g} | {x:.3f} "
+                         f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | {lube:.3f} | "
+                         f"{100 * (x / lube - 1):+.0f} % | {_or_dash(laj, '.3f')} | {_or_dash(100 * (x / laj - 1), '+.0f', ' %')} | "
+                         f"{float(row.r0_for_5_percent):.2g} | {float(row.r0_for_2_percent):.2g} |")
+    return "\n".join(lines) + "\n"
+
+
+def _or_dash(value: float, spec: str, suffix: str = "") -> str:
+    """`value` formatted, or '-' when it is NaN."""
+    return "-" if np.isnan(value) else f"{value:{spec}}{suffix}"

@@ -606,3 +606,48 @@ def convergence_figure(table, path: Path) -> Path:
         ax.legend(fontsize=7)
     return _save(fig, path)
 
+
+
+def column_size_limit_figure(table, limits, path: Path) -> Path:
+    """h_inf/r0 (top) and the run-out (bottom) against d/r0, one column per aspect ratio of the
+    column_size sub-study: each run (one point per seed), the fit X_inf + k (d/r0)^p, X_inf at
+    d/r0 = 0 with its bootstrap interval, and Lube's and Lajeunesse's values there (the
+    experiments' columns held thousands of grains across: d/r0 about 0; Lajeunesse's height only
+    up to a = 0.74, where its printed law is a height). `limits`: from
+    :func:`colsim.convergence.column_size_limits` (None: points only)."""
+    plt = _pyplot()
+    study = table.where(table.study == "column_size", drop=True)
+    aspect = np.unique(study.aspect_ratio.values) if study.sizes.get("run", 0) else np.array([])
+    fig, axes = plt.subplots(2, max(len(aspect), 1), figsize=(3.2 * max(len(aspect), 1) + 1, 6.5),
+                             layout="constrained", squeeze=False)
+    if not len(aspect):
+        for ax in axes.ravel():
+            _empty(ax, "no column-size runs")
+        return _save(fig, path)
+    for col, a in enumerate(aspect):
+        part = study.isel(run=np.flatnonzero(study.aspect_ratio.values == a))
+        x = 1.0 / part.r0_over_mean_diameter.values
+        for row, measure in enumerate(("h_inf_over_r0", "runout_over_r0")):
+            ax = axes[row, col]
+            ax.plot(x, part[measure].values, "o", color="C0", mfc="none", label="runs (one per seed)")
+            fitted = limits is not None and "aspect_ratio" in limits.coords and a in limits.aspect_ratio.values
+            fit = limits.sel(aspect_ratio=a, measure=measure) if fitted else None
+            if fit is not None and np.isfinite(float(fit.limit)):
+                grid = np.linspace(0.0, 1.05 * x.max(), 100)
+                curve = float(fit.limit) + float(fit.slope) * grid ** float(fit.exponent)
+                ax.plot(grid, curve, "-", color="C0", lw=1, label=f"fit, p = {float(fit.exponent):.2f}")
+                low, high = float(fit.limit_low), float(fit.limit_high)
+                ax.errorbar([0.0], [float(fit.limit)], yerr=[[float(fit.limit) - low], [high - float(fit.limit)]],
+                            fmt="D", color="C0", capsize=3, label=f"X_inf, {float(limits.attrs['level']):.0%} interval")
+            for offset, (name, law) in zip((-0.004, 0.004), LAWS[measure].items()):
+                if measure == "h_inf_over_r0" and "Lajeunesse" in name and a > LAJEUNESSE_BREAK:
+                    continue   # its height law as printed (0.74 a) is not a final height there
+                ax.plot([offset], [float(law(a))], "s" if "Lube" in name else "^", color="k" if "Lube" in name else "C3",
+                        label=name)
+            ax.set_xlim(-0.01, 1.1 * x.max())
+            ax.set_title(f"a = {a:g}", fontsize=10)
+            ax.set_xlabel("mean diameter / r0")
+            ax.set_ylabel(QUANTITY_LABELS[measure])
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    return _save(fig, path)

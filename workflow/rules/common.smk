@@ -347,7 +347,8 @@ def convergence_outputs():
     """The convergence study's products, or none."""
     if not config.get("convergence"):
         return []
-    return [f"{STUDY_DIR}/convergence.nc", f"{STUDY_DIR}/convergence.md", f"{STUDY_DIR}/figures/convergence.png"]
+    return [f"{STUDY_DIR}/convergence.nc", f"{STUDY_DIR}/convergence.md", f"{STUDY_DIR}/figures/convergence.png",
+            f"{STUDY_DIR}/column_size_limits.nc", f"{STUDY_DIR}/figures/column_size_limits.png"]
 
 
 def collapse_runtime(wildcards):

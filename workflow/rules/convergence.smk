@@ -21,6 +21,13 @@ rule convergence:
             category="Convergence",
             labels={"figure": "Convergence"},
         ),
+        limits=f"{STUDY_DIR}/column_size_limits.nc",
+        size_figure=report(
+            f"{STUDY_DIR}/figures/column_size_limits.png",
+            caption="../report/column_size_limits.rst",
+            category="Convergence",
+            labels={"figure": "Column-size limits"},
+        ),
     params:
         default_end=config["collapse"]["duration"],
     log:
@@ -31,4 +38,4 @@ rule convergence:
         "colsim convergence --time-step {input.time_step:q} --end-time {input.end_time:q}"
         " --column-size {input.column_size:q} --seeds {input.seeds:q} --default-end {params.default_end}"
         " --output {output.nc:q} --csv {output.csv:q} --markdown {output.markdown:q}"
-        " --figure {output.figure:q} > {log:q} 2>&1"
+        " --figure {output.figure:q} --limits {output.limits:q} --size-figure {output.size_figure:q} > {log:q} 2>&1"
