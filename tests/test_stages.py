@@ -471,12 +471,15 @@ def test_a_column_of_less_than_a_layer_is_an_error(tmp_path, capsys):
     assert not (tmp_path / "x.nc").exists()
 
 
-def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40, **collapse):
+def _analysis_file(path, r0=1.0, aspect_ratio=1.0, steps=40, pack=None, **collapse):
     """A small analysis file as `colsim analyse` writes it, with its configuration chain (collapse:
-    more `colsim collapse` options)."""
+    more `colsim collapse` options; pack: the `colsim pack` options, if any)."""
+    trim = {"command": "trim", "aspect_ratio": aspect_ratio}
+    if pack is not None:
+        trim["input_config"] = {"command": "pack", **pack}
     config = {"command": "analyse", "contact_tolerance": 0.01, "input": "collapse.nc",
               "input_config": {"command": "collapse", "steps": steps, "mu_r": 0.12, "output": "collapse.nc",
-                               **collapse, "input_config": {"command": "trim", "aspect_ratio": aspect_ratio}}}
+                               **collapse, "input_config": trim}}
     attrs = {**io.global_attributes(io.ANALYSIS_KIND, "t", config, seed=1), "aspect_ratio": aspect_ratio,
              "mu_r": 0.12, "mu": 0.577, "r0": r0, "h0": aspect_ratio * r0, "duration": 4.0, "n_steps": steps}
     data = {name: ((), 1.0, {"units": "1", "long_name": name}) for name in SUMMARY_VARIABLES}
@@ -510,6 +513,20 @@ def test_associated_runs_are_collected_whatever_their_unused_friction_tolerance(
     _analysis_file(tmp_path / "a.nc", aspect_ratio=1.0, friction_law="associated", friction_tolerance=1e-4)
     _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, friction_law="associated", friction_tolerance=1e-5)
     assert _main_in(tmp_path, ["collect", "a.nc", "b.nc", "--output", "summary.nc"]) == 0
+
+
+def test_packings_poured_in_one_cloud_before_and_after_layers_are_one_study(tmp_path, capsys):
+    """A packing made before layers existed (no layer_height, no max_spheres bound) and one poured in
+    one cloud since (layer_height None, its unused freeze depth, the bound) are the same filling: one
+    study. A packing filled in layers is not."""
+    _analysis_file(tmp_path / "a.nc", aspect_ratio=1.0, pack={"mu": 0.0, "dt": 0.02})
+    _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, pack={"mu": 0.0, "dt": 0.02, "layer_height": None,
+                                                              "freeze_depth": 3.5, "max_spheres": 500000})
+    assert _main_in(tmp_path, ["collect", "a.nc", "b.nc", "--output", "summary.nc"]) == 0
+    _analysis_file(tmp_path / "c.nc", aspect_ratio=3.0, pack={"mu": 0.0, "dt": 0.02, "layer_height": 2.5,
+                                                              "freeze_depth": 3.5, "max_spheres": 500000})
+    assert _main_in(tmp_path, ["collect", "a.nc", "c.nc", "--output", "summary2.nc"]) == 2
+    assert "runs differ in pack.freeze_depth: None in" in capsys.readouterr().err   # the first named
 
 
 #: every unit colsim writes: UDUNITS strings (SI, with g = 9.81 m s-2) and "1"

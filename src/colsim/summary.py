@@ -26,23 +26,29 @@ RUN_ATTRIBUTES = {
 }
 
 
-# what a run's settings may differ in between the runs of one summary: the swept values, file names
-# and checkpointing (which does not change a result)
+# what a run's settings may differ in between the runs of one summary: the swept values, file names,
+# checkpointing, threads and the packing's size bound (none of which changes a result)
 SWEPT = ("aspect_ratio", "mu_r", "seed")
-NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads"}
+NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads",
+                             "max_spheres"}
 
 
 def run_settings(analysis) -> dict:
     """A run's settings, flattened: r0 and mu, and each stage's options from the configuration
-    chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS and the
-    Coulomb fixed point's tolerance of an associated run (which does not use it)."""
+    chain in the file (analyse, collapse, trim, pack: "collapse.steps"), less NOT_SETTINGS, the
+    Coulomb fixed point's tolerance of an associated run and the freeze depth of a packing poured in
+    one cloud (which do not use them)."""
     settings = {name: float(analysis.attrs[name]) for name in ("r0", "mu") if name in analysis.attrs}
     config = json.loads(analysis.attrs.get("config", "{}"))
     while config:
         stage = config.get("command", "stage")
         if stage == "collapse":   # runs made before the option existed used R_eff
             config = {"rolling_lever": "effective", **config}
+        if stage == "pack":       # packings made before layers were poured in one cloud
+            config = {"layer_height": None, **config}
         unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
+        if stage == "pack" and config["layer_height"] is None:
+            unused = {"freeze_depth"}
         settings |= {f"{stage}.{key}": value for key, value in config.items()
                      if key not in NOT_SETTINGS | unused and key != "input_config"}
         config = config.get("input_config") or {}
