@@ -4,7 +4,7 @@
     python benchmarks/collapse.py --r0 2 --runs auto-1000    # one run
     python benchmarks/collapse.py --r0 6 --runs auto-1000 --threads 2   # issue 30's r0 = 6 target
 
-Columns are made as a user makes them: `colsim pack` (in layers unless --pack-layer-height none;
+Columns are made as a user makes them: `colsim pack` (in layers with --pack-layer-height 2.5;
 cached under benchmarks/.cache/, with its wall and CPU time, peak memory and steps in a .json
 beside it, printed with the runs) and `colsim trim`. --threads: of the packing and of each run. Each run is a separate process (so peak
 memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`colsim.collapse.collapse`:
@@ -42,6 +42,7 @@ def column_file(r0: float, aspect_ratio: float, seed: int, pack_solver: str, pac
                 layer_height: str = "none", threads: int = 1) -> Path:
     """The trimmed column (made once with the colsim CLI and cached)."""
     CACHE.mkdir(exist_ok=True)
+    layer_height = str(layer_height).lower()
     layers = "" if layer_height == "none" else f"_layers{float(layer_height):g}"
     stem = f"r0_{r0:g}_seed_{seed}_{pack_solver}_dt{pack_dt:g}{layers}"
     packing = CACHE / f"packing_{stem}_h{aspect_ratio * r0:g}.nc"
@@ -126,7 +127,7 @@ def main(argv=None):
                         help="solver of `colsim pack` (default: %(default)s, as a user packs; clarabel: the reference)")
     parser.add_argument("--pack-dt", type=float, default=0.02)
     parser.add_argument("--pack-layer-height", default=str(LAYER_HEIGHT),
-                        help="colsim pack --layer-height (default: %(default)s; none: one pour)")
+                        help="colsim pack --layer-height (default: %(default)s, one pour; 2.5: layers)")
     parser.add_argument("--threads", type=int, default=1, help="threads of the packing and of each run")
     parser.add_argument("--clarabel-100-up-to", type=float, default=3.0, metavar="R0",
                         help="run clarabel-100 only up to this r0 (at r0 = 4 it takes 10-20 hours; "

@@ -7,7 +7,7 @@ between the spheres and with the floor, for a looser packing than the paper's.) 
 spacing 1.04 d_max: each sphere moves at random inside its own lattice cell, so no two overlap.
 Clouds are added until the settled packing is taller than the requested height.
 
-In layers (the default): each cloud adds about `layer_height` of settled packing and falls a few
+In layers (`layer_height`, off by default): each cloud adds about that much settled packing and falls a few
 diameters, not the column's height; before it falls, the spheres at rest more than `freeze_depth`
 below the surface are fixed and leave the cone program, so a step costs what the top of the
 packing costs, not the whole column (docs/validation/packing-layers.md measures both ways).
@@ -131,9 +131,11 @@ def expected_spheres(r0: float, height: float, diameter_range) -> float:
     return SOLID_FRACTION_GUESS * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
 
 
-#: Filling in layers (:func:`pack`): the settled thickness each cloud adds, and the depth below
-#: the settled surface from which slow spheres are fixed (length, the paper's diameters 0.25-0.5).
-LAYER_HEIGHT = 2.5
+#: Filling in layers (:func:`pack`): the settled thickness each cloud adds (length, the paper's
+#: diameters 0.25-0.5; measured at 2.5), None for one cloud: the default, since the layers' deposits
+#: at a = 5 are not yet the pour's (docs/validation/packing-layers.md); and the depth below the
+#: settled surface from which slow spheres are fixed.
+LAYER_HEIGHT = None
 FREEZE_DEPTH = 3.5
 #: A layer has landed (the next cloud may come) at the rest criterion with this many times
 #: rest_energy: speeds 10x those of rest. Only the last cloud must come to rest.
