@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .contacts import touching_pairs
 from .io import at_rest_flag, at_rest_variable, state_from_dataset
-from .state import ParticleState
+from .state import LEVER_OF_OLDER_FILES, ParticleState
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
 #: the front followed frame by frame: the radius holding this share of the mass (:func:`mass_front`),
@@ -200,7 +200,7 @@ def _run_attributes(trajectory) -> dict:
     attrs["n_steps"] = int(trajectory.attrs["n_steps"])
     attrs["friction_law"] = str(trajectory.attrs.get("friction_law", "associated"))
     # a trajectory written before the option existed was computed with R_eff
-    attrs["rolling_lever"] = str(trajectory.attrs.get("rolling_lever", "effective"))
+    attrs["rolling_lever"] = str(trajectory.attrs.get("rolling_lever", LEVER_OF_OLDER_FILES))
     if "step_solver_backend" in trajectory:   # how many steps each back-end solved
         names, counts = np.unique(trajectory["step_solver_backend"].values.astype(str), return_counts=True)
         attrs["solver_backends"] = json.dumps({str(n): int(c) for n, c in zip(names, counts)})

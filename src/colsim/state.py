@@ -166,6 +166,8 @@ class ContactLaw:
 # disc's own radius: between spheres L = 2 R_i R_j / (R_i + R_j), each radius when they are equal.
 # "effective": R_eff = R_i R_j / (R_i + R_j), half of it between equal spheres. At a wall both are R_i.
 ROLLING_LEVERS = ("paper", "effective")
+#: the lever of the files written before the option existed (colsim used R_eff until 2026-11-25)
+LEVER_OF_OLDER_FILES = "effective"
 
 
 def rolling_lever(radius_i: np.ndarray, radius_j: np.ndarray, lever: str = "paper") -> np.ndarray:

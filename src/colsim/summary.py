@@ -11,6 +11,7 @@ import xarray as xr
 
 from .io import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 from .laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
+from .state import LEVER_OF_OLDER_FILES
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -43,7 +44,7 @@ def run_settings(analysis) -> dict:
     while config:
         stage = config.get("command", "stage")
         if stage == "collapse":   # runs made before the option existed used R_eff
-            config = {"rolling_lever": "effective", **config}
+            config = {"rolling_lever": LEVER_OF_OLDER_FILES, **config}
         if stage == "pack":       # packings made before layers were poured in one cloud
             config = {"layer_height": None, **config}
         unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
@@ -129,7 +130,7 @@ def collect_analyses(analyses) -> xr.Dataset:
     first = analyses[0].attrs
     attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
              "friction_law": str(first.get("friction_law", "associated")),
-             "rolling_lever": str(first.get("rolling_lever", "effective")),
+             "rolling_lever": str(first.get("rolling_lever", LEVER_OF_OLDER_FILES)),
              "solver_backends": json.dumps(solver_backends(analyses)),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
