@@ -140,6 +140,9 @@ FREEZE_DEPTH = 3.5
 #: A layer has landed (the next cloud may come) at the rest criterion with this many times
 #: rest_energy: speeds 10x those of rest. Only the last cloud must come to rest.
 LANDED_ENERGY_FACTOR = 100.0
+#: a packing logs its progress every 50 steps, and at least this often (seconds): the steps of a big
+#: pour's impact take 5-15 s each, and 50 of them left the log silent for over ten minutes
+LOG_INTERVAL_S = 60.0
 
 
 def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
@@ -241,11 +244,13 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
     carry = Carry(None if warm is None else _renumber(warm, moving, supports, state.n))
     sub = state.subset(moving)
     gravity = -settings.gravity[2]
+    logged = time.perf_counter()
     for result in run(sub, local, max_steps - steps, solver, first_step=steps, carry=carry):
         sub, steps = result.state, steps + 1
         if progress is not None:
             progress(result.diagnostics, sub)
-        if steps % 50 == 0:
+        if steps % 50 == 0 or time.perf_counter() - logged >= LOG_INTERVAL_S:
+            logged = time.perf_counter()
             d = result.diagnostics
             log.info("pack step %d: %d moving, %d contacts, kinetic energy %.3g, %.2f s solve",
                      steps, sub.n, d.n_contacts, d.kinetic_energy + d.rotational_energy, d.solve_time)
