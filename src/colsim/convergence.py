@@ -251,7 +251,7 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
     Returns a Dataset over (aspect_ratio, measure); None when no aspect ratio has 2 sizes."""
     import xarray as xr
 
-    from .laws import LAJEUNESSE_BREAK, LAWS
+    from .laws import final_values
     from .size_limit import size_limit
 
     study = table.where(table.study == "column_size", drop=True)
@@ -269,9 +269,7 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
             runs = {float(r): values[r0 == r] for r in np.unique(r0)}
             limit = size_limit(runs, diameter, replicates, level, seed)
             fit = limit.fit
-            laws = {name.split()[0]: float(law(a)) for name, law in LAWS[measure].items()}
-            if measure == "h_inf_over_r0" and a > LAJEUNESSE_BREAK:
-                laws["Lajeunesse"] = np.nan   # its height law as printed (0.74 a) is no final height there
+            laws = {name.split()[0]: value for name, value in final_values(measure, a).items()}
             needed = [diameter * (abs(fit.k) / (accuracy * abs(fit.x_inf))) ** (1.0 / fit.p)
                       if fit.x_inf else np.nan for accuracy in LIMIT_ACCURACIES]
             rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, float(fit.p_fitted),

@@ -59,3 +59,10 @@ LAWS = {
     "h_inf_over_r0": {"Lube et al. (2004)": lube_height, "Lajeunesse et al. (2004)": lajeunesse_height},
 }
 """The laws by the summary variable they predict, then by name (for plots and comparisons)."""
+
+
+def final_values(variable: str, a: float) -> dict:
+    """{law name: its value of `variable` at aspect ratio a}, NaN where the law gives no final
+    value: Lajeunesse's height law as printed (0.74 a) above a = 0.74."""
+    return {name: np.nan if variable == "h_inf_over_r0" and "Lajeunesse" in name and a > LAJEUNESSE_BREAK
+            else float(law(a)) for name, law in LAWS[variable].items()}

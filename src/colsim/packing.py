@@ -103,8 +103,7 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
     forever (a true steady state of the filling), and nothing stops a grain spinning in place.
     """
     state = result.state
-    speed2 = np.einsum("ij,ij->i", state.velocity, state.velocity)
-    slow = 0.5 * speed2 / (gravity * 2.0 * state.radius) < rest_energy
+    slow = _slow(state, gravity, rest_energy)
     loaded = result.solution.forces[:, 0] > 0
     supported = np.zeros(state.n, dtype=bool)
     supported[result.contacts.i[loaded]] = True
@@ -224,9 +223,13 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
 def _buried_at_rest(state: ParticleState, depth_z: float, gravity: float, rest_energy: float) -> np.ndarray:
     """(n,) bool: spheres whose top is below depth_z (length) and whose kinetic energy of
     translation is below rest_energy m g d."""
+    return _slow(state, gravity, rest_energy) & (state.position[:, 2] + state.radius < depth_z)
+
+
+def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarray:
+    """(n,) bool: translational kinetic energy below rest_energy m g d (d the sphere's diameter)."""
     speed2 = np.einsum("ij,ij->i", state.velocity, state.velocity)
-    slow = 0.5 * speed2 / (gravity * 2.0 * state.radius) < rest_energy
-    return slow & (state.position[:, 2] + state.radius < depth_z)
+    return 0.5 * speed2 / (gravity * 2.0 * state.radius) < rest_energy
 
 
 def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
@@ -291,10 +294,11 @@ def _renumber(warm: WarmStart, moving: np.ndarray, supports: np.ndarray, n: int)
 
 def _number_back(forces: WarmStart, moving: np.ndarray, supports: np.ndarray) -> WarmStart:
     """The inverse of :func:`_renumber`: a step's forces in the numbering of the whole packing."""
-    i = moving[forces.i]
-    j = np.where(forces.j >= 0, moving[np.maximum(forces.j, 0)],
-                 np.where(forces.j == -1, -1, supports[np.maximum(-2 - forces.j, 0)] if len(supports) else -1))
-    return WarmStart(i, j, forces.family.copy(), forces.force.copy(), forces.rolling.copy())
+    j = forces.j.copy()                       # walls keep -1
+    particle, fixed = forces.j >= 0, forces.j <= -2
+    j[particle] = moving[forces.j[particle]]
+    j[fixed] = supports[-2 - forces.j[fixed]]
+    return WarmStart(moving[forces.i], j, forces.family.copy(), forces.force.copy(), forces.rolling.copy())
 
 
 def _between_fixed(warm: WarmStart | None, fixed: np.ndarray) -> WarmStart | None:

@@ -39,7 +39,8 @@ import numpy as np
 from .analysis import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
 from .io import AT_REST_FLAGS, at_rest_flag
 from .summary import FLAGS, means_per_size, run_flags
-from .laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_height, lube_runout
+from .laws import (LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, final_values, lube_height,
+                   lube_runout)
 
 log = logging.getLogger(__name__)
 
@@ -607,7 +608,6 @@ def convergence_figure(table, path: Path) -> Path:
     return _save(fig, path)
 
 
-
 def column_size_limit_figure(table, limits, path: Path) -> Path:
     """h_inf/r0 (top) and the run-out (bottom) against d/r0, one column per aspect ratio of the
     column_size sub-study: each run (one point per seed), the fit X_inf + k (d/r0)^p, X_inf at
@@ -639,10 +639,8 @@ def column_size_limit_figure(table, limits, path: Path) -> Path:
                 low, high = float(fit.limit_low), float(fit.limit_high)
                 ax.errorbar([0.0], [float(fit.limit)], yerr=[[float(fit.limit) - low], [high - float(fit.limit)]],
                             fmt="D", color="C0", capsize=3, label=f"X_inf, {float(limits.attrs['level']):.0%} interval")
-            for offset, (name, law) in zip((-0.004, 0.004), LAWS[measure].items()):
-                if measure == "h_inf_over_r0" and "Lajeunesse" in name and a > LAJEUNESSE_BREAK:
-                    continue   # its height law as printed (0.74 a) is not a final height there
-                ax.plot([offset], [float(law(a))], "s" if "Lube" in name else "^", color="k" if "Lube" in name else "C3",
+            for offset, (name, value) in zip((-0.004, 0.004), final_values(measure, a).items()):
+                ax.plot([offset], [value], "s" if "Lube" in name else "^", color="k" if "Lube" in name else "C3",
                         label=name)
             ax.set_xlim(-0.01, 1.1 * x.max())
             ax.set_title(f"a = {a:g}", fontsize=10)

@@ -49,7 +49,7 @@ def run_settings(analysis) -> dict:
             config = {"layer_height": None, **config}
         unused = {"friction_tolerance"} if config.get("friction_law") == "associated" else set()
         if stage == "pack" and config["layer_height"] is None:
-            unused = {"freeze_depth"}
+            unused |= {"freeze_depth"}
         settings |= {f"{stage}.{key}": value for key, value in config.items()
                      if key not in NOT_SETTINGS | unused and key != "input_config"}
         config = config.get("input_config") or {}
