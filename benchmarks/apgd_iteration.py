@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from colsim import io
-from colsim.apgd import ApgdSolver
-from colsim.collapse import CollapseSettings
-from colsim.contacts import detect
-from colsim.program import assemble
-from colsim.stepper import base_margin, predicted_displacement
+from colsim.solvers.apgd import ApgdSolver
+from colsim.stages.collapse import CollapseSettings
+from colsim.engine.contacts import detect
+from colsim.engine.program import assemble
+from colsim.engine.stepper import base_margin, predicted_displacement
 
 CACHE = Path(__file__).resolve().parent / ".cache"
 

@@ -7,7 +7,7 @@
 Columns are made as a user makes them: `colsim pack` (in layers with --pack-layer-height 2.5;
 cached under benchmarks/.cache/, with its wall and CPU time, peak memory and steps in a .json
 beside it, printed with the runs) and `colsim trim`. --threads: of the packing and of each run. Each run is a separate process (so peak
-memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`colsim.collapse.collapse`:
+memory is its own) that collapses the column to t/sqrt(h0/g) = 4 through :func:`colsim.stages.collapse.collapse`:
 
 - clarabel-100: Clarabel, 100 steps (the paper's dt/sqrt(h0/g) = 0.04);
 - auto-1000: `solver: auto`, 1,000 steps (0.004), warm-started from the packing's forces;
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.packing import LAYER_HEIGHT
+from colsim.stages.pack import LAYER_HEIGHT
 
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache"
@@ -78,9 +78,9 @@ def _children_cpu() -> float:
 def run_one(column: Path, name: str, threads: int = 1) -> dict:
     """One run in this process on `threads` threads; returns its record."""
     from colsim import io
-    from colsim.collapse import CollapseSettings, collapse
+    from colsim.stages.collapse import CollapseSettings, collapse
     from colsim.solvers import make_solver
-    from colsim.threads import use_threads
+    from colsim.engine.threads import use_threads
 
     use_threads(threads)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from colsim import io
-from colsim.collapse import CollapseSettings, collapse
+from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import ApgdSolver, ClarabelSolver
 
 

@@ -44,8 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from colsim.solvers import ClarabelSolver, Solver
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import step
+from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import step
 
 CACHE = Path(__file__).resolve().parent / ".cache"
 SPACING = 0.52

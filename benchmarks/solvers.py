@@ -29,15 +29,15 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.packing import lattice_cloud
+from colsim.stages.pack import lattice_cloud
 
-from colsim.admm import AdmmSolver
-from colsim.apgd import ApgdSolver
-from colsim.contacts import detect
-from colsim.program import assemble
+from colsim.solvers.admm import AdmmSolver
+from colsim.solvers.apgd import ApgdSolver
+from colsim.engine.contacts import detect
+from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver, SolverError, WarmStart
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import predicted_displacement, run, step
+from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import predicted_displacement, run, step
 
 HERE = Path(__file__).resolve().parent
 CACHE = HERE / ".cache"

@@ -40,8 +40,8 @@ def one(n: int, method: str, threads: int, out: str, seed: int = 0, equilibrate:
     from packings import settled_packing
 
     from colsim.solvers import ClarabelSolver
-    from colsim.state import ContactLaw, StepSettings, Walls
-    from colsim.stepper import step
+    from colsim.engine.state import ContactLaw, StepSettings, Walls
+    from colsim.engine.stepper import step
 
     state = settled_packing(n, seed)
     settings = StepSettings(dt=0.02, walls=Walls(floor=True, cylinder_radius=None),

@@ -19,10 +19,10 @@ import sys
 from pathlib import Path
 
 from colsim import io
-from colsim.apgd import ApgdSolver
-from colsim.collapse import CollapseSettings, collapse
-from colsim.cones import mean_diameter
-from colsim.program import Solver
+from colsim.solvers.apgd import ApgdSolver
+from colsim.stages.collapse import CollapseSettings, collapse
+from colsim.engine.cones import mean_diameter
+from colsim.engine.program import Solver
 from colsim.solvers import make_solver
 
 LEVELS = (1e-3, 1e-4, 1e-5, 1e-6)   # largest violation, mean diameters

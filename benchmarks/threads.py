@@ -29,8 +29,8 @@ import xarray as xr
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from apgd_iteration import first_step   # noqa: E402
 
-from colsim.apgd import ApgdSolver   # noqa: E402
-from colsim.threads import use_threads   # noqa: E402
+from colsim.solvers.apgd import ApgdSolver   # noqa: E402
+from colsim.engine.threads import use_threads   # noqa: E402
 
 
 def per_iteration(program, guess, iterations: int) -> float:

@@ -9,7 +9,7 @@ Every column (from `colsim trim`) collapses with mu = 0.577, mu_r = 0.12, to t/s
 `--steps` steps (1,000 by default: dt/sqrt(h0/g) = 0.004) with `solver: auto` at each APGD
 tolerance, length floor (the residuals' length is at least this many mean diameters) and overlap
 tolerance (the largest cone violation, mean diameters, that counts as feasible;
-:class:`colsim.apgd.ApgdSolver`), and with Clarabel where `--clarabel` names the column (a substring of its path;
+:class:`colsim.solvers.apgd.ApgdSolver`), and with Clarabel where `--clarabel` names the column (a substring of its path;
 Clarabel at 1,000 steps costs about 30 CPU minutes at a = 2, r0 = 2). The deposit is measured as
 the workflow's analysis does (main mass, contact tolerance 1 % of the smallest diameter).
 
@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from colsim import io
-from colsim.analysis import measure_deposit
-from colsim.collapse import CollapseSettings, collapse
+from colsim.stages.analyse import measure_deposit
+from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import make_solver
 
 

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from colsim import io
-from colsim.collapse import CollapseSettings, collapse
+from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import make_solver
-from colsim.stepper import Carry, run
+from colsim.engine.stepper import Carry, run
 
 
 def start_at(column: Path, n_steps: int, first_step: int):
@@ -56,7 +56,7 @@ def run_one(start, solver, n_steps: int, first_step: int, steps: int):
     """`steps` steps from `start` (state, h0, carry) with `solver`: the last diagnostics, the last
     state, CPU s and mean iterations a step."""
     state, h0, carry = start[0].copy(), start[1], copy.deepcopy(start[2])
-    if not solver.uses_warm_start:   # as colsim.collapse hands it on
+    if not solver.uses_warm_start:   # as colsim.stages.collapse hands it on
         carry = Carry(None, carry.margin)
     step_settings = CollapseSettings(mu_r=0.12, n_steps=n_steps).step_settings(h0)
     cpu = time.process_time()

@@ -17,10 +17,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from colsim.contacts import overlaps
+from colsim.engine.contacts import overlaps
 from colsim.solvers import ClarabelSolver
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import step
+from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import step
 from helpers import COLLAPSE_LAW, DT, G, max_speed
 
 CYLINDER_RADIUS = 1.5

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.plots import FIGURES
-from colsim.state import ContactLaw, ParticleState
-from colsim.summary import SUMMARY_VARIABLES
+from colsim.study.plots import FIGURES
+from colsim.engine.state import ContactLaw, ParticleState
+from colsim.study.collect import SUMMARY_VARIABLES
 
 __all__ = ["COLLAPSE_LAW", "DT", "FIGURES", "G", "ROOT", "SUMMARY_VARIABLES", "TINY", "cf_check_failures",
            "copy_workflow", "max_speed", "planned_outputs", "snakemake"]

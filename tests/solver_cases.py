@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from colsim.contacts import detect
-from colsim.packing import lattice_cloud
-from colsim.program import assemble
+from colsim.engine.contacts import detect
+from colsim.stages.pack import lattice_cloud
+from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver
-from colsim.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import predicted_displacement, run, step
+from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import predicted_displacement, run, step
 
 COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
 

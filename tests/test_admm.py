@@ -1,12 +1,12 @@
-"""The ADMM back-end (colsim.admm): exact projection onto the gap cone, agreement with Clarabel,
+"""The ADMM back-end (colsim.solvers.admm): exact projection onto the gap cone, agreement with Clarabel,
 warm start, errors."""
 import clarabel
 import numpy as np
 import pytest
 
-from colsim.admm import AdmmSolver
-from colsim.cones import project_gap_cone
-from colsim.program import cone_violation
+from colsim.solvers.admm import AdmmSolver
+from colsim.engine.cones import project_gap_cone
+from colsim.engine.program import cone_violation
 from colsim.solvers import SolverError, WarmStart, make_solver
 from solver_cases import against_clarabel, collapse_program, mid_collapse, small_pile
 

@@ -1,16 +1,16 @@
-"""The first-order back-end (colsim.apgd): exact cone projection, agreement with Clarabel, errors."""
+"""The first-order back-end (colsim.solvers.apgd): exact cone projection, agreement with Clarabel, errors."""
 import clarabel
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from scipy.optimize import minimize_scalar
 
-from colsim.apgd import ApgdSolver
-from colsim.cones import project_compiled, project_coupled_cone, relative_residuals, scaled_residuals
-from colsim.program import cone_violation
+from colsim.solvers.apgd import ApgdSolver
+from colsim.engine.cones import project_compiled, project_coupled_cone, relative_residuals, scaled_residuals
+from colsim.engine.program import cone_violation
 from colsim.solvers import AutoSolver, ClarabelSolver, SolverError, WarmStart, make_solver
-from colsim.state import StepSettings
-from colsim.stepper import run
+from colsim.engine.state import StepSettings
+from colsim.engine.stepper import run
 from solver_cases import COLLAPSE, against_clarabel, collapse_program, mid_collapse, small_pile
 
 
@@ -294,7 +294,7 @@ def test_overlap_tolerance_bounds_the_largest_violation_in_diameters(pile):
 
 def test_auto_uses_the_length_floor_in_both_stages():
     from colsim.cli import build_parser
-    from colsim.commands import _pack_solver, _solver
+    from colsim.cli.commands import _pack_solver, _solver
     assert AutoSolver().apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR > 0
     assert ApgdSolver().length_floor == 0.0
     parser = build_parser()
@@ -312,8 +312,8 @@ def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     packing's own primal bound (tolerance 1e-3 x at least 0.1 d) is already that loose, so the
     packing goes without it, and records its settings as before the option existed."""
     from colsim.cli import build_parser
-    from colsim.commands import _pack_solver, _solver
-    from colsim.packing import APGD_TOLERANCE
+    from colsim.cli.commands import _pack_solver, _solver
+    from colsim.stages.pack import APGD_TOLERANCE
     assert AutoSolver().apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE > 0
     assert ApgdSolver().overlap_tolerance == 0.0
     assert AutoSolver.APGD_OVERLAP_TOLERANCE <= APGD_TOLERANCE * AutoSolver.APGD_LENGTH_FLOOR

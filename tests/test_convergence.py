@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from colsim.convergence import converged_steps, fit_converged_steps, time_step_means, convergence_markdown, runs_table
+from colsim.study.convergence import converged_steps, fit_converged_steps, time_step_means, convergence_markdown, runs_table
 
 
 def analysis(a=2.0, r0=2.0, seed=1, steps=100, duration=4.0, h=1.0, runout=1.5, mean_d=0.4):
@@ -95,7 +95,7 @@ def test_unknown_sub_study_and_empty_input_are_errors():
 
 
 def test_convergence_figure_is_written(tmp_path):
-    from colsim.plots import convergence_figure
+    from colsim.study.plots import convergence_figure
 
     groups = {"time_step": [analysis(steps=n) for n in (100, 200)], "end_time": [analysis(duration=8.0)],
               "column_size": [analysis(a=0.5, r0=r0, seed=seed, duration=8.0) for r0 in (2.0, 3.0) for seed in (1, 2)],
@@ -107,11 +107,11 @@ def test_convergence_figure_is_written(tmp_path):
 def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
     """Runs made on X = X_inf + k d/r0 exactly (r0 = 2, 3, 4, three seeds, d = 0.375, a = 2 and 5)
     give X_inf to 1e-9 (a least-squares fit of noise-free data) with a zero-width interval; the
-    r0 within 5 % solves |k| (d/r0) = 0.05 X_inf; the laws are those of colsim.laws at each a
+    r0 within 5 % solves |k| (d/r0) = 0.05 X_inf; the laws are those of colsim.study.experimental_laws at each a
     (no Lajeunesse height above a = 0.74); the table and the figure are written."""
-    from colsim.convergence import column_size_limit_markdown, column_size_limits
-    from colsim.laws import lube_height, lube_runout
-    from colsim.plots import column_size_limit_figure
+    from colsim.study.convergence import column_size_limit_markdown, column_size_limits
+    from colsim.study.experimental_laws import lube_height, lube_runout
+    from colsim.study.plots import column_size_limit_figure
 
     d, truth = 0.375, {"h": (0.9, -1.2), "runout": (3.5, -4.0)}
     runs = [analysis(a=a, r0=r0, seed=seed, mean_d=d, h=truth["h"][0] + truth["h"][1] * d / r0,

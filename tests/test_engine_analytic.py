@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from colsim.solvers import ClarabelSolver
-from colsim.state import FRICTION_LAWS, ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import run
+from colsim.engine.state import FRICTION_LAWS, ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import run
 
 G = 9.81
 RADIUS = 0.2
@@ -239,7 +239,7 @@ def test_coulomb_keeps_loaded_contacts_closed_in_a_collapsing_pile(pile):
     Under the associated law the sliding contacts open by mu |du_t| + mu_r |dphi|, more than that
     bound allows coulomb (measured 1.3e-4 d over these first steps against a bound of 2.5e-5 d;
     coulomb's largest 4.8e-6 d)."""
-    from colsim.program import assemble, cone_violation
+    from colsim.engine.program import assemble, cone_violation
     from helpers import COLLAPSE_LAW
     dt, tol = 0.002, 1e-6
     d_mean = 2 * float(pile.settled.radius.mean())

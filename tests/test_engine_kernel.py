@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from colsim.contacts import WALL, Contacts, overlaps, tangent_basis
-from colsim.program import contact_jacobian
+from colsim.engine.contacts import WALL, Contacts, overlaps, tangent_basis
+from colsim.engine.program import contact_jacobian
 from colsim.solvers import ClarabelSolver, SolverError
-from colsim.state import FLOOR, PARTICLE, ContactLaw, ParticleState, StepSettings, Walls
-from colsim.stepper import OverlapError, base_margin, next_margin, step
+from colsim.engine.state import FLOOR, PARTICLE, ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import OverlapError, base_margin, next_margin, step
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 vectors = st.tuples(finite, finite, finite).map(np.array).filter(lambda v: np.linalg.norm(v) > 1e-3)

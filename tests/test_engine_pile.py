@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colsim.contacts import detect
-from colsim.program import assemble, cone_violation
+from colsim.engine.contacts import detect
+from colsim.engine.program import assemble, cone_violation
 from colsim.solvers import ClarabelSolver
-from colsim.state import FLOOR, PARTICLE, FixedSpheres, ParticleState, StepSettings, Walls
-from colsim.stepper import predicted_displacement, run, step
-from colsim.warm_start import WarmStart
+from colsim.engine.state import FLOOR, PARTICLE, FixedSpheres, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import predicted_displacement, run, step
+from colsim.engine.warm_start import WarmStart
 
 from helpers import COLLAPSE_LAW, DT, G, max_speed
 
@@ -137,7 +137,7 @@ def test_forms_agree_on_forces_of_a_determinate_stack():
     5x smaller than at 1e-8 (both forms converge to one solution; a formulation error would not
     shrink). The top sphere sits off-centre, so both contacts carry sliding and rolling forces.
     """
-    from colsim.state import ContactLaw, ParticleState
+    from colsim.engine.state import ContactLaw, ParticleState
 
     radius = np.array([0.25, 0.15])
     position = np.array([[0.0, 0.0, 0.25], [0.1, 0.05, 0.25 + np.sqrt(0.4**2 - 0.1**2 - 0.05**2)]])
@@ -163,7 +163,7 @@ def test_forms_agree_on_forces_of_a_determinate_stack():
 
 
 def test_fixed_spheres_carry_the_weight_of_what_rests_on_them(pile):
-    """The settled pile with its lower half fixed (colsim.state.FixedSpheres, as the packing's
+    """The settled pile with its lower half fixed (colsim.engine.state.FixedSpheres, as the packing's
     buried part while it fills): the upper half steps on them as on walls.
 
     Force balance as in test_floor_carries_the_weight: the frictionless vertical cylinder takes no

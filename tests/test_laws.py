@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from colsim import laws
+from colsim.study import experimental_laws as laws
 
 
 @pytest.mark.parametrize("law, a, expected", [

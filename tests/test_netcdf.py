@@ -13,9 +13,9 @@ import xarray as xr
 
 from colsim import io
 from colsim.cli import main
-from colsim.state import FLOOR, PARTICLE, ParticleState
-from colsim.warm_start import WarmStart
-from colsim.summary import run_flags
+from colsim.engine.state import FLOOR, PARTICLE, ParticleState
+from colsim.engine.warm_start import WarmStart
+from colsim.study.collect import run_flags
 
 from helpers import cf_check_failures
 

@@ -1,13 +1,13 @@
-"""colsim.plots on small synthetic datasets shaped like colsim's files (no simulation needed)."""
+"""colsim.study.plots on small synthetic datasets shaped like colsim's files (no simulation needed)."""
 import matplotlib
 import numpy as np
 import pytest
 import xarray as xr
 from matplotlib.container import ErrorbarContainer
 
-from colsim import plots
-from colsim.laws import LAWS
-from colsim.summary import SUMMARY_VARIABLES
+from colsim.study import plots
+from colsim.study.experimental_laws import LAWS
+from colsim.study.collect import SUMMARY_VARIABLES
 
 KEPT = []
 
@@ -154,7 +154,7 @@ def test_package_imports_without_matplotlib():
     import subprocess
     import sys
 
-    code = ("import sys; sys.modules['matplotlib'] = None; import colsim, colsim.plots, colsim.laws; "
+    code = ("import sys; sys.modules['matplotlib'] = None; import colsim, colsim.study.plots, colsim.study.experimental_laws; "
             "print('ok')")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "ok"
 
@@ -304,7 +304,7 @@ def test_front_figure_draws_the_mass_share_front_above_the_main_mass_edge(tmp_pa
     """With the analyses' mass_front_95_over_r0 (issue 32, item 3): a top row of it as measured, frame
     by frame (one line per run, its values exactly), above the main mass's edge as before; an
     analysis made before the variable existed is drawn in the bottom row only."""
-    from colsim.analysis import FRONT_MASS_VARIABLE
+    from colsim.stages.analyse import FRONT_MASS_VARIABLE
 
     runs = [analysis(a, m, 1) for a in (0.5, 2.0) for m in (0.0, 0.12)]
     for run in runs:

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 from colsim import io
-from colsim.vtk import export_trajectory
+from colsim.io.vtk import export_trajectory
 
 
 def colsim(*args, cwd):
@@ -157,7 +157,7 @@ def test_a_failed_vtk_export_leaves_the_earlier_series(files, tmp_path, monkeypa
     export_trajectory(trajectory, tmp_path)
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     calls = {"n": 0}
-    from colsim import vtk
+    from colsim.io import vtk
 
     original = vtk.write_vtu
 

@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from colsim.apgd import ApgdSolver
-from colsim.contacts import detect
-from colsim.program import assemble
+from colsim.solvers.apgd import ApgdSolver
+from colsim.engine.contacts import detect
+from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver
-from colsim.state import ROLLING_LEVERS, ContactLaw, ParticleState, StepSettings, Walls, rolling_lever
-from colsim.stepper import run
+from colsim.engine.state import ROLLING_LEVERS, ContactLaw, ParticleState, StepSettings, Walls, rolling_lever
+from colsim.engine.stepper import run
 
 from solver_cases import against_clarabel, mid_collapse, small_pile
 

@@ -1,8 +1,8 @@
-"""colsim.size_limit on synthetic data whose limit is known."""
+"""colsim.study.size_limit on synthetic data whose limit is known."""
 import numpy as np
 import pytest
 
-from colsim.size_limit import choose_fit, fit_limit, size_limit
+from colsim.study.size_limit import choose_fit, fit_limit, size_limit
 
 D = 0.375                            # mean diameter of the study's spheres (0.25-0.5)
 R0 = np.array([2.0, 3.0, 4.0, 5.0, 6.0])

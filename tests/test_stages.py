@@ -11,15 +11,17 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from colsim import analysis, io
-from colsim.calibration import polygon_rolling_coefficient
+from colsim.stages import analyse as analysis
+
+from colsim import io
+from colsim.study.polygon import polygon_rolling_coefficient
 from colsim.cli import main
-from colsim.collapse import CollapseSettings, collapse
-from colsim.packing import column_height, pack, solid_fraction, trim
+from colsim.stages.collapse import CollapseSettings, collapse
+from colsim.stages.pack import column_height, pack, solid_fraction, trim
 from colsim.solvers import AutoSolver, ClarabelSolver
-from colsim.contacts import overlaps, touching_pairs
-from colsim.state import ParticleState, Walls
-from colsim.summary import SUMMARY_VARIABLES
+from colsim.engine.contacts import overlaps, touching_pairs
+from colsim.engine.state import ParticleState, Walls
+from colsim.study.collect import SUMMARY_VARIABLES
 
 CLARABEL = ClarabelSolver()
 
@@ -211,7 +213,7 @@ def test_collapse_resumes_from_checkpoint_to_the_same_result(packing, tmp_path):
 
 
 def test_rest_criterion_needs_the_whole_window_steady():
-    from colsim.collapse import deposit_at_rest
+    from colsim.stages.collapse import deposit_at_rest
 
     t = np.arange(0.0, 3.01, 0.2)
     steady = np.r_[np.linspace(1.0, 2.0, 6), np.full(10, 2.0)]      # moving until t = 1, then still
@@ -251,8 +253,8 @@ def _run_cli(*args, cwd):
 
 def test_progress_is_logged_every_tenth_of_the_steps_or_every_minute(caplog):
     """A slow run still logs: a line every 10 % of the steps, or after 60 s without one."""
-    from colsim.commands import _progress_bar
-    from colsim.stepper import StepDiagnostics
+    from colsim.cli.commands import _progress_bar
+    from colsim.engine.stepper import StepDiagnostics
 
     now = [0.0]
     progress = _progress_bar(100, "collapse", interval_s=60.0, clock=lambda: now[0])
@@ -332,7 +334,7 @@ def test_all_stages_through_the_cli(tmp_path):
 # process started in the background by a shell without job control inherits SIGINT ignored.
 _SIGNAL_AFTER_FIRST_CHECKPOINT = """
 import os, signal, sys
-import colsim.collapse as collapse
+import colsim.stages.collapse as collapse
 from colsim.cli import main
 signal.signal(signal.SIGINT, signal.default_int_handler)
 save = collapse._save_checkpoint
@@ -453,7 +455,7 @@ def test_unwritable_output_fails_before_the_work(tmp_path, capsys, monkeypatch, 
 
     def no_step(*args, **kwargs):
         raise AssertionError("a step was taken before the outputs were checked")
-    monkeypatch.setattr("colsim.stepper.step", no_step)
+    monkeypatch.setattr("colsim.engine.stepper.step", no_step)
     assert _main_in(tmp_path, args) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "error: cannot write" in err, err
@@ -554,7 +556,7 @@ def test_files_carry_cf_units_versions_and_long_names(tmp_path):
 
 
 def test_export_vtk_removes_its_own_earlier_frames(tmp_path):
-    from colsim.vtk import export_trajectory
+    from colsim.io.vtk import export_trajectory
 
     def trajectory(frames):
         n = 3

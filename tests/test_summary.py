@@ -5,8 +5,8 @@ import json
 import numpy as np
 import xarray as xr
 
-from colsim.laws import lube_height, lube_runout
-from colsim.summary import lube_markdown, lube_rst, one_row_per_run, run_flags
+from colsim.study.experimental_laws import lube_height, lube_runout
+from colsim.study.collect import lube_markdown, lube_rst, one_row_per_run, run_flags
 
 
 def test_check_variables_become_one_column_per_value():
@@ -97,8 +97,8 @@ def law_summary(h_shift, runout_shift, programs, wall):
 
 
 def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
-    from colsim.plots import friction_law_figure
-    from colsim.summary import friction_law_comparison, friction_law_markdown
+    from colsim.study.plots import friction_law_figure
+    from colsim.study.collect import friction_law_comparison, friction_law_markdown
 
     comparison = friction_law_comparison({"associated": law_summary(0.0, 0.0, 1.0, 10.0),
                                           "coulomb": law_summary(0.0, 0.5, 15.0, 110.0)})

@@ -1,4 +1,4 @@
-"""APGD on several threads (colsim.threads): the same answer as on one, to the solver's tolerance.
+"""APGD on several threads (colsim.engine.threads): the same answer as on one, to the solver's tolerance.
 
 The kernels run in a child process started with NUMBA_NUM_THREADS=3, so three threads exist on
 any machine (on one core they take turns; only the arithmetic is tested, never the speed)."""
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from colsim.threads import use_threads
+from colsim.engine.threads import use_threads
 
 TESTS = Path(__file__).parent
 
@@ -18,9 +18,9 @@ SOLVE_ON_THREADS = """
 import json, sys
 import numpy as np
 sys.path.insert(0, {tests!r})
-from colsim.apgd import ApgdSolver
+from colsim.solvers.apgd import ApgdSolver
 from colsim.solvers import ClarabelSolver
-from colsim.threads import threads, use_threads
+from colsim.engine.threads import threads, use_threads
 from solver_cases import collapse_program, mid_collapse, small_pile
 
 program, _ = collapse_program(mid_collapse(small_pile()))

@@ -495,7 +495,7 @@ def test_a_folder_whose_settings_the_study_does_not_have_is_an_error(tmp_path):
 
 def test_the_friction_tolerance_has_one_default():
     """config.yaml, the schema and colsim (FrictionLaw, so the CLI) agree on the fixed point's tolerance."""
-    from colsim.state import FrictionLaw
+    from colsim.engine.state import FrictionLaw
     schema = yaml.safe_load((ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
     assert schema["properties"]["friction_tolerance"]["default"] == config["friction_tolerance"] == FrictionLaw().tolerance

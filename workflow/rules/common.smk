@@ -10,8 +10,8 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from colsim.io import atomic_path
-from colsim.packing import expected_spheres
-from colsim.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
+from colsim.stages.pack import expected_spheres
+from colsim.study.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
@@ -377,7 +377,7 @@ def write_study_files(study, summary_path, template, config_path, description_pa
     import jinja2
     import xarray
 
-    from colsim.summary import lube_rst
+    from colsim.study.collect import lube_rst
 
     with xarray.open_dataset(summary_path) as summary:
         attrs = dict(summary.attrs)

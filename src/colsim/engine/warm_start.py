@@ -2,7 +2,7 @@
 
 A warm start stores each contact's force and rolling force in the global frame, with the pair that
 carries it: particle i, and particle j, a wall (j = -1 with the wall's family) or a fixed sphere
-(j = -2 - k, :class:`colsim.state.FixedSpheres`). The next step's
+(j = -2 - k, :class:`colsim.engine.state.FixedSpheres`). The next step's
 contacts are matched by pair and get the stored forces re-expressed in their own frames, projected
 onto their cones (zeros for new pairs). The pairs survive a change of the particle set: pouring
 more spheres keeps the indices, and trimming renumbers them (:meth:`WarmStart.subset`). So a packing's
@@ -70,7 +70,7 @@ class WarmStart:
 
     def subset(self, keep: np.ndarray) -> "WarmStart":
         """The pairs whose particles are all in `keep` ((n,) bool mask of the old particles),
-        renumbered as :meth:`colsim.state.ParticleState.subset` renumbers the particles."""
+        renumbered as :meth:`colsim.engine.state.ParticleState.subset` renumbers the particles."""
         keep = np.asarray(keep, dtype=bool)
         new_index = np.full(len(keep), -1, dtype=np.int64)
         new_index[keep] = np.arange(np.count_nonzero(keep))

@@ -1,6 +1,6 @@
 """The reference back-end: Clarabel's interior-point method on the step's cone program.
 
-Clarabel solves the program of :mod:`colsim.program` to high accuracy in 20-60 KKT factorisations
+Clarabel solves the program of :mod:`colsim.engine.program` to high accuracy in 20-60 KKT factorisations
 whatever the step size; its cost per factorisation grows about N^1.65-1.8 (3D fill). It is the
 reference every other back-end is tested against.
 """
@@ -13,7 +13,7 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 

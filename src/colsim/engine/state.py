@@ -88,7 +88,7 @@ class ParticleState:
 @dataclass(frozen=True, eq=False)
 class FixedSpheres:
     """Spheres that never move and carry no unknowns: the buried part of a packing while it fills
-    (:func:`colsim.packing.pack`). position: (k, 3) length; radius: (k,) length.
+    (:func:`colsim.stages.pack.pack`). position: (k, 3) length; radius: (k,) length.
 
     A contact with fixed sphere k has j = -2 - k (:func:`fixed_code`): a wall to the cone program,
     a pair to the warm start, with the particle law's friction and the lever between two spheres."""
@@ -187,7 +187,7 @@ FRICTION_LAWS = ("associated", "coulomb")
 
 @dataclass(frozen=True)
 class FrictionLaw:
-    """The friction law of the contacts (:mod:`colsim.friction`): name 'associated' (the paper's) or
+    """The friction law of the contacts (:mod:`colsim.engine.friction`): name 'associated' (the paper's) or
     'coulomb'; for coulomb, the fixed point's tolerance (a fraction of the mean diameter) and the
     most cone programs solved per step (max_iter)."""
 
@@ -211,9 +211,9 @@ class StepSettings:
     overlap_tolerance: largest overlap accepted after a step, as a fraction of the smallest diameter.
     detection_margin_fraction: gap beyond the predicted motion within which a pair is a potential
     contact, as a fraction of the smallest diameter (the stepper's margins are lengths). detection_slack: fraction of a pair's predicted relative
-    displacement added to that margin (see :func:`colsim.contacts.detect`).
-    friction: the friction law, associated (the paper's) or coulomb (:mod:`colsim.friction`).
-    max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.stepper`).
+    displacement added to that margin (see :func:`colsim.engine.contacts.detect`).
+    friction: the friction law, associated (the paper's) or coulomb (:mod:`colsim.engine.friction`).
+    max_redo: how many times a step with a missed contact is redone (see :mod:`colsim.engine.stepper`).
     margin_growth: factor by which a redone step's detection margin grows.
     """
 

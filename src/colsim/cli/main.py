@@ -22,9 +22,9 @@ import math
 import sys
 from pathlib import Path
 
-from .packing import FREEZE_DEPTH, LAYER_HEIGHT
-from .solvers import SOLVERS, AutoSolver
-from .state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
+from ..stages.pack import FREEZE_DEPTH, LAYER_HEIGHT
+from ..solvers.registry import SOLVERS, AutoSolver
+from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
 
 log = logging.getLogger("colsim")
 
@@ -242,9 +242,9 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     from . import commands
-    from .io import InputError
-    from .solvers import SolverError
-    from .stepper import OverlapError
+    from ..io.netcdf import InputError
+    from ..solvers.registry import SolverError
+    from ..engine.stepper import OverlapError
 
     try:
         commands.check_outputs(args)
@@ -285,6 +285,3 @@ def _interrupted(args) -> str:
         return "no checkpoint was written yet: run the same command again to start over"
     return f"the checkpoint {checkpoint} is kept: run the same command again to resume from it"
 
-
-if __name__ == "__main__":
-    sys.exit(main())

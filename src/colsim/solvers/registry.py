@@ -1,9 +1,9 @@
 """The solver layer: the back-ends by name and the automatic choice between them.
 
-Every back-end solves a step's :class:`~colsim.program.ConeProgram` behind the contract of
-:class:`~colsim.program.Solver` and returns a :class:`~colsim.program.ConeSolution`: the increments
+Every back-end solves a step's :class:`~colsim.engine.program.ConeProgram` behind the contract of
+:class:`~colsim.engine.program.Solver` and returns a :class:`~colsim.engine.program.ConeSolution`: the increments
 u (6n,) and the contact forces (m, 5) = (p, q1, q2, r1, r2). A back-end that does not reach its
-tolerance raises :class:`~colsim.program.SolverError`; it never returns an unconverged result.
+tolerance raises :class:`~colsim.engine.program.SolverError`; it never returns an unconverged result.
 
 Imports flow one way: program -> cones -> back-ends (clarabel, apgd, admm) -> solvers -> stepper.
 """
@@ -16,8 +16,8 @@ import numpy as np
 from .admm import AdmmSolver
 from .apgd import ApgdSolver
 from .clarabel import ClarabelSolver
-from .program import ConeSolution, Solver, SolverError, at_step
-from .warm_start import WarmStart
+from ..engine.program import ConeSolution, Solver, SolverError, at_step
+from ..engine.warm_start import WarmStart
 
 __all__ = ["SOLVERS", "AdmmSolver", "ApgdSolver", "AutoSolver", "ClarabelSolver", "ConeSolution",
            "Solver", "SolverError", "WarmStart", "at_step", "make_solver"]
@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 
 def make_solver(name: str = "clarabel", **options) -> Solver:
     """A back-end by name (one of SOLVERS): 'clarabel' (displacement form), 'clarabel-force',
-    'apgd' (first-order, :mod:`colsim.apgd`), 'admm' (operator splitting on the displacement form,
-    :mod:`colsim.admm`) or 'auto' (:class:`AutoSolver`)."""
+    'apgd' (first-order, :mod:`colsim.solvers.apgd`), 'admm' (operator splitting on the displacement form,
+    :mod:`colsim.solvers.admm`) or 'auto' (:class:`AutoSolver`)."""
     makers = {"clarabel": ClarabelSolver, "clarabel-force": lambda **o: ClarabelSolver(form="force", **o),
               "apgd": ApgdSolver, "admm": AdmmSolver, "auto": AutoSolver}
     if name not in makers:

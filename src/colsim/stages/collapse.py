@@ -2,10 +2,10 @@
 
 The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
 mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
-The friction law is the paper's associated one unless friction_law = 'coulomb' (:mod:`colsim.friction`).
+The friction law is the paper's associated one unless friction_law = 'coulomb' (:mod:`colsim.engine.friction`).
 With max_duration set, it goes on at the same dt until the deposit is at rest or t / sqrt(h0/g)
 reaches max_duration, whichever comes first. At rest: the final height and run-out (measured as in
-:mod:`colsim.analysis`) moved less than rest_tolerance mean diameters over the last rest_window,
+:mod:`colsim.stages.analyse`) moved less than rest_tolerance mean diameters over the last rest_window,
 and the kinetic energy (translational and rotational) is below rest_energy times its peak. The
 energy test is needed: grains at the edge join the main mass in jumps, a time unit or more apart.
 Frames (state every `frame_every` steps, and the first and last) and per-step diagnostics are kept.
@@ -24,11 +24,12 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .analysis import measure_deposit
-from .io import AT_REST_FLAGS, at_rest_variable, atomic_path, component_coordinate
-from .solvers import Solver, WarmStart
-from .state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
-from .stepper import Carry, StepDiagnostics, run
+from .analyse import measure_deposit
+from ..io.netcdf import AT_REST_FLAGS, at_rest_variable, atomic_path, component_coordinate
+from ..engine.program import Solver
+from ..engine.warm_start import WarmStart
+from ..engine.state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
+from ..engine.stepper import Carry, StepDiagnostics, run
 
 log = logging.getLogger(__name__)
 
@@ -54,9 +55,9 @@ class CollapseSettings:
     rest_window: float = 1.0             # t / sqrt(h0/g)
     rest_tolerance: float = 0.1          # mean diameters
     rest_energy: float = 1e-2            # of the peak kinetic energy
-    friction_law: str = "associated"     # or "coulomb" (colsim.friction)
+    friction_law: str = "associated"     # or "coulomb" (colsim.engine.friction)
     friction_tolerance: float = FrictionLaw().tolerance     # coulomb's fixed point, mean diameters
-    rolling_lever: str = "paper"         # or "effective" (R_eff; colsim.state.rolling_lever)
+    rolling_lever: str = "paper"         # or "effective" (R_eff; colsim.engine.state.rolling_lever)
 
     def __post_init__(self):
         for name in ("mu", "mu_r"):

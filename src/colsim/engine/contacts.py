@@ -1,7 +1,7 @@
 """Contact detection: potential contacts between spheres, the floor, the cylinder and fixed spheres.
 
 A potential contact k joins particle i to body j (another particle, a wall, j = -1, or fixed
-sphere k, j = -2 - k: :class:`colsim.state.FixedSpheres`). Its unit
+sphere k, j = -2 - k: :class:`colsim.engine.state.FixedSpheres`). Its unit
 normal points from i to j, its gap is the surface distance along that normal at the start of the
 step (negative when overlapping), and (t1, t2, n) is a right-handed orthonormal frame. A pair is
 listed when its predicted relative motion within the step brings it within a margin of contact

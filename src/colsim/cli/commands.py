@@ -8,12 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import analysis, io
-from .collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
-from .packing import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
-from .solvers import make_solver
-from .state import FRICTION_LAWS
-from .threads import use_threads
+from ..stages import analyse as analysis
+
+from .. import io
+from ..stages.collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
+from ..stages.pack import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
+from ..solvers.registry import make_solver
+from ..engine.state import FRICTION_LAWS
+from ..engine.threads import use_threads
 
 log = logging.getLogger("colsim")
 
@@ -86,7 +88,7 @@ def _solver(args, scaled_time_step: float):
 
 def _pack_solver(args):
     """The packing's back-end: under auto, APGD for every warm-started step at the packing's own
-    tolerance (:data:`colsim.packing.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest;
+    tolerance (:data:`colsim.stages.pack.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest;
     no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
@@ -219,7 +221,7 @@ def analyse(args):
 
 
 def collect(args):
-    from .summary import collect_analyses, lube_markdown, one_row_per_run
+    from ..study.collect import collect_analyses, lube_markdown, one_row_per_run
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
@@ -242,7 +244,7 @@ def _csv_writer(dataset):
 
 
 def convergence(args):
-    from . import convergence as study
+    from ..study import convergence as study
 
     groups = {name: [io.open_dataset(p, io.ANALYSIS_KIND) for p in getattr(args, name)]
               for name in study.SUB_STUDIES}
@@ -263,7 +265,7 @@ def convergence(args):
         limits.attrs.update(io.global_attributes("column-size-limits", "colsim column-size limits", _settings(args)))
         writers[args.limits] = lambda tmp: io.write_netcdf(limits, tmp)
     if args.size_figure:
-        from .plots import column_size_limit_figure
+        from ..study.plots import column_size_limit_figure
 
         writers[args.size_figure] = lambda tmp: column_size_limit_figure(table, limits, tmp)
     if args.csv:
@@ -271,14 +273,14 @@ def convergence(args):
     if args.markdown:
         writers[args.markdown] = _text_writer(text)
     if args.figure:
-        from .plots import convergence_figure
+        from ..study.plots import convergence_figure
 
         writers[args.figure] = lambda tmp: convergence_figure(table, tmp)
     io.write_all(writers)
 
 
 def compare_laws(args):
-    from .summary import collect_analyses, friction_law_comparison, friction_law_markdown
+    from ..study.collect import collect_analyses, friction_law_comparison, friction_law_markdown
 
     summaries = {}
     for law in FRICTION_LAWS:
@@ -296,14 +298,14 @@ def compare_laws(args):
     if args.markdown:
         writers[args.markdown] = _text_writer(text)
     if args.figure:
-        from .plots import friction_law_figure
+        from ..study.plots import friction_law_figure
 
         writers[args.figure] = lambda tmp: friction_law_figure(comparison, tmp)
     io.write_all(writers)
 
 
 def plot(args):
-    from . import plots
+    from ..study import plots
 
     summary = io.open_dataset(args.summary, "collapse-summary")
     analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in args.analyses]
@@ -312,7 +314,7 @@ def plot(args):
 
 
 def export_vtk(args):
-    from .vtk import export_trajectory
+    from ..io.vtk import export_trajectory
 
     trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
     path = export_trajectory(trajectory, args.output_dir)
@@ -320,6 +322,6 @@ def export_vtk(args):
 
 
 def mu_r(args):
-    from .calibration import polygon_rolling_coefficient
+    from ..study.polygon import polygon_rolling_coefficient
 
     print(f"{polygon_rolling_coefficient(args.polygon, args.method):.6f}")

@@ -9,9 +9,9 @@ from collections import Counter
 import numpy as np
 import xarray as xr
 
-from .io import AT_REST_FLAGS, at_rest_flag, at_rest_variable
-from .laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
-from .state import LEVER_OF_OLDER_FILES
+from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
+from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
+from ..engine.state import LEVER_OF_OLDER_FILES
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -198,7 +198,7 @@ def runout_measures_markdown(summary) -> str:
 
 
 REST_ENERGY = 1e-2
-"""The collapse's default rest test on the kinetic energy (colsim.collapse.CollapseSettings.rest_energy):
+"""The collapse's default rest test on the kinetic energy (colsim.stages.collapse.CollapseSettings.rest_energy):
 at rest only below this share of its peak."""
 MAIN_MASS_SHARE = 0.5
 """A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:

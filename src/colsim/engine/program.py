@@ -14,13 +14,13 @@ Its Lagrange dual (force form) is
     subject to lam_k = (p, q1, q2, r1, r2) with ||q|| <= mu p, ||r|| <= mu_r p
 
 and u = Mbar^-1 (fbar + B' lam). The multipliers are the contact forces: normal p, sliding q and
-rolling r; the rolling moment is L r, L the contact's lever (:func:`colsim.state.rolling_lever`:
+rolling r; the rolling moment is L r, L the contact's lever (:func:`colsim.engine.state.rolling_lever`:
 the paper's particle radius, or R_eff). This is the associated friction law of the paper: a
 sliding contact opens by mu ||du_t|| per step.
 
 A back-end solves a program behind one contract (:class:`Solver`): it returns a
 :class:`ConeSolution` or raises :class:`SolverError`, never an unconverged result. The back-ends
-are :mod:`colsim.clarabel`, :mod:`colsim.apgd` and :mod:`colsim.admm`; :mod:`colsim.solvers` picks
+are :mod:`colsim.solvers.clarabel`, :mod:`colsim.solvers.apgd` and :mod:`colsim.solvers.admm`; :mod:`colsim.solvers` picks
 them by name.
 """
 from __future__ import annotations
@@ -45,7 +45,7 @@ class ConeProgram:
     jacobian: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns)
     gap: (m,) length; mu, mu_r: (m,) coefficients
     contacts: the contacts B was built from (their frames and radii give B without the matrix:
-    :mod:`colsim.apgd`'s compiled kernels use them); None for a program given by B alone
+    :mod:`colsim.solvers.apgd`'s compiled kernels use them); None for a program given by B alone
     """
 
     mass: np.ndarray

@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from . import __version__
-from .state import ParticleState
-from .warm_start import WarmStart
+from .. import __version__
+from ..engine.state import ParticleState
+from ..engine.warm_start import WarmStart
 
 STATE_KIND = "particle-state"
 TRAJECTORY_KIND = "collapse-trajectory"
@@ -300,8 +300,8 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
     least one; finite positions, velocities and radii; diameters within the file's stated range;
     nothing below the floor or (r0 given) outside the cylinder, and no two spheres overlapping, by
     more than 1 % of the smallest diameter (the stepper's own tolerance)."""
-    from .contacts import overlaps
-    from .state import Walls
+    from ..engine.contacts import overlaps
+    from ..engine.state import Walls
 
     if state.n == 0:
         raise InputError(f"input file {path} holds no spheres")

@@ -24,11 +24,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .contacts import fixed_pairs
-from .program import SolverError
-from .solvers import Solver, WarmStart
-from .state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
-from .stepper import Carry, run
+from ..engine.contacts import fixed_pairs
+from ..engine.program import SolverError
+from ..engine.program import Solver
+from ..engine.warm_start import WarmStart
+from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
+from ..engine.stepper import Carry, run
 
 log = logging.getLogger(__name__)
 
@@ -157,7 +158,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
 
     layer_height: each cloud adds about this settled thickness (length; None: one cloud for the
     whole height). Before a cloud falls, the spheres more than freeze_depth (length) below the
-    settled surface that are at rest become fixed (:class:`colsim.state.FixedSpheres`): they leave
+    settled surface that are at rest become fixed (:class:`colsim.engine.state.FixedSpheres`): they leave
     the program, and the cloud and the top of the packing settle on them. A cloud is followed by
     the next once it has landed (:data:`LANDED_ENERGY_FACTOR`); the last one and the spheres not
     fixed step until :func:`is_at_rest` (the fixed ones were at rest when fixed). The forces

@@ -10,13 +10,13 @@ Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks th
 - seeds: the same column from several packings.
 
 :func:`convergence_markdown` turns the table into the relative changes docs/validation/ quotes (the
-column-size runs averaged over seeds by :func:`colsim.summary.means_per_size`).
+column-size runs averaged over seeds by :func:`colsim.study.collect.means_per_size`).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .summary import means_per_size
+from .collect import means_per_size
 
 SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
 RUN_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "final_to_peak_kinetic_energy", "n_particles",
@@ -244,14 +244,14 @@ LIMIT_ACCURACIES = (0.05, 0.02)
 
 def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed: int = 0):
     """The column-size limit X_inf of h_inf/r0 and the run-out at each aspect ratio of the
-    column_size sub-study with at least 2 sizes (:func:`colsim.size_limit.size_limit`: X(r0) =
+    column_size sub-study with at least 2 sizes (:func:`colsim.study.size_limit.size_limit`: X(r0) =
     X_inf + k (d/r0)^p, its interval by bootstrap over seeds and sizes), beside Lube's and
     Lajeunesse's laws, and the r0 (length) at which the fit is within 5 % and 2 % of X_inf.
 
     Returns a Dataset over (aspect_ratio, measure); None when no aspect ratio has 2 sizes."""
     import xarray as xr
 
-    from .laws import final_values
+    from .experimental_laws import final_values
     from .size_limit import size_limit
 
     study = table.where(table.study == "column_size", drop=True)

@@ -1,6 +1,6 @@
 """A first-order back-end: accelerated projected gradient (APGD) on the contact forces.
 
-It solves the force form of the step's cone program (:mod:`colsim.program`),
+It solves the force form of the step's cone program (:mod:`colsim.engine.program`),
 
     minimise   1/2 lam' W lam + c' lam      subject to lam_k in K_k,
     K_k = {(p, q, r): ||q|| <= mu_k p, ||r|| <= mu_r,k p},
@@ -13,7 +13,7 @@ Chrono's APGD (Mazhar et al. 2015). W is never formed: the gradient is
 
 i.e. each contact's gap at the end of the step, so one iteration costs one product with B' and one
 with B (work linear in the number of contacts) plus the exact Euclidean projection onto K_k
-(:func:`colsim.cones.project_point`). The compiled kernel fuses them and applies B and B' from the
+(:func:`colsim.engine.cones.project_point`). The compiled kernel fuses them and applies B and B' from the
 contacts' frames and radii (12 numbers a contact) instead of the matrix (42 non-zeros a contact):
 4.2 ms an iteration at 55,000 contacts against 7.5 ms with the matrix (benchmarks/apgd_iteration.py).
 
@@ -24,7 +24,7 @@ the projection stays exact.
 
 Stopping (checked every `check_every` iterations, at the current iterate lam, in one compiled
 sweep): the relative primal infeasibility and complementarity of
-:func:`colsim.cones.relative_residuals` must both fall below `tolerance`; dual feasibility
+:func:`colsim.engine.cones.relative_residuals` must both fall below `tolerance`; dual feasibility
 (lam_k in K_k) is exact by construction (the iterate is a projection). Their length L is the
 step's root-mean-square free flight, or `length_floor` mean diameters where that is larger: at rest
 the free flight is g dt^2 (4e-4 d at r0 = 2 and dt/sqrt(h0/g) = 0.004), and without a floor the
@@ -36,7 +36,7 @@ complementarity has converged (`auto` uses 1e-4 d; 4.3x fewer iterations at r0 =
 Not reaching it within `max_iter` iterations raises :class:`SolverError`.
 
 Warm start: the solver accepts forces (m, 5) aligned with the program's contacts (zeros for new
-contacts). :class:`colsim.warm_start.WarmStart` carries a step's forces by contact pair, in the
+contacts). :class:`colsim.engine.warm_start.WarmStart` carries a step's forces by contact pair, in the
 global frame, and re-expresses them in the next step's contact frames.
 """
 from __future__ import annotations
@@ -47,10 +47,10 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
+from ..engine.cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
                     project_point, row_scaling, scaled_coefficients, scaled_residuals)
-from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
-from .threads import prange, threads
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.threads import prange, threads
 
 if HAVE_NUMBA:
     import numba
@@ -300,7 +300,7 @@ class _Iteration:
         return self.apply_G(self.hx, self.c)
 
     def residuals(self, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
-        """:func:`colsim.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
+        """:func:`colsim.engine.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
         return scaled_residuals(self.gradient_at_x(), self.x, self.scaling.ravel(), mu, mu_r, scale, floor)
 
     def iterate(self, n: int):

@@ -21,7 +21,7 @@
   main mass, the largest cluster, can shrink and its edge recede). Analyses made before the mass
   front existed get the bottom row only.
 
-In the figures against a and against mu_r, a point whose runs :func:`colsim.summary.run_flags` flags
+In the figures against a and against mu_r, a point whose runs :func:`colsim.study.collect.run_flags` flags
 is drawn distinctly, with a legend entry: an open marker where a seed was still moving at the end, a
 black cross where a seed's main mass holds less than half the grains.
 
@@ -36,10 +36,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
-from .io import AT_REST_FLAGS, at_rest_flag
-from .summary import FLAGS, means_per_size, run_flags
-from .laws import (LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, final_values, lube_height,
+from ..stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
+from ..io.netcdf import AT_REST_FLAGS, at_rest_flag
+from .collect import FLAGS, means_per_size, run_flags
+from .experimental_laws import (LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, final_values, lube_height,
                    lube_runout)
 
 log = logging.getLogger(__name__)
@@ -79,7 +79,7 @@ def _label(variable, fallback: str) -> str:
 
 
 def _save(fig, path: Path) -> Path:
-    from .io import atomic_path
+    from ..io.netcdf import atomic_path
 
     with atomic_path(path) as tmp:   # a killed plot leaves no PNG that looks finished
         fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
@@ -340,14 +340,14 @@ def _grid(plt, n: int, width: float, height: float):
 
 def _bin_edges(centres) -> np.ndarray:
     """The edges of equal radial bins from their centres (the first bin starts on the axis when its
-    centre is half a width out, as colsim.analysis.deposit_profile makes them)."""
+    centre is half a width out, as colsim.stages.analyse.deposit_profile makes them)."""
     centres = np.asarray(centres, dtype=float)
     width = centres[1] - centres[0] if len(centres) > 1 else 2.0 * centres[0]
     return np.r_[centres - width / 2, centres[-1:] + width / 2]
 
 
 def _analysis_flags(run) -> dict:
-    """{flag: bool} of one analysis, as :func:`colsim.summary.run_flags` flags a run ({} when the
+    """{flag: bool} of one analysis, as :func:`colsim.study.collect.run_flags` flags a run ({} when the
     analysis lacks h_inf_over_r0)."""
     import json
 
@@ -365,7 +365,7 @@ def _analysis_flags(run) -> dict:
 def deposit_profile_figure(analyses, path: Path) -> Path:
     """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed; each
     bin drawn over its whole width, from the first (at the axis) to the last; a run that
-    :func:`colsim.summary.run_flags` flags is dashed and its legend entry says why."""
+    :func:`colsim.study.collect.run_flags` flags is dashed and its legend entry says why."""
     plt = _pyplot()
     runs = _by_key(analyses)
     ratios = sorted({a for a, _, _ in runs}) or [np.nan]
@@ -407,11 +407,11 @@ def _slab(run, frame):
 
 def _end_name(trajectory) -> str:
     """"deposit" for the last frame of a run at rest, "end (still moving)" otherwise (as
-    :func:`colsim.summary.run_flags` decides: at_rest 0, or with a fixed end time, no at_rest, the
+    :func:`colsim.study.collect.run_flags` decides: at_rest 0, or with a fixed end time, no at_rest, the
     kinetic energy at the end above the run's rest_energy of its peak); "end" when it cannot tell."""
     import json
 
-    from .summary import rest_energy
+    from .collect import rest_energy
 
     flag = at_rest_flag(trajectory)
     if flag != AT_REST_FLAGS["not_checked"]:
@@ -561,7 +561,7 @@ def _time_step_panel(ax, part) -> None:
 
 
 def convergence_figure(table, path: Path) -> Path:
-    """The convergence study (a table from :func:`colsim.convergence.runs_table`) in four panels:
+    """The convergence study (a table from :func:`colsim.study.convergence.runs_table`) in four panels:
     both quantities against dt/sqrt(h0/g), at the default and the later end time, against r0 over
     the mean diameter (mean over seeds; runs that go on past the default end also show their
     run-out there, dotted; Lube's run-out as a thin dashed line), and per seed with the mean.
@@ -614,7 +614,7 @@ def column_size_limit_figure(table, limits, path: Path) -> Path:
     d/r0 = 0 with its bootstrap interval, and Lube's and Lajeunesse's values there (the
     experiments' columns held thousands of grains across: d/r0 about 0; Lajeunesse's height only
     up to a = 0.74, where its printed law is a height). `limits`: from
-    :func:`colsim.convergence.column_size_limits` (None: points only)."""
+    :func:`colsim.study.convergence.column_size_limits` (None: points only)."""
     plt = _pyplot()
     study = table.where(table.study == "column_size", drop=True)
     aspect = np.unique(study.aspect_ratio.values) if study.sizes.get("run", 0) else np.array([])

@@ -1,6 +1,6 @@
 """The friction law of a step: associated (the paper's) or Coulomb (non-associated), on the same cone program.
 
-associated: one cone program (:mod:`colsim.program`), g + du_n >= mu ||du_t|| + mu_r ||dphi||.
+associated: one cone program (:mod:`colsim.engine.program`), g + du_n >= mu ||du_t|| + mu_r ||dphi||.
     Its flow rule is normal to the cone: a sliding contact opens by mu ||du_t|| (and a rolling one
     by mu_r ||dphi||) every step, so a sliding grain hovers.
 

@@ -1,7 +1,7 @@
 """Time stepping: detect, assemble, solve, update (x += dx, v = dx/dt, w = dth/dt), check.
 
 Potential contacts come from the free-flight prediction u = v dt + g dt^2 of every particle
-(:func:`colsim.contacts.detect`): a pair is listed when its relative segment comes within a margin
+(:func:`colsim.engine.contacts.detect`): a pair is listed when its relative segment comes within a margin
 (default 5 % of the smallest diameter, plus half the pair's relative displacement, for the velocity
 changes of the step). After the step the largest overlap is measured. A step whose overlap exceeds
 the tolerance is redone: missed pairs are added, linearised about their end-of-attempt normal, the
@@ -23,7 +23,8 @@ import numpy as np
 from . import contacts as contact_detection
 from . import friction
 from .program import assemble
-from .solvers import ConeSolution, Solver, WarmStart
+from .program import ConeSolution, Solver
+from .warm_start import WarmStart
 from .state import ParticleState, StepSettings
 
 log = logging.getLogger(__name__)
@@ -41,7 +42,7 @@ class StepDiagnostics:
     the whole step, redone attempts included. detection_margin: of the accepted attempt (length).
     solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`).
     solver_iterations: summed over the cone programs of the step; friction_iterations: how many
-    cone programs the friction law solved (1, or the Coulomb fixed point's, :mod:`colsim.friction`)."""
+    cone programs the friction law solved (1, or the Coulomb fixed point's, :mod:`colsim.engine.friction`)."""
 
     step: int
     time: float

@@ -1,12 +1,12 @@
 """The cone toolkit shared by the iterative back-ends: projections, row scalings and residuals.
 
 Every contact k has the force cone K_k = {(p, q, r): ||q|| <= mu_k p, ||r|| <= mu_r,k p} (the
-multipliers lam_k = (p, q1, q2, r1, r2) of :mod:`colsim.program`) and its dual, the cone of
+multipliers lam_k = (p, q1, q2, r1, r2) of :mod:`colsim.engine.program`) and its dual, the cone of
 admissible end-of-step gaps C_k = {y: y_n >= mu_k ||y_t|| + mu_r,k ||y_r||}. This module projects
 onto both exactly, scales a contact's rows so that the two cones keep their form, and measures how
 far forces and gaps are from a solution in dimensionless terms. It knows nothing of any solver.
 
-Residuals (relative, the stopping rule of :mod:`colsim.apgd` and :mod:`colsim.admm`):
+Residuals (relative, the stopping rule of :mod:`colsim.solvers.apgd` and :mod:`colsim.solvers.admm`):
   - primal: max_k (mu ||y_t|| + mu_r ||y_r|| - y_n)_+ / L;
   - dual: max_k max(||q|| - mu p, ||r|| - mu_r p, -p)_+ / F;
   - complementarity: sum_k |lam_k . y_k| / ((sum_k p_k + m F0) L);

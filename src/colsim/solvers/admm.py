@@ -1,6 +1,6 @@
 """An operator-splitting back-end: ADMM on the displacement (primal) form, as OSQP does for QPs.
 
-The step's program (:mod:`colsim.program`) in its displacement form is
+The step's program (:mod:`colsim.engine.program`) in its displacement form is
 
     minimise   1/2 u' Mbar u - fbar' u   subject to   y = B u + g e_n in C,
     C = {y: y_n >= mu ||y_t|| + mu_r ||y_r||} per contact,
@@ -9,7 +9,7 @@ whose dual cone is the force cone K = {(p, q, r): ||q|| <= mu p, ||r|| <= mu_r p
 
 Scaling: each contact's normal, sliding and rolling rows are scaled, y^ = D y with
 D = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(B Mbar^-1 B')^-1/2 (the scaling of
-:func:`colsim.cones.row_scaling`). The scaled cone is the same kind of cone with mu^ = mu s_n/s_t and
+:func:`colsim.engine.cones.row_scaling`). The scaled cone is the same kind of cone with mu^ = mu s_n/s_t and
 mu_r^ = mu_r s_n/s_r, so the Euclidean projection onto it stays exact, and a scalar penalty rho in
 the scaled space is the per-row penalty R = rho D^2 in the original one.
 
@@ -24,7 +24,7 @@ so -w stays in K^ and z in C^ with z . w = 0 exactly; the contact forces are lam
 by construction) and u solves Mbar u = fbar + B' lam at convergence (ClarabelSolver's convention).
 
 Stopping (every `check_every` iterations), both as lengths relative to the free-flight length L
-(:func:`colsim.cones.length_scale`): primal max |B u + g e_n - z| / L, and dual
+(:func:`colsim.engine.cones.length_scale`): primal max |B u + g e_n - z| / L, and dual
 max |u - u(lam)| / L with u(lam) = Mbar^-1 (fbar + B' lam). APGD's force-form residuals of the
 result are recorded in the solution's info as force_form_*. Not converging within `max_iter`
 iterations raises :class:`SolverError`.
@@ -55,9 +55,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .cones import (force_floor, length_scale, project_coupled_cone, project_gap_cone,
+from ..engine.cones import (force_floor, length_scale, project_coupled_cone, project_gap_cone,
                     relative_residuals, row_scaling, scaled_coefficients)
-from .program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 
