@@ -22,7 +22,7 @@ from colsim import io
 from colsim.solvers.apgd import ApgdSolver
 from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.engine.cones import mean_diameter
-from colsim.engine.program import Solver
+from colsim.engine.solver_contract import Solver
 from colsim.solvers import make_solver
 
 LEVELS = (1e-3, 1e-4, 1e-5, 1e-6)   # largest violation, mean diameters

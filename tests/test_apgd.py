@@ -313,7 +313,7 @@ def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     packing goes without it, and records its settings as before the option existed."""
     from colsim.cli import build_parser
     from colsim.cli.commands import _pack_solver, _solver
-    from colsim.stages.pack import APGD_TOLERANCE
+    from colsim.solvers.defaults import PACK_APGD_TOLERANCE as APGD_TOLERANCE
     assert AutoSolver().apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE > 0
     assert ApgdSolver().overlap_tolerance == 0.0
     assert AutoSolver.APGD_OVERLAP_TOLERANCE <= APGD_TOLERANCE * AutoSolver.APGD_LENGTH_FLOOR

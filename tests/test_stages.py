@@ -17,7 +17,8 @@ from colsim import io
 from colsim.study.polygon import polygon_rolling_coefficient
 from colsim.cli import main
 from colsim.stages.collapse import CollapseSettings, collapse
-from colsim.stages.pack import column_height, pack, solid_fraction, trim
+from colsim.stages.pack import column_height, pack, solid_fraction
+from colsim.stages.trim import trim
 from colsim.solvers import AutoSolver, ClarabelSolver
 from colsim.engine.contacts import overlaps, touching_pairs
 from colsim.engine.state import ParticleState, Walls
@@ -253,8 +254,8 @@ def _run_cli(*args, cwd):
 
 def test_progress_is_logged_every_tenth_of_the_steps_or_every_minute(caplog):
     """A slow run still logs: a line every 10 % of the steps, or after 60 s without one."""
-    from colsim.cli.commands import _progress_bar
-    from colsim.engine.stepper import StepDiagnostics
+    from colsim.cli.progress import progress_bar as _progress_bar
+    from colsim.engine.records import StepDiagnostics
 
     now = [0.0]
     progress = _progress_bar(100, "collapse", interval_s=60.0, clock=lambda: now[0])
@@ -337,11 +338,11 @@ import os, signal, sys
 import colsim.stages.collapse as collapse
 from colsim.cli import main
 signal.signal(signal.SIGINT, signal.default_int_handler)
-save = collapse._save_checkpoint
+save = collapse.save_checkpoint
 def save_then_signal(*args, **kwargs):
     save(*args, **kwargs)
     os.kill(os.getpid(), signal.{name})
-collapse._save_checkpoint = save_then_signal
+collapse.save_checkpoint = save_then_signal
 sys.exit(main(sys.argv[1:]))
 """
 

@@ -6,7 +6,8 @@ import numpy as np
 import xarray as xr
 
 from colsim.study.experimental_laws import lube_height, lube_runout
-from colsim.study.collect import lube_markdown, lube_rst, one_row_per_run, run_flags
+from colsim.study.collect import one_row_per_run, run_flags
+from colsim.study.markdown import lube_markdown, lube_rst
 
 
 def test_check_variables_become_one_column_per_value():
@@ -98,7 +99,8 @@ def law_summary(h_shift, runout_shift, programs, wall):
 
 def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
     from colsim.study.plots import friction_law_figure
-    from colsim.study.collect import friction_law_comparison, friction_law_markdown
+    from colsim.study.collect import friction_law_comparison
+    from colsim.study.markdown import friction_law_markdown
 
     comparison = friction_law_comparison({"associated": law_summary(0.0, 0.0, 1.0, 10.0),
                                           "coulomb": law_summary(0.0, 0.5, 15.0, 110.0)})

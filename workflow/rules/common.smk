@@ -377,7 +377,7 @@ def write_study_files(study, summary_path, template, config_path, description_pa
     import jinja2
     import xarray
 
-    from colsim.study.collect import lube_rst
+    from colsim.study.markdown import lube_rst
 
     with xarray.open_dataset(summary_path) as summary:
         attrs = dict(summary.attrs)

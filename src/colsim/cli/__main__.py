@@ -1,6 +1,6 @@
 """`python -m colsim.cli`: the `colsim` command."""
 import sys
 
-from .main import main
+from .entry import main
 
 sys.exit(main())

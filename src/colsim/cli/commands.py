@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import logging
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -11,11 +10,15 @@ import numpy as np
 from ..stages import analyse as analysis
 
 from .. import io
-from ..stages.collapse import CollapseSettings, collapse as run_collapse, trajectory_dataset
-from ..stages.pack import APGD_TOLERANCE, kept_by_trim, pack as run_pack, solid_fraction
-from ..solvers.registry import make_solver
 from ..engine.state import FRICTION_LAWS
 from ..engine.threads import use_threads
+from ..io.trajectory import trajectory_dataset
+from ..solvers import defaults
+from ..solvers.registry import make_solver
+from ..stages.collapse import CollapseSettings, collapse as run_collapse
+from ..stages.pack import pack as run_pack, solid_fraction
+from ..stages.trim import kept_by_trim
+from .progress import progress_bar
 
 log = logging.getLogger("colsim")
 
@@ -88,39 +91,13 @@ def _solver(args, scaled_time_step: float):
 
 def _pack_solver(args):
     """The packing's back-end: under auto, APGD for every warm-started step at the packing's own
-    tolerance (:data:`colsim.stages.pack.APGD_TOLERANCE`, or --solver-tolerance), Clarabel for the rest;
-    no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
+    tolerance (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or --solver-tolerance), Clarabel
+    for the rest; no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
     return make_solver("auto", scaled_time_step=None,
-                       apgd={"overlap_tolerance": 0.0, **_apgd_options(args, APGD_TOLERANCE)})
-
-
-def _progress_bar(total: int, description: str, interval_s: float = 60.0, clock=time.monotonic):
-    """A tqdm bar on a terminal (off otherwise) and a log line every 10 % of the steps, or sooner
-    once interval_s seconds have passed since the last line (a long step or run to rest would
-    otherwise leave the log silent for many minutes)."""
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, desc=description, disable=None, unit="step")
-    every = max(1, total // 10)
-    started = clock()
-    counter = {"n": 0, "last": started}
-
-    def update(diagnostics, *_):
-        counter["n"] += 1
-        bar.update(1)
-        bar.set_postfix(contacts=diagnostics.n_contacts, iters=diagnostics.solver_iterations)
-        now = clock()
-        if counter["n"] % every == 0 or now - counter["last"] >= interval_s:
-            counter["last"] = now
-            log.info("%s step %d of at most %d (%.0f s): %d contacts, kinetic energy %.3g, "
-                     "overlap %.2g, solve %.2f s, %d iterations", description, diagnostics.step,
-                     total, now - started, diagnostics.n_contacts,
-                     diagnostics.kinetic_energy + diagnostics.rotational_energy,
-                     diagnostics.largest_overlap, diagnostics.solve_time, diagnostics.solver_iterations)
-    update.close = bar.close
-    return update
+                       apgd={"overlap_tolerance": defaults.PACK_APGD_OVERLAP_TOLERANCE,
+                             **_apgd_options(args, defaults.PACK_APGD_TOLERANCE)})
 
 
 def pack(args):
@@ -178,7 +155,7 @@ def collapse(args):
         rolling_lever=args.rolling_lever)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if args.friction_law == "associated" else f" {args.friction_law}"
-    progress = _progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")
+    progress = progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")
     solver = _solver(args, settings.duration / settings.n_steps)
     try:
         run = run_collapse(column, h0, settings, solver, io.contact_forces_of(source),
@@ -221,7 +198,8 @@ def analyse(args):
 
 
 def collect(args):
-    from ..study.collect import collect_analyses, lube_markdown, one_row_per_run
+    from ..study.collect import collect_analyses, one_row_per_run
+    from ..study.markdown import lube_markdown
 
     summary = collect_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     summary.attrs.update(io.global_attributes("collapse-summary", "colsim study summary", _settings(args)))
@@ -280,7 +258,8 @@ def convergence(args):
 
 
 def compare_laws(args):
-    from ..study.collect import collect_analyses, friction_law_comparison, friction_law_markdown
+    from ..study.collect import collect_analyses, friction_law_comparison
+    from ..study.markdown import friction_law_markdown
 
     summaries = {}
     for law in FRICTION_LAWS:

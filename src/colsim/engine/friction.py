@@ -49,7 +49,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .program import ConeProgram, ConeSolution, Solver, SolverError, at_step
+from .program import ConeProgram
+
+from .solver_contract import ConeSolution, Solver, SolverError, at_step
 from .state import FRICTION_LAWS, FrictionLaw
 
 __all__ = ["FRICTION_LAWS", "FrictionLaw", "dilation", "solve_step"]

@@ -18,14 +18,14 @@ rolling r; the rolling moment is L r, L the contact's lever (:func:`colsim.engin
 the paper's particle radius, or R_eff). This is the associated friction law of the paper: a
 sliding contact opens by mu ||du_t|| per step.
 
-A back-end solves a program behind one contract (:class:`Solver`): it returns a
-:class:`ConeSolution` or raises :class:`SolverError`, never an unconverged result. The back-ends
+A back-end solves a program behind one contract (:mod:`colsim.engine.solver_contract`): it returns
+a ConeSolution or raises SolverError, never an unconverged result. The back-ends
 are :mod:`colsim.solvers.clarabel`, :mod:`colsim.solvers.apgd` and :mod:`colsim.solvers.admm`; :mod:`colsim.solvers` picks
 them by name.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -167,59 +167,3 @@ def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> d
         "dual": float(np.max(dual)),
         "complementarity": float(np.max(np.abs(p * slack))),
     }
-
-
-@dataclass
-class ConeSolution:
-    """increments: (6n,) u = [dx; dth]; forces: (m, 5) (p, q1, q2, r1, r2), force units.
-    setup_time, solve_time: seconds; info: the back-end's residuals and counters; backend: the
-    name of the back-end that solved it, where a solver delegates (''; the solver's own name)."""
-
-    increments: np.ndarray
-    forces: np.ndarray
-    status: str
-    iterations: int
-    setup_time: float
-    solve_time: float
-    info: dict = field(default_factory=dict)
-    backend: str = ""
-
-
-class SolverError(RuntimeError):
-    """A cone program that was not solved to tolerance."""
-
-    def __init__(self, message: str, status: str = "", step: int | None = None, residuals=None):
-        self.status = status
-        self.step = step
-        self.residuals = residuals or {}
-        super().__init__(message)
-
-
-def at_step(step: int | None) -> str:
-    """' at step N' for an error message, or '' when the step is not known."""
-    return f" at step {step}" if step is not None else ""
-
-
-class Solver:
-    """A back-end: `solve(program, warm_start=None, step=None) -> ConeSolution`.
-
-    warm_start: forces (m, 5) aligned with the program's contacts, or None.
-    step: the step number, for error messages."""
-
-    name = "base"
-    #: whether solve() uses `warm_start` (the stepper then passes the previous step's forces)
-    uses_warm_start = False
-
-    def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
-              step: int | None = None) -> ConeSolution:
-        raise NotImplementedError
-
-    def describe(self) -> dict:
-        """The back-end's name and settings (JSON-able), for output attributes and checkpoints."""
-        settings = {k: v for k, v in vars(self).items() if isinstance(v, (bool, int, float, str))}
-        return {"name": self.name, **settings}
-
-    @staticmethod
-    def no_contacts(program: ConeProgram) -> ConeSolution:
-        """The solution of a program without contacts: free motion."""
-        return ConeSolution(program.free_motion(), np.zeros((0, ROWS_PER_CONTACT)), "Solved", 0, 0.0, 0.0)

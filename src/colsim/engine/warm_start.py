@@ -7,6 +7,9 @@ contacts are matched by pair and get the stored forces re-expressed in their own
 onto their cones (zeros for new pairs). The pairs survive a change of the particle set: pouring
 more spheres keeps the indices, and trimming renumbers them (:meth:`WarmStart.subset`). So a packing's
 final forces can start the first step of its column's collapse.
+
+A plain record: the cone projection (numba) is loaded by :meth:`WarmStart.match` alone, so that reading
+a file's forces (:mod:`colsim.io`) loads no numerics.
 """
 from __future__ import annotations
 
@@ -14,8 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cones import project_coupled_cone
-from .program import ROWS_PER_CONTACT
 
 
 @dataclass
@@ -50,6 +51,9 @@ class WarmStart:
 
     def match(self, contacts, n_particles: int) -> np.ndarray:
         """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
+        from .cones import project_coupled_cone
+        from .program import ROWS_PER_CONTACT
+
         out = np.zeros((contacts.m, ROWS_PER_CONTACT))
         if self.m == 0 or contacts.m == 0:
             return out

@@ -55,9 +55,11 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from . import defaults
 from ..engine.cones import (force_floor, length_scale, project_coupled_cone, project_gap_cone,
                     relative_residuals, row_scaling, scaled_coefficients)
-from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram
+from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +85,7 @@ class AdmmSolver(Solver):
     name = "admm"
     uses_warm_start = True
 
-    def __init__(self, tolerance: float = 1e-3, max_iter: int = 5000, rho: float = 30.0,
+    def __init__(self, tolerance: float = defaults.ADMM_TOLERANCE, max_iter: int = defaults.ADMM_MAX_ITER, rho: float = 30.0,
                  alpha: float = 1.6, adaptive: bool = True, adapt_every: int = 300,
                  adapt_factor: float = 5.0, max_refactor: int = 1, check_every: int = 10,
                  factorization: str = "MMD_AT_PLUS_A", rho_growth: float = 10.0,

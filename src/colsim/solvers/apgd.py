@@ -47,9 +47,11 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from . import defaults
 from ..engine.cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
                     project_point, row_scaling, scaled_coefficients, scaled_residuals)
-from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram
+from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
 from ..engine.threads import prange, threads
 
 if HAVE_NUMBA:
@@ -369,7 +371,7 @@ class ApgdSolver(Solver):
     name = "apgd"
     uses_warm_start = True
 
-    def __init__(self, tolerance: float = 1e-5, max_iter: int = 20000, check_every: int = 10,
+    def __init__(self, tolerance: float = defaults.APGD_TOLERANCE, max_iter: int = defaults.APGD_MAX_ITER, check_every: int = 10,
                  precondition: bool = True, kernel: str | None = None, lipschitz_decay: float = 0.9,
                  length_floor: float = 0.0, overlap_tolerance: float = 0.0, verbose: bool = False):
         if not tolerance > 0:

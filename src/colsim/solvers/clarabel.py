@@ -13,7 +13,10 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 
-from ..engine.program import ROWS_PER_CONTACT, ConeProgram, ConeSolution, Solver, SolverError, at_step
+from ..engine.program import ROWS_PER_CONTACT, ConeProgram
+from . import defaults
+
+from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +43,7 @@ class ClarabelSolver(Solver):
     RETRY_STATUSES = ("NumericalError", "InsufficientProgress")
 
     def __init__(self, form: str = "displacement", direct_solve_method: str = "faer",
-                 threads: int = 1, tolerance: float = 1e-8, max_iter: int = 200,
+                 threads: int = 1, tolerance: float = defaults.CLARABEL_TOLERANCE, max_iter: int = defaults.CLARABEL_MAX_ITER,
                  equilibrate: bool = False, retry: bool = True,
                  accept_almost_solved: bool = True, verbose: bool = False):
         if form not in ("displacement", "force"):

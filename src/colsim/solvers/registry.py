@@ -1,11 +1,9 @@
-"""The solver layer: the back-ends by name and the automatic choice between them.
+"""The back-ends by name and the automatic choice between them.
 
-Every back-end solves a step's :class:`~colsim.engine.program.ConeProgram` behind the contract of
-:class:`~colsim.engine.program.Solver` and returns a :class:`~colsim.engine.program.ConeSolution`: the increments
-u (6n,) and the contact forces (m, 5) = (p, q1, q2, r1, r2). A back-end that does not reach its
-tolerance raises :class:`~colsim.engine.program.SolverError`; it never returns an unconverged result.
-
-Imports flow one way: program -> cones -> back-ends (clarabel, apgd, admm) -> solvers -> stepper.
+Every back-end solves a step's :class:`~colsim.engine.program.ConeProgram` behind the engine's
+contract (:mod:`colsim.engine.solver_contract`) and returns a ConeSolution: the increments u (6n,)
+and the contact forces (m, 5) = (p, q1, q2, r1, r2). A back-end that does not reach its tolerance
+raises SolverError; it never returns an unconverged result. The stepper sees only the contract.
 """
 from __future__ import annotations
 
@@ -13,17 +11,17 @@ import logging
 
 import numpy as np
 
+from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
+from ..engine.warm_start import WarmStart
+from . import defaults
 from .admm import AdmmSolver
 from .apgd import ApgdSolver
 from .clarabel import ClarabelSolver
-from ..engine.program import ConeSolution, Solver, SolverError, at_step
-from ..engine.warm_start import WarmStart
 
 __all__ = ["SOLVERS", "AdmmSolver", "ApgdSolver", "AutoSolver", "ClarabelSolver", "ConeSolution",
            "Solver", "SolverError", "WarmStart", "at_step", "make_solver"]
 
-#: the back-ends' names, as make_solver, the CLI and the config schema accept them
-SOLVERS = ("clarabel", "clarabel-force", "apgd", "admm", "auto")
+SOLVERS = defaults.SOLVERS
 
 log = logging.getLogger(__name__)
 
@@ -63,18 +61,13 @@ class AutoSolver(Solver):
 
     name = "auto"
     uses_warm_start = True
-    #: APGD's tolerance under auto, from the tolerance study (docs/solvers.md, "APGD's tolerance")
-    APGD_TOLERANCE = 1e-5
-    #: APGD's length floor under auto, mean diameters (docs/solvers.md, "APGD's tolerance"): with the
-    #: tolerance, each contact's end-of-step gap to 1e-6 of a mean diameter at least
-    APGD_LENGTH_FLOOR = 0.1
-    #: APGD's overlap tolerance under auto in a collapse, mean diameters (docs/solvers.md, "The overlap
-    #: tolerance"): a step's largest cone violation may reach it while complementarity keeps the
-    #: relative tolerance (the packing's own bound, 1e-3 x at least 0.1 d, is as loose already)
-    APGD_OVERLAP_TOLERANCE = 1e-4
+    #: APGD's settings under auto: :mod:`colsim.solvers.defaults`
+    APGD_TOLERANCE = defaults.AUTO_APGD_TOLERANCE
+    APGD_LENGTH_FLOOR = defaults.AUTO_APGD_LENGTH_FLOOR
+    APGD_OVERLAP_TOLERANCE = defaults.AUTO_APGD_OVERLAP_TOLERANCE
 
-    def __init__(self, scaled_time_step: float | None = None, apgd_below: float = 0.04,
-                 max_iter: int = 20_000, clarabel: dict | None = None, apgd: dict | None = None):
+    def __init__(self, scaled_time_step: float | None = None, apgd_below: float = defaults.AUTO_APGD_BELOW,
+                 max_iter: int = defaults.AUTO_MAX_ITER, clarabel: dict | None = None, apgd: dict | None = None):
         if max_iter < 1:
             raise ValueError(f"the APGD iteration cap must be >= 1, got {max_iter}")
         self.scaled_time_step = None if scaled_time_step is None else float(scaled_time_step)

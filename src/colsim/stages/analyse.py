@@ -7,7 +7,7 @@
   measured from the column axis.
 - Normalised: h_inf / r0 and (r_inf - r0) / r0, against a = h0 / r0.
 
-:func:`analyse_trajectory` measures a whole trajectory (as :func:`colsim.stages.collapse.trajectory_dataset`
+:func:`analyse_trajectory` measures a whole trajectory (as :func:`colsim.io.trajectory.trajectory_dataset`
 lays it out) into the analysis Dataset that `colsim analyse` writes.
 
 The edge of a deposit is a sparse layer of grains on the floor, a few hundredths of a diameter
@@ -26,8 +26,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..engine.contacts import touching_pairs
-from ..io.netcdf import at_rest_flag, at_rest_variable, state_from_dataset
 from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
+from ..io.netcdf import at_rest_flag, at_rest_variable, state_from_dataset
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
 #: the front followed frame by frame: the radius holding this share of the mass (:func:`mass_front`),

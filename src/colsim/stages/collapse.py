@@ -22,20 +22,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 
-from .analyse import measure_deposit
-from ..io.netcdf import AT_REST_FLAGS, at_rest_variable, atomic_path, component_coordinate
-from ..engine.program import Solver
-from ..engine.warm_start import WarmStart
+from ..engine.records import Carry
+from ..engine.solver_contract import Solver
 from ..engine.state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
-from ..engine.stepper import Carry, StepDiagnostics, run
+from ..engine.stepper import run
+from ..engine.warm_start import WarmStart
+from ..io.checkpoint import load_checkpoint, save_checkpoint
+from .analyse import measure_deposit
 
 log = logging.getLogger(__name__)
 
-TEXT_DIAGNOSTICS = {"solver_status": "solver status per step",
-                    "solver_backend": "back-end that solved the step (apgd, clarabel or clarabel-fallback)"}
-DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in TEXT_DIAGNOSTICS]
 
 
 @dataclass
@@ -159,7 +156,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     """
     step_settings = settings.step_settings(h0)
     fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
-    saved = _load_checkpoint(checkpoint, fingerprint)
+    saved = load_checkpoint(checkpoint, fingerprint)
     if saved:
         state, frames, diagnostics, carry, elapsed = (saved[k] for k in
                                                       ("state", "frames", "diagnostics", "carry", "elapsed"))
@@ -188,7 +185,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
             if at_rest:
                 break
         if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
-            _save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
+            save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
                              time.perf_counter() - start)
         if stop_after is not None and k - resumed_from >= stop_after:
             break
@@ -202,127 +199,3 @@ def _at_rest(history, diagnostics, column, settings) -> bool:
     times, heights, fronts = np.array(history).T
     return deposit_at_rest(times, heights, fronts, settings.rest_window,
                            settings.rest_tolerance * 2.0 * float(column.radius.mean()))
-
-
-# A checkpoint is a numpy .npz archive of plain arrays, read with allow_pickle=False: loading one can
-# run no code, and its fingerprint is compared before anything else in it is used.
-STATE_FIELDS = ("position", "velocity", "angular_velocity")
-WARM_FIELDS = ("i", "j", "family", "force", "rolling")
-
-
-def _save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed):
-    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed),
-              "radius": state.radius, "density": np.array(state.density),
-              "frame_step": np.array([k for k, _ in frames], dtype=np.int64),
-              "frame_time": np.array([f.time for _, f in frames])}
-    for name in STATE_FIELDS:
-        arrays[f"state_{name}"] = getattr(state, name)
-        arrays[f"frame_{name}"] = np.stack([getattr(f, name) for _, f in frames])
-    arrays["state_time"] = np.array(state.time)
-    for name in StepDiagnostics.__dataclass_fields__:
-        values = [getattr(d, name) for d in diagnostics]
-        arrays[f"diagnostic_{name}"] = np.array(values, dtype=str if name in TEXT_DIAGNOSTICS else None)
-    arrays["margin"] = np.array(np.nan if carry.margin is None else carry.margin)
-    if carry.warm_start is not None:
-        for name in WARM_FIELDS:
-            arrays[f"warm_{name}"] = getattr(carry.warm_start, name)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as handle:
-            np.savez(handle, **arrays)
-
-
-def _load_checkpoint(path, fingerprint):
-    """The saved run ({state, frames, diagnostics, carry, elapsed}) if `path` holds a checkpoint of
-    this fingerprint; None (with a warning) for another run's or an unreadable file."""
-    if path is None or not Path(path).is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            if str(archive["fingerprint"]) != fingerprint:
-                log.warning("ignoring checkpoint %s: it belongs to other inputs or settings", path)
-                return None
-            return _restore(dict(archive))
-    except Exception as error:  # a checkpoint from another version, a damaged or foreign file
-        log.warning("ignoring unreadable checkpoint %s (%s)", path, error)
-        return None
-
-
-def _restore(arrays) -> dict:
-    """The run saved by :func:`_save_checkpoint` from its arrays."""
-    radius, density = arrays["radius"], float(arrays["density"])
-    state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), radius, density,
-                          float(arrays["state_time"]))
-    frames = [(int(k), ParticleState(*(arrays[f"frame_{name}"][n] for name in STATE_FIELDS), radius, density,
-                                     float(arrays["frame_time"][n])))
-              for n, k in enumerate(arrays["frame_step"])]
-    fields = StepDiagnostics.__dataclass_fields__
-    columns = {name: arrays[f"diagnostic_{name}"].tolist() for name in fields}
-    diagnostics = [StepDiagnostics(**{name: columns[name][k] for name in fields})
-                   for k in range(len(columns["step"]))]
-    warm = WarmStart(*(arrays[f"warm_{name}"] for name in WARM_FIELDS)) if "warm_i" in arrays else None
-    margin = float(arrays["margin"])
-    carry = Carry(warm, None if np.isnan(margin) else margin)
-    return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": carry,
-            "elapsed": float(arrays["elapsed"])}
-
-
-#: long names of per-step diagnostics: the wall-clock times (s) apart from the simulation's time
-STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
-                   "detection_time": "wall-clock time of the step's contact detection",
-                   "assembly_time": "wall-clock time of the step's assembly",
-                   "setup_time": "wall-clock time of the solver's set-up in the step",
-                   "solve_time": "wall-clock time of the solver in the step",
-                   "wall_time": "wall-clock time of the step"}
-
-
-def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict):
-    """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
-    steps = np.array([k for k, _ in run.frames])
-    frames = [s for _, s in run.frames]
-    t_scale = np.sqrt(h0 / settings.gravity)
-    data = {
-        "position": (("time", "particle", "xyz"), np.stack([s.position for s in frames]),
-                     {"units": "length", "long_name": "particle centre position"}),
-        "velocity": (("time", "particle", "xyz"), np.stack([s.velocity for s in frames]),
-                     {"units": "length/time", "long_name": "particle velocity"}),
-        "angular_velocity": (("time", "particle", "xyz"), np.stack([s.angular_velocity for s in frames]),
-                             {"units": "rad/time", "long_name": "particle angular velocity"}),
-        "radius": ("particle", run.initial.radius, {"units": "length", "long_name": "particle radius"}),
-        "initial_height": ("particle", run.initial.position[:, 2],
-                           {"units": "length", "long_name": "height of the particle centre at release"}),
-        "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
-        "at_rest": at_rest_variable((), AT_REST_FLAGS["not_checked"] if run.at_rest is None else int(run.at_rest)),
-    }
-    units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
-             "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
-             "setup_time": "s", "solve_time": "s",
-             "detection_margin": "length", "wall_time": "s"}
-    for name in DIAGNOSTIC_FIELDS:
-        if name == "step":
-            continue
-        values = np.array([getattr(d, name) for d in run.diagnostics])
-        data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
-                                                  "long_name": STEP_LONG_NAMES.get(name, name.replace("_", " ") + " per step")})
-    for name, long_name in TEXT_DIAGNOSTICS.items():
-        data[f"step_{name}"] = ("step", np.array([getattr(d, name) for d in run.diagnostics], dtype=object),
-                                {"long_name": long_name})
-    coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
-              "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
-                              {"units": "1", "long_name": "time over sqrt(h0/g)"}),
-              "step": ("step", np.array([d.step for d in run.diagnostics]),
-                       {"units": "1", "long_name": "step number"}),
-              **component_coordinate()}
-    dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
-    dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
-                          "mu_r": settings.mu_r, "friction_law": settings.friction_law,
-                          "rolling_lever": settings.rolling_lever,
-                          "dt": settings.time_step(h0),
-                          "duration": settings.scaled_time(len(run.diagnostics)),
-                          "n_steps": len(run.diagnostics),
-                          "wall_time": run.wall_time, "density": float(run.initial.density)})
-    if settings.friction_law == "coulomb":   # the fixed point's stopping rule, mean diameters
-        dataset.attrs["friction_tolerance"] = settings.friction_tolerance
-    if settings.max_duration is not None:   # the run went on towards rest: how far (whether: at_rest)
-        dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
-                              "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy})
-    return dataset

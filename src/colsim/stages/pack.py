@@ -25,21 +25,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..engine.contacts import fixed_pairs
-from ..engine.program import SolverError
-from ..engine.program import Solver
-from ..engine.warm_start import WarmStart
+from ..engine.records import Carry
+from ..engine.solver_contract import SolverError
+from ..engine.solver_contract import Solver
 from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
-from ..engine.stepper import Carry, run
+from ..engine.stepper import run
+from ..engine.warm_start import WarmStart
+from .pack_defaults import DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 
 log = logging.getLogger(__name__)
 
 LATTICE_FACTOR = 1.04
 SOLID_FRACTION_GUESS = 0.58
-#: APGD's tolerance when `colsim pack` runs under auto. Measured (r0 = 2, height 10, seed 1,
-#: dt 0.02; docs/solvers.md, "Packing under auto"): the same rest criterion, solid fraction and step count as Clarabel
-#: in a third of the time; a settled packing is an initial condition, where 1e-3 of the step's
-#: free fall (g dt^2) is 1e-5 of a diameter.
-APGD_TOLERANCE = 1e-3
 
 
 @dataclass
@@ -112,9 +109,6 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
     return slow.mean() >= rest_fraction and supported.mean() >= 0.99
 
 
-# The most spheres a packing may hold unless told otherwise: 3x the r0 = 8, a = 5 column's 160,000,
-# about 4 GB of packing; r0 = 20 would pour 2.4 million and run out of memory on a 24 GB machine.
-DEFAULT_MAX_SPHERES = 500_000
 
 
 def mean_sphere_volume(diameter_range) -> float:
@@ -131,12 +125,6 @@ def expected_spheres(r0: float, height: float, diameter_range) -> float:
     return SOLID_FRACTION_GUESS * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
 
 
-#: Filling in layers (:func:`pack`): the settled thickness each cloud adds (length, the paper's
-#: diameters 0.25-0.5; measured at 2.5), None for one cloud: the default, since the layers' deposits
-#: at a = 5 are not yet the pour's (docs/validation/packing-layers.md); and the depth below the
-#: settled surface from which slow spheres are fixed.
-LAYER_HEIGHT = None
-FREEZE_DEPTH = 3.5
 #: A layer has landed (the next cloud may come) at the rest criterion with this many times
 #: rest_energy: speeds 10x those of rest. Only the last cloud must come to rest.
 LANDED_ENERGY_FACTOR = 100.0
@@ -337,31 +325,3 @@ def _add(state: ParticleState, position, radius) -> ParticleState:
         np.vstack([state.angular_velocity, zeros]), np.concatenate([state.radius, radius]),
         state.density, state.time,
     )
-
-
-def trim(state: ParticleState, h0: float) -> ParticleState:
-    """Keep the spheres that stay below h0 (z + R <= h0): the column's top then reads at most h0."""
-    return state.subset(kept_by_trim(state, h0))
-
-
-def kept_by_trim(state: ParticleState, h0: float) -> np.ndarray:
-    """(n,) bool: the spheres of the packing `state` that a column of height h0 keeps.
-
-    ValueError when the packing is too short for h0, or when the cut keeps fewer spheres than half
-    the packing's bottom layer (those within half the smallest diameter of the floor): below that
-    it is not a column."""
-    if h0 <= 0:
-        raise ValueError(f"column height h0 must be positive, got {h0}")
-    top = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
-    if column_height(state) < h0:
-        raise ValueError(f"the packing (height {column_height(state):.3f}, top {top:.3f}) is too short "
-                         f"for a column of height h0 = {h0:.3f}")
-    kept = state.position[:, 2] + state.radius <= h0
-    d_min, d_max = 2.0 * float(state.radius.min()), 2.0 * float(state.radius.max())
-    layer = int(np.count_nonzero(state.position[:, 2] - state.radius < 0.5 * d_min))
-    n_kept = int(np.count_nonzero(kept))
-    if n_kept == 0 or 2 * n_kept < layer:
-        raise ValueError(f"h0 = {h0:g} leaves {n_kept} spheres, less than half a layer ({layer} lie on the "
-                         f"packing's floor; smallest diameter {d_min:.3g}, largest {d_max:.3g}): cut at h0 >= "
-                         f"the largest diameter")
-    return kept

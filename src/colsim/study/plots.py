@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag
+from ..stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
 from .collect import FLAGS, means_per_size, run_flags
 from .experimental_laws import (LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, final_values, lube_height,
                    lube_runout)

@@ -22,9 +22,9 @@ import math
 import sys
 from pathlib import Path
 
-from ..stages.pack import FREEZE_DEPTH, LAYER_HEIGHT
-from ..solvers.registry import SOLVERS, AutoSolver
 from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
+from ..solvers import defaults
+from ..stages.pack_defaults import DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 
 log = logging.getLogger("colsim")
 
@@ -73,9 +73,9 @@ def _integer(text):
 
 
 def _solver_arguments(parser):
-    parser.add_argument("--solver", default="auto", choices=SOLVERS,
+    parser.add_argument("--solver", default=defaults.DEFAULT_SOLVER, choices=defaults.SOLVERS,
                         help="cone-program back-end (default: %(default)s: APGD for warm-started steps "
-                             "up to dt/sqrt(h0/g) = 0.04, Clarabel otherwise; see docs/solvers.md)")
+                             f"up to dt/sqrt(h0/g) = {defaults.AUTO_APGD_BELOW:g}, Clarabel otherwise; see docs/solvers.md)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
                         help="solver tolerance (default: the back-end's own; for auto, APGD's)")
     parser.add_argument("--threads", type=_positive_int, default=1,
@@ -90,12 +90,19 @@ def _length_floor_argument(parser, under_auto: str):
                              "apgd 0)")
 
 
+def _floor_under_auto(tolerance: float, which: str) -> str:
+    """The length floor's default under auto, and what it guarantees with `tolerance`."""
+    floor = defaults.AUTO_APGD_LENGTH_FLOOR
+    return (f"under auto {floor:g}: with {which} {tolerance:g}, each contact's gap to "
+            f"{floor * tolerance:.0e} of a mean diameter at least")
+
+
 def _overlap_tolerance_argument(parser):
     parser.add_argument("--solver-overlap-tolerance", type=_non_negative, default=None,
                         help="APGD's stopping rule: a step's contacts count as feasible once no "
                              "end-of-step gap violates its cone by more than this many mean diameters "
                              "(complementarity keeps the relative tolerance; default: under auto "
-                             f"{AutoSolver.APGD_OVERLAP_TOLERANCE:g}, apgd 0: the relative tolerance alone)")
+                             f"{defaults.AUTO_APGD_OVERLAP_TOLERANCE:g}, apgd 0: the relative tolerance alone)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -119,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="at rest when 95%% of the particles have kinetic energy < this times m g d "
                         "and 99%% carry a contact force (default: %(default)s)")
     p.add_argument("--max-steps", type=_positive_int, default=5000, help="give up after this many steps (default: %(default)s)")
-    p.add_argument("--max-spheres", type=_positive_int, default=500_000,
+    p.add_argument("--max-spheres", type=_positive_int, default=DEFAULT_MAX_SPHERES,
                    help="refuse, before any work, a packing expected to hold more spheres than this "
                         "(default: %(default)s, about 4 GB)")
     p.add_argument("--mu", type=_non_negative, default=0.0,
@@ -132,8 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="while filling in layers, spheres at rest more than this below the settled "
                         "surface are fixed and leave the program, length (default: %(default)s)")
     _solver_arguments(p)
-    _length_floor_argument(p, "under auto 0.1: with the packing's tolerance 1e-3, each contact's gap to "
-                              "1e-4 of a mean diameter at least")
+    _length_floor_argument(p, _floor_under_auto(defaults.PACK_APGD_TOLERANCE, "the packing's tolerance"))
     _overlap_tolerance_argument(p)
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
 
@@ -174,8 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--checkpoint-every", type=_positive_int, default=100, help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")
     _solver_arguments(p)
-    _length_floor_argument(p, "under auto 0.1: with the tolerance 1e-5, each contact's gap to 1e-6 "
-                              "of a mean diameter at least")
+    _length_floor_argument(p, _floor_under_auto(defaults.AUTO_APGD_TOLERANCE, "the tolerance"))
     _overlap_tolerance_argument(p)
     p.add_argument("--output", required=True, help="trajectory file to write (netCDF)")
 
@@ -243,7 +248,7 @@ def main(argv=None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     from . import commands
     from ..io.netcdf import InputError
-    from ..solvers.registry import SolverError
+    from ..engine.solver_contract import SolverError
     from ..engine.stepper import OverlapError
 
     try:

@@ -1,0 +1,77 @@
+"""A collapse's checkpoint: a numpy .npz archive of plain arrays (the state, the frames so far, the
+steps' diagnostics, the warm start and margin carried to the next step), read with
+allow_pickle=False: loading one can run no code, and its fingerprint (the run's inputs and
+settings) is compared before anything else in it is used. Written to a temporary name, then renamed.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from ..engine.records import TEXT_DIAGNOSTICS, Carry, StepDiagnostics
+from ..engine.state import ParticleState
+from ..engine.warm_start import WarmStart
+from .netcdf import atomic_path
+
+log = logging.getLogger(__name__)
+
+STATE_FIELDS = ("position", "velocity", "angular_velocity")
+WARM_FIELDS = ("i", "j", "family", "force", "rolling")
+
+
+def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed):
+    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed),
+              "radius": state.radius, "density": np.array(state.density),
+              "frame_step": np.array([k for k, _ in frames], dtype=np.int64),
+              "frame_time": np.array([f.time for _, f in frames])}
+    for name in STATE_FIELDS:
+        arrays[f"state_{name}"] = getattr(state, name)
+        arrays[f"frame_{name}"] = np.stack([getattr(f, name) for _, f in frames])
+    arrays["state_time"] = np.array(state.time)
+    for name in StepDiagnostics.__dataclass_fields__:
+        values = [getattr(d, name) for d in diagnostics]
+        arrays[f"diagnostic_{name}"] = np.array(values, dtype=str if name in TEXT_DIAGNOSTICS else None)
+    arrays["margin"] = np.array(np.nan if carry.margin is None else carry.margin)
+    if carry.warm_start is not None:
+        for name in WARM_FIELDS:
+            arrays[f"warm_{name}"] = getattr(carry.warm_start, name)
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez(handle, **arrays)
+
+
+def load_checkpoint(path, fingerprint):
+    """The saved run ({state, frames, diagnostics, carry, elapsed}) if `path` holds a checkpoint of
+    this fingerprint; None (with a warning) for another run's or an unreadable file."""
+    if path is None or not Path(path).is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            if str(archive["fingerprint"]) != fingerprint:
+                log.warning("ignoring checkpoint %s: it belongs to other inputs or settings", path)
+                return None
+            return _restore(dict(archive))
+    except Exception as error:  # a checkpoint from another version, a damaged or foreign file
+        log.warning("ignoring unreadable checkpoint %s (%s)", path, error)
+        return None
+
+
+def _restore(arrays) -> dict:
+    """The run saved by :func:`save_checkpoint` from its arrays."""
+    radius, density = arrays["radius"], float(arrays["density"])
+    state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), radius, density,
+                          float(arrays["state_time"]))
+    frames = [(int(k), ParticleState(*(arrays[f"frame_{name}"][n] for name in STATE_FIELDS), radius, density,
+                                     float(arrays["frame_time"][n])))
+              for n, k in enumerate(arrays["frame_step"])]
+    fields = StepDiagnostics.__dataclass_fields__
+    columns = {name: arrays[f"diagnostic_{name}"].tolist() for name in fields}
+    diagnostics = [StepDiagnostics(**{name: columns[name][k] for name in fields})
+                   for k in range(len(columns["step"]))]
+    warm = WarmStart(*(arrays[f"warm_{name}"] for name in WARM_FIELDS)) if "warm_i" in arrays else None
+    margin = float(arrays["margin"])
+    carry = Carry(warm, None if np.isnan(margin) else margin)
+    return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": carry,
+            "elapsed": float(arrays["elapsed"])}

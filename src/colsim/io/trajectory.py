@@ -1,0 +1,78 @@
+"""A collapse's trajectory file (netCDF, kind collapse-trajectory): frames over `time` (positions,
+velocities, angular velocities), the per-step diagnostics over `step`, and the run's settings as
+attributes."""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import xarray as xr
+
+from ..engine.records import TEXT_DIAGNOSTICS, StepDiagnostics
+from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate
+
+if TYPE_CHECKING:   # annotations only: the file format does not load the stage
+    from ..stages.collapse import CollapseRun, CollapseSettings
+
+DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in TEXT_DIAGNOSTICS]
+
+#: long names of per-step diagnostics: the wall-clock times (s) apart from the simulation's time
+STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
+                   "detection_time": "wall-clock time of the step's contact detection",
+                   "assembly_time": "wall-clock time of the step's assembly",
+                   "setup_time": "wall-clock time of the solver's set-up in the step",
+                   "solve_time": "wall-clock time of the solver in the step",
+                   "wall_time": "wall-clock time of the step"}
+
+
+def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict) -> xr.Dataset:
+    """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
+    steps = np.array([k for k, _ in run.frames])
+    frames = [s for _, s in run.frames]
+    t_scale = np.sqrt(h0 / settings.gravity)
+    data = {
+        "position": (("time", "particle", "xyz"), np.stack([s.position for s in frames]),
+                     {"units": "length", "long_name": "particle centre position"}),
+        "velocity": (("time", "particle", "xyz"), np.stack([s.velocity for s in frames]),
+                     {"units": "length/time", "long_name": "particle velocity"}),
+        "angular_velocity": (("time", "particle", "xyz"), np.stack([s.angular_velocity for s in frames]),
+                             {"units": "rad/time", "long_name": "particle angular velocity"}),
+        "radius": ("particle", run.initial.radius, {"units": "length", "long_name": "particle radius"}),
+        "initial_height": ("particle", run.initial.position[:, 2],
+                           {"units": "length", "long_name": "height of the particle centre at release"}),
+        "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
+        "at_rest": at_rest_variable((), AT_REST_FLAGS["not_checked"] if run.at_rest is None else int(run.at_rest)),
+    }
+    units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
+             "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
+             "setup_time": "s", "solve_time": "s",
+             "detection_margin": "length", "wall_time": "s"}
+    for name in DIAGNOSTIC_FIELDS:
+        if name == "step":
+            continue
+        values = np.array([getattr(d, name) for d in run.diagnostics])
+        data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
+                                                  "long_name": STEP_LONG_NAMES.get(name, name.replace("_", " ") + " per step")})
+    for name, long_name in TEXT_DIAGNOSTICS.items():
+        data[f"step_{name}"] = ("step", np.array([getattr(d, name) for d in run.diagnostics], dtype=object),
+                                {"long_name": long_name})
+    coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
+              "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
+                              {"units": "1", "long_name": "time over sqrt(h0/g)"}),
+              "step": ("step", np.array([d.step for d in run.diagnostics]),
+                       {"units": "1", "long_name": "step number"}),
+              **component_coordinate()}
+    dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
+    dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,
+                          "mu_r": settings.mu_r, "friction_law": settings.friction_law,
+                          "rolling_lever": settings.rolling_lever,
+                          "dt": settings.time_step(h0),
+                          "duration": settings.scaled_time(len(run.diagnostics)),
+                          "n_steps": len(run.diagnostics),
+                          "wall_time": run.wall_time, "density": float(run.initial.density)})
+    if settings.friction_law == "coulomb":   # the fixed point's stopping rule, mean diameters
+        dataset.attrs["friction_tolerance"] = settings.friction_tolerance
+    if settings.max_duration is not None:   # the run went on towards rest: how far (whether: at_rest)
+        dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
+                              "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy})
+    return dataset

@@ -1,0 +1,45 @@
+"""Every solver default, in one place: the back-ends, the CLI's help, the config schema and the docs
+(docs/solvers.md, "Defaults") read them from here. Plain constants: importing this module loads no
+back-end, so the CLI can parse its arguments first.
+
+Where each figure comes from is docs/solvers.md; the measurements are summarised beside each.
+"""
+
+#: the back-ends' names, as make_solver, the CLI and the config schema accept them
+SOLVERS = ("clarabel", "clarabel-force", "apgd", "admm", "auto")
+#: the back-end of pack and collapse unless told otherwise
+DEFAULT_SOLVER = "auto"
+
+#: Clarabel's tolerance (its gap and feasibility tolerances) and iteration cap: the reference
+CLARABEL_TOLERANCE = 1e-8
+CLARABEL_MAX_ITER = 200
+#: APGD's relative tolerance and iteration cap when named on its own (`--solver apgd`)
+APGD_TOLERANCE = 1e-5
+APGD_MAX_ITER = 20_000
+#: ADMM's relative tolerance and iteration cap
+ADMM_TOLERANCE = 1e-3
+ADMM_MAX_ITER = 5000
+
+#: auto hands a warm-started step to APGD up to this dt / sqrt(h0/g) (Clarabel above: larger steps
+#: were not measured; at 0.04 warm-started APGD took 0.15 s a step against Clarabel's 0.79 s, r0 = 2)
+AUTO_APGD_BELOW = 0.04
+#: auto's APGD iteration cap; a step that reaches it is solved again by Clarabel (a cold
+#: 16,000-sphere step took APGD 10,400 iterations, about 50 s, and Clarabel 816 s)
+AUTO_MAX_ITER = 20_000
+#: APGD's tolerance under auto, from the tolerance study (docs/solvers.md, "APGD's tolerance")
+AUTO_APGD_TOLERANCE = 1e-5
+#: APGD's length floor under auto, mean diameters: with the tolerance, each contact's end-of-step
+#: gap to 1e-6 of a mean diameter at least
+AUTO_APGD_LENGTH_FLOOR = 0.1
+#: APGD's overlap tolerance under auto in a collapse, mean diameters (docs/solvers.md, "The overlap
+#: tolerance"): a step's largest cone violation may reach it while complementarity keeps the
+#: relative tolerance
+AUTO_APGD_OVERLAP_TOLERANCE = 1e-4
+
+#: APGD's tolerance when `colsim pack` runs under auto. Measured (r0 = 2, height 10, seed 1, dt 0.02;
+#: docs/solvers.md, "Packing under auto"): the same rest criterion, solid fraction and step count as
+#: Clarabel in a third of the time; a settled packing is an initial condition, where 1e-3 of the
+#: step's free fall (g dt^2) is 1e-5 of a diameter
+PACK_APGD_TOLERANCE = 1e-3
+#: APGD's overlap tolerance under auto in a packing: none (its tolerance is already as loose)
+PACK_APGD_OVERLAP_TOLERANCE = 0.0

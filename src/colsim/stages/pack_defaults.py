@@ -1,0 +1,13 @@
+"""The packing stage's defaults, plain constants: the CLI shows them in its help before it loads the
+engine."""
+
+#: the most spheres a packing may hold unless told otherwise: 3x the r0 = 8, a = 5 column's 160,000,
+#: about 4 GB of packing; r0 = 20 would pour 2.4 million and run out of memory on a 24 GB machine
+DEFAULT_MAX_SPHERES = 500_000
+
+#: Filling in layers (:func:`pack`): the settled thickness each cloud adds (length, the paper's
+#: diameters 0.25-0.5; measured at 2.5), None for one cloud: the default, since the layers' deposits
+#: at a = 5 are not yet the pour's (docs/validation/packing-layers.md); and the depth below the
+#: settled surface from which slow spheres are fixed.
+LAYER_HEIGHT = None
+FREEZE_DEPTH = 3.5

@@ -1,0 +1,164 @@
+"""A study's tables in Markdown (and the report's reStructuredText): the means over seeds against
+Lube et al.'s laws with the other run-out measures and the paper's qualitative claims, and the two
+friction laws side by side; from the datasets of :mod:`colsim.study.collect`."""
+from __future__ import annotations
+
+import numpy as np
+
+from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_flags
+from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
+
+
+def claims_markdown(summary) -> str:
+    """Markdown table of the paper's qualitative claims, per mu_r and a (mean over seeds): the final
+    height over h0 (1 where the top is undisturbed, below 1 where it was eroded), the radius of the
+    top disc that did not move, over r0, and the share of grains in the main mass."""
+    lines = ["| mu_r | a | h_inf/h0 | undisturbed top radius/r0 | main mass / grains |", "|---|---|---|---|---|"]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            if not _has_runs(part):
+                continue
+            kept = np.nanmean(part.n_main_mass.values / part.n_particles.values)
+            lines.append(f"| {float(m):g} | {a:g} | {np.nanmean(part.h_inf_over_r0.values) / a:.2f} | "
+                         f"{np.nanmean(part.undisturbed_top_radius.values):.2f} | {kept:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def runout_measures_markdown(summary) -> str:
+    """Markdown table per mu_r and a: Lube's run-out, r_inf at each contact tolerance and the radius
+    holding each share of the mass, as (r - r0)/r0, mean over seeds, with the error against Lube."""
+    tolerances = summary.contact_tolerance.values
+    shares = summary.mass_share.values
+    header = (["mu_r", "a", "Lube"] + [f"connected, gap <= {100 * t:g} % d_min" for t in tolerances]
+              + [f"{100 * s:g} % of the mass" for s in shares])
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for m in summary.mu_r.values:
+        for a in summary.aspect_ratio.values:
+            part = summary.sel(mu_r=m, aspect_ratio=a)
+            if not _has_runs(part):
+                continue
+            law = lube_runout(a)
+            values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
+                np.nanmean(part.mass_front_over_r0.values, axis=0))
+            cells = [f"{v:.2f} ({_error(v, law)})" for v in values]
+            lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _flag_cell(flags, seeds) -> str:
+    """The flags of one (mu_r, a) row over its seeds: "still moving (seeds 1, 2)"; "" when none."""
+    cells = []
+    for name, flagged in flags.items():
+        which = [f"{int(s)}" for s, f in zip(seeds, np.atleast_1d(flagged)) if f]
+        if which:
+            cells.append(f"{FLAGS[name]} (seed{'s' if len(which) > 1 else ''} {', '.join(which)})")
+    return "; ".join(cells)
+
+
+def lube_markdown(summary) -> str:
+    """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and
+    a, with the error against Lajeunesse et al. beside (its height law as the paper prints it), and a
+    flags column naming the seeds whose runs :func:`run_flags` flags (explained under the tables)."""
+    lines = []
+    flags = run_flags(summary)
+    seed_values = summary.seed.values if "seed" in summary.coords else [0]
+    for m in summary.mu_r.values:
+        part = summary.sel(mu_r=m)
+        counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
+        counts = counts[counts > 0]   # a partial study: the aspect ratios run (every mu_r has one)
+        seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
+        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
+                  "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
+                  "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error | flags |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for a in part.aspect_ratio.values:
+            if not _has_runs(part.sel(aspect_ratio=a)):
+                continue
+            h = part.h_inf_over_r0.sel(aspect_ratio=a).values
+            r = part.runout_over_r0.sel(aspect_ratio=a).values
+            h_mean, r_mean = np.nanmean(h), np.nanmean(r)
+            cells = [f"{a:g}"]
+            for mean, values, law in ((h_mean, h, lube_height(a)), (r_mean, r, lube_runout(a))):
+                cells += [f"{mean:.3f}", f"{np.nanmax(values) - np.nanmin(values):.3f}", f"{law:.3f}",
+                          _error(mean, law)]
+            for mean, law in ((h_mean, lajeunesse_height(a)), (r_mean, lajeunesse_runout(a))):
+                cells += [f"{law:.3f}", _error(mean, law)]
+            cells.append(_flag_cell({name: flag.sel(mu_r=m, aspect_ratio=a).values for name, flag in flags.items()},
+                                    seed_values))
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
+    if any(bool(flag.any()) for flag in flags.values()):
+        lines += [f"Flags: *{FLAGS['moving']}*: the run was not at rest at its end (it reached max_duration "
+                  f"moving or, with a fixed end time, its kinetic energy was still above {rest_energy_of(summary):g} "
+                  f"of its peak), so its h_inf and run-out are not those of a final deposit; "
+                  f"*{FLAGS['fragment']}*: the main mass (the largest connected cluster) holds less than "
+                  f"{100 * MAIN_MASS_SHARE:g} % of the grains, so its h_inf and run-out describe a fragment. The means "
+                  f"include these runs; the figures draw them with open markers (moving) or a cross (fragment).",
+                  ""]
+    if "runout_over_r0_by_tolerance" in summary and "mass_front_over_r0" in summary:
+        lines += ["### Run-out by other measures (mean over seeds; error against Lube)", "",
+                  runout_measures_markdown(summary)]
+    if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
+        lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    return "\n".join(lines)
+
+
+def lube_rst(summary, mu_r: float) -> str:
+    """reStructuredText list-table of the report's landing page: at the swept mu_r nearest `mu_r`,
+    per a, the mean over seeds of h_inf/r0 and the run-out with Lube's values and the errors."""
+    m = summary.mu_r.values[np.argmin(np.abs(summary.mu_r.values - mu_r))]
+    part = summary.sel(mu_r=m)
+    rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error"]]
+    for a in part.aspect_ratio.values:
+        if not _has_runs(part.sel(aspect_ratio=a)):
+            continue
+        h = float(np.nanmean(part.h_inf_over_r0.sel(aspect_ratio=a).values))
+        r = float(np.nanmean(part.runout_over_r0.sel(aspect_ratio=a).values))
+        rows.append([f"{a:g}", f"{h:.3f}", f"{lube_height(a):.3f}", _error(h, lube_height(a)),
+                     f"{r:.3f}", f"{lube_runout(a):.3f}", _error(r, lube_runout(a))])
+    lines = [f".. list-table:: mu_r = {float(m):g}, mean over seeds, against Lube et al. (2004)",
+             "   :header-rows: 1", ""]
+    for row in rows:
+        lines += [f"   * - {row[0]}"] + [f"     - {cell}" for cell in row[1:]]
+    return "\n".join(lines) + "\n"
+
+
+def _has_runs(part) -> bool:
+    """Whether any seed of this part of a summary ran (a partial study leaves NaN rows out)."""
+    return bool(np.isfinite(part.h_inf_over_r0.values).any())
+
+
+def _error(value: float, law: float) -> str:
+    """The relative error of value against law, in percent, signed."""
+    return f"{100 * (value - law) / law:+.0f} %"
+
+
+def friction_law_markdown(comparison) -> str:
+    """Markdown table per mu_r and a: each law's h_inf/r0 and run-out (mean and sd over seeds) against
+    Lube's laws, its main-mass share, cone programs per step and wall time per collapse."""
+    lines = []
+    for m in comparison.mu_r.values:
+        lines += [f"### mu_r = {float(m):g} (mean over seeds, sd = sample standard deviation)", "",
+                  "| a | law | seeds | h_inf/r0 (sd) | Lube | error | (r_inf - r0)/r0 (sd) | Lube | error "
+                  "| main mass / grains | cone programs a step | wall s a collapse |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for a in comparison.aspect_ratio.values:
+            for law in comparison.friction_law.values:
+                part = comparison.sel(mu_r=m, aspect_ratio=a, friction_law=law)
+                h, r = part.h_inf_over_r0.values, part.runout_over_r0.values
+                seeds = int(np.isfinite(h).sum())
+                if seeds == 0:
+                    continue
+                sd = (lambda v: np.nanstd(v, ddof=1) if np.isfinite(v).sum() > 1 else np.nan)
+                h_law, r_law = lube_height(a), lube_runout(a)
+                share = np.nanmean(part.n_main_mass.values / part.n_particles.values)
+                programs = (np.nanmean(part.cone_programs_per_step.values)
+                            if "cone_programs_per_step" in part else np.nan)
+                lines.append(
+                    f"| {a:g} | {law} | {seeds} | {np.nanmean(h):.3f} ({sd(h):.3f}) | {h_law:.3f} | "
+                    f"{_error(np.nanmean(h), h_law)} | {np.nanmean(r):.3f} ({sd(r):.3f}) | "
+                    f"{r_law:.3f} | {_error(np.nanmean(r), r_law)} | {share:.2f} | "
+                    f"{programs:.1f} | {np.nanmean(part.wall_time.values):.0f} |")
+        lines.append("")
+    return "\n".join(lines)

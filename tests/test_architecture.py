@@ -1,0 +1,134 @@
+"""The import order of docs/architecture.md, held against the code: each subpackage imports only
+those below it, no module imports itself back through others, and reading a file or parsing the
+command line loads no numerics."""
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "colsim"
+
+#: the subpackages from the bottom up: a module may import from its own subpackage and those below
+LAYERS = {"engine": 0, "solvers": 1, "io": 1, "stages": 2, "study": 3, "cli": 4}
+#: io reads and writes files: of the engine it may import these plain records only
+IO_MAY_IMPORT = {"colsim.engine.state", "colsim.engine.records", "colsim.engine.warm_start",
+                 "colsim.engine.contacts"}
+#: what reading a file or parsing the command line must not load
+HEAVY = ("numba", "clarabel", "colsim.engine.cones", "colsim.solvers.registry", "colsim.engine.stepper")
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _type_checking_block(node) -> bool:
+    return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+
+
+def imports_of(path: Path, top_level_only: bool = False) -> set[str]:
+    """The colsim modules `path` imports (function-level ones too unless top_level_only; never
+    those under `if TYPE_CHECKING:`), as absolute names."""
+    me = module_name(path)
+    package = me if path.name == "__init__.py" else me.rsplit(".", 1)[0]
+    found = set()
+
+    def visit(node, top):
+        for child in ast.iter_child_nodes(node):
+            if _type_checking_block(child):
+                continue
+            if isinstance(child, ast.ImportFrom):
+                base = child.module or ""
+                if child.level:
+                    anchor = package.split(".")[: len(package.split(".")) - child.level + 1]
+                    base = ".".join(anchor + ([base] if base else []))
+                if base.startswith("colsim"):
+                    for alias in child.names:   # 'from . import x' names a module
+                        candidate = f"{base}.{alias.name}"
+                        known = (PACKAGE.parent / candidate.replace(".", "/")).with_suffix(".py").exists() or \
+                            (PACKAGE.parent / candidate.replace(".", "/")).is_dir()
+                        found.add(candidate if known else base)
+            elif isinstance(child, ast.Import):
+                found.update(a.name for a in child.names if a.name.startswith("colsim"))
+            nested = isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))
+            if not (top_level_only and nested):
+                visit(child, top and not nested)
+
+    visit(ast.parse(path.read_text()), True)
+    return found - {me}
+
+
+MODULES = sorted(PACKAGE.rglob("*.py"))
+
+
+def layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in LAYERS) else None
+
+
+def test_every_module_lives_in_a_layer():
+    loose = [module_name(p) for p in MODULES if p.parent != PACKAGE] + \
+        [module_name(p) for p in MODULES if p.parent == PACKAGE and p.name != "__init__.py"]
+    assert all(layer(m) in LAYERS for m in loose), [m for m in loose if layer(m) not in LAYERS]
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: module_name(p))
+def test_a_module_imports_only_its_own_layer_and_those_below(path):
+    me = module_name(path)
+    mine = layer(me)
+    for target in imports_of(path):
+        theirs = layer(target)
+        if theirs is None or mine is None:   # colsim itself (__version__)
+            continue
+        if mine == "io" and theirs == "engine":
+            assert target in IO_MAY_IMPORT, f"{me} imports {target}: io may read only plain records of the engine"
+            continue
+        assert LAYERS[theirs] <= LAYERS[mine] and (theirs == mine or LAYERS[theirs] < LAYERS[mine]), \
+            f"{me} ({mine}) imports {target} ({theirs}): against the order {LAYERS}"
+
+
+def test_no_module_imports_itself_back_at_load_time():
+    graph = {module_name(p): imports_of(p, top_level_only=True) for p in MODULES}
+    done, stack = set(), []
+
+    def visit(node):
+        if node in stack:
+            raise AssertionError("import cycle: " + " -> ".join(stack[stack.index(node):] + [node]))
+        if node in done or node not in graph:
+            return
+        stack.append(node)
+        for target in sorted(graph[node]):
+            if not node.startswith(target + "."):   # a module's own package is loaded first anyway
+                visit(target)
+        stack.pop()
+        done.add(node)
+
+    for node in graph:
+        visit(node)
+
+
+def test_the_rule_catches_an_upward_import(tmp_path, monkeypatch):
+    """The checker itself: an engine module that imports a stage is reported."""
+    bad = PACKAGE / "engine" / "state.py"
+    text = bad.read_text() + "\nfrom ..stages import pack\n"
+    fake = tmp_path / "colsim" / "engine"
+    fake.mkdir(parents=True)
+    (fake / "state.py").write_text(text)
+    monkeypatch.setattr(sys.modules[__name__], "PACKAGE", tmp_path / "colsim")
+    with pytest.raises(AssertionError, match="against the order"):
+        test_a_module_imports_only_its_own_layer_and_those_below(fake / "state.py")
+
+
+@pytest.mark.parametrize("statement", [
+    "import colsim.io, colsim.io.trajectory, colsim.io.checkpoint, colsim.io.vtk",
+    "import colsim.cli; colsim.cli.build_parser().parse_args(['collapse', '--input', 'c.nc', '--output', 'o.nc'])",
+    "import colsim.solvers.defaults, colsim.stages.pack_defaults",
+])
+def test_files_and_the_command_line_load_no_numerics(statement):
+    code = f"{statement}; import sys; print(sorted(m for m in sys.modules if m.startswith({HEAVY!r})))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]", done.stdout
