@@ -21,7 +21,9 @@ from colsim.engine.contacts import overlaps
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
-from helpers import COLLAPSE_LAW, DT, G, max_speed
+from colsim.stages.pack import pack
+from solver_cases import small_pile
+from helpers import COLLAPSE_LAW, DT, G, PACKING_R0, max_speed
 
 CYLINDER_RADIUS = 1.5
 N_SPHERES = 200
@@ -101,3 +103,17 @@ def pile() -> Pile:
             break
     return Pile(cloud, poured, replace(state, time=0.0), CYLINDER_RADIUS, largest, redone,
                 tolerance, k)
+
+
+@pytest.fixture(scope="session")
+def packing() -> ParticleState:
+    """The stage tests' packing: ~450 spheres poured by the pack stage into a cylinder of radius
+    1.5 (PACKING_R0), 3 high, with Clarabel (about 10 s)."""
+    return pack(PACKING_R0, 3.0, np.random.default_rng([7, 0]), ClarabelSolver())
+
+
+@pytest.fixture(scope="session")
+def solver_pile() -> ParticleState:
+    """The back-end tests' pile: about 90 spheres poured into a cylinder of radius 1.2
+    (solver_cases.small_pile; a few seconds)."""
+    return small_pile()

@@ -1,4 +1,4 @@
-"""Helpers shared by the tests: the session pile's settings (conftest, test_engine_pile), and for the
+"""Helpers shared by the tests: the session pile's settings (conftest, engine/test_pile), and for the
 workflow tests (test_workflow, test_slurm) a copy of the workflow, a snakemake run in it, the jobs a
 dry run plans and the names of the tiny study's files."""
 from __future__ import annotations
@@ -13,12 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.study.plots import FIGURES
+from colsim import io
+from colsim.cli import main
 from colsim.engine.state import ContactLaw, ParticleState
 from colsim.study.collect import SUMMARY_VARIABLES
+from colsim.study.plots import FIGURES
 
-__all__ = ["COLLAPSE_LAW", "DT", "FIGURES", "G", "ROOT", "SUMMARY_VARIABLES", "TINY", "cf_check_failures",
-           "copy_workflow", "max_speed", "planned_outputs", "snakemake"]
+__all__ = ["CF_UNITS", "COLLAPSE_LAW", "DT", "FIGURES", "G", "PACKING_R0", "ROOT", "SUMMARY_VARIABLES", "TINY",
+           "assert_cf_units", "cf_check_failures", "copy_workflow", "main_in", "tiny_state_files", "max_speed", "planned_outputs", "snakemake"]
 
 # the session pile (conftest.pile): gravity, time step, and the friction that locks it and collapses it
 G = 9.81
@@ -114,3 +116,36 @@ def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
         if messages or not result.msgs:
             failures.append(f"{result.name}: {'; '.join(messages) or 'failed'}")
     return failures
+
+
+#: the cylinder radius of the stage tests' packing (conftest.packing)
+PACKING_R0 = 1.5
+
+#: every unit colsim writes: UDUNITS strings (SI, with g = 9.81 m s-2) and "1"
+CF_UNITS = set(io.SI_UNITS.values()) | {"1", "s"}
+
+
+def assert_cf_units(dataset):
+    """Every variable and coordinate of `dataset` has a long_name and units colsim writes (CF:
+    UDUNITS strings; "1" for dimensionless numbers and text)."""
+    for name, variable in dataset.variables.items():
+        assert variable.attrs.get("long_name"), name
+        assert variable.attrs.get("units") in CF_UNITS, (name, variable.attrs.get("units"))
+
+
+def tiny_state_files(directory):
+    """pack.nc (two stacked spheres of diameter 0.5, r0 = 1) and column.nc (the same, h0 = 1)."""
+    state = ParticleState.at_rest([[0, 0, 0.25], [0, 0, 0.75]], [0.25, 0.25])
+    io.write_state(directory / "pack.nc", state, {**io.global_attributes(io.STATE_KIND, "t", {}), "r0": 1.0})
+    io.write_state(directory / "column.nc", state,
+                   {**io.global_attributes(io.STATE_KIND, "t", {}), "r0": 1.0, "h0": 1.0, "aspect_ratio": 1.0,
+                    "solid_fraction": 0.1})
+
+
+def main_in(directory, args):
+    cwd = os.getcwd()
+    os.chdir(directory)
+    try:
+        return main(args)
+    finally:
+        os.chdir(cwd)

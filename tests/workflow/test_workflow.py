@@ -52,7 +52,7 @@ def test_summary_holds_finite_numbers_with_units(tiny_study):
 
 @pytest.mark.slow
 def test_the_study_files_pass_the_cf_checker(tiny_study):
-    """Bound: no error or warning of the IOOS checker's CF-1.8 suite (tests/test_netcdf.py) in the
+    """Bound: no error or warning of the IOOS checker's CF-1.8 suite (tests/io/test_netcdf.py) in the
     tiny study's packing, column, trajectory, analysis and summary; at_rest is a flag everywhere."""
     run = sorted(tiny_study.glob("results/r0_1/seed_1/pack_*/a_*/mu_r_0.12/run_*"))[0]
     paths = [run.parents[2] / "packing.nc", run.parents[1] / "column.nc", run / "collapse.nc", run / "analysis.nc",

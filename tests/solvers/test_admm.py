@@ -8,7 +8,7 @@ from colsim.solvers.admm import AdmmSolver
 from colsim.engine.cones import project_gap_cone
 from colsim.engine.program import cone_violation
 from colsim.solvers import SolverError, WarmStart, make_solver
-from solver_cases import against_clarabel, collapse_program, mid_collapse, small_pile
+from solver_cases import against_clarabel, collapse_program, mid_collapse
 
 
 def _reference_projection(x, a, b):
@@ -54,14 +54,9 @@ def test_projection_onto_gap_cone_is_exact():
         np.testing.assert_allclose(z[k], _reference_projection(x[k], a[k], b[k]), atol=1e-7 * size[k])
 
 
-@pytest.fixture(scope="module")
-def pile():
-    return small_pile()
-
-
 @pytest.mark.parametrize("stage", ["release", "mid-collapse"])
-def test_agrees_with_clarabel(pile, stage):
-    state = pile if stage == "release" else mid_collapse(pile)
+def test_agrees_with_clarabel(solver_pile, stage):
+    state = solver_pile if stage == "release" else mid_collapse(solver_pile)
     program, sol, du, net_error = against_clarabel(make_solver("admm"), state)
     assert du <= 1e-3, du
     violation = cone_violation(program, sol.increments, sol.forces)
@@ -70,18 +65,18 @@ def test_agrees_with_clarabel(pile, stage):
     assert net_error <= 1e-2
 
 
-def test_warm_start_from_the_solution_converges_at_once(pile):
-    program, found = collapse_program(pile)
+def test_warm_start_from_the_solution_converges_at_once(solver_pile):
+    program, found = collapse_program(solver_pile)
     solver = AdmmSolver()
     cold = solver.solve(program)
-    guess = WarmStart.from_step(found, cold.forces).match(found, pile.n)
+    guess = WarmStart.from_step(found, cold.forces).match(found, solver_pile.n)
     warm = solver.solve(program, warm_start=guess)
     assert warm.info["start"] == "warm" and warm.iterations < cold.iterations
     assert solver.uses_warm_start
 
 
-def test_non_convergence_is_an_error(pile):
-    program, _ = collapse_program(pile)
+def test_non_convergence_is_an_error(solver_pile):
+    program, _ = collapse_program(solver_pile)
     with pytest.raises(SolverError, match="step 17"):
         AdmmSolver(max_iter=20, tolerance=1e-12).solve(program, step=17)
     with pytest.raises(ValueError):

@@ -12,7 +12,7 @@ import pytest
 
 from colsim.engine.threads import use_threads
 
-TESTS = Path(__file__).parent
+TESTS = Path(__file__).resolve().parents[1]   # tests/, where solver_cases.py is
 
 SOLVE_ON_THREADS = """
 import json, sys

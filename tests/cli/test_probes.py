@@ -1,7 +1,7 @@
 """Issue 28's probes, kept: each bad input, path or file gets one line naming the cause and its exit
 status (2: the input, 1: the computation), and nothing is lost or written half.
 
-The workflow's probes (studies that share folders, NaN in a configuration) are in test_workflow.py.
+The workflow's probes (studies that share folders, NaN in a configuration) are in workflow/test_workflow.py.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 The paper's lever (its Eqs. 6 and 9) is the particle radius: L = 2 R_i R_j / (R_i + R_j) between
 spheres, each radius when the two are equal; the DEM convention `effective` is R_eff = R_i R_j /
-(R_i + R_j), half of it. At a wall both are R_i, so the incline cases of test_engine_analytic hold
+(R_i + R_j), half of it. At a wall both are R_i, so the incline cases of engine/test_analytic hold
 under either lever.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ROLLING_LEVERS, ContactLaw, ParticleState, StepSettings, Walls, rolling_lever
 from colsim.engine.stepper import run
 
-from solver_cases import against_clarabel, mid_collapse, small_pile
+from solver_cases import against_clarabel, mid_collapse
 
 G = 9.81
 
@@ -95,18 +95,13 @@ def test_the_top_sphere_rolls_off_at_mu_r_times_its_lever(lever, radii):
     assert rolled >= 1e-3 * G * duration
 
 
-@pytest.fixture(scope="module")
-def pile():
-    return small_pile()
-
-
 @pytest.mark.parametrize("lever", ROLLING_LEVERS)
 @pytest.mark.parametrize("stage", ["release", "mid-collapse"])
-def test_apgd_agrees_with_clarabel_under_each_lever(pile, stage, lever):
+def test_apgd_agrees_with_clarabel_under_each_lever(solver_pile, stage, lever):
     """The bounds of test_apgd.test_agrees_with_clarabel (APGD at its 1e-5 tolerance against Clarabel
-    at 1e-10), on the same pile under each lever."""
+    at 1e-10), on the same solver_pile under each lever."""
     law = ContactLaw.uniform(0.577, 0.12, rolling_lever=lever)
-    state = pile if stage == "release" else mid_collapse(pile, law=law)
+    state = solver_pile if stage == "release" else mid_collapse(solver_pile, law=law)
     program, sol, du, net_error = against_clarabel(ApgdSolver(), state, law=law)
     assert du <= 1e-3 and net_error <= 1e-3, (du, net_error)
     assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5

@@ -1,0 +1,44 @@
+"""The argument parser (colsim.cli.entry): its defaults and help come from the one place each
+default lives (colsim.solvers.defaults, colsim.stages.pack_defaults), and a bad value stops it
+with exit status 2 naming the option."""
+import pytest
+
+from colsim.cli import build_parser
+from colsim.solvers import defaults
+from colsim.stages import pack_defaults
+
+COLLAPSE = ["collapse", "--input", "column.nc", "--output", "collapse.nc"]
+PACK = ["pack", "--height", "2", "--output", "pack.nc"]
+
+
+def _help(parser, command: str) -> str:
+    subparsers = next(action for action in parser._actions if action.dest == "command")
+    return " ".join(subparsers.choices[command].format_help().split())
+
+
+def test_solver_defaults_and_choices_are_the_defaults_module_s():
+    parser = build_parser()
+    for args in (COLLAPSE, PACK):
+        assert parser.parse_args(args).solver == defaults.DEFAULT_SOLVER
+    text = _help(parser, "collapse")
+    assert f"dt/sqrt(h0/g) = {defaults.AUTO_APGD_BELOW:g}" in text
+    assert f"under auto {defaults.AUTO_APGD_LENGTH_FLOOR:g}" in text
+    assert f"under auto {defaults.AUTO_APGD_OVERLAP_TOLERANCE:g}" in text
+    assert "{" + ",".join(defaults.SOLVERS) + "}" in text
+
+
+def test_pack_defaults_are_the_pack_defaults_module_s():
+    chosen = build_parser().parse_args(PACK)
+    assert chosen.max_spheres == pack_defaults.DEFAULT_MAX_SPHERES
+    assert chosen.layer_height == pack_defaults.LAYER_HEIGHT
+    assert chosen.freeze_depth == pack_defaults.FREEZE_DEPTH
+
+
+@pytest.mark.parametrize("args, option", [(COLLAPSE + ["--solver", "gauss-seidel"], "--solver"),
+                                          (COLLAPSE + ["--threads", "0"], "--threads"),
+                                          (COLLAPSE + ["--solver-tolerance", "-1"], "--solver-tolerance")])
+def test_a_bad_value_exits_2_naming_the_option(args, option, capsys):
+    with pytest.raises(SystemExit) as stop:
+        build_parser().parse_args(args)
+    assert stop.value.code == 2
+    assert option in capsys.readouterr().err

@@ -1,0 +1,59 @@
+"""One step's cone program (colsim.engine.program): the contact Jacobian by property."""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from colsim.engine.contacts import WALL, Contacts, tangent_basis
+from colsim.engine.program import contact_jacobian
+from colsim.engine.state import FLOOR, PARTICLE
+
+finite = st.floats(-1.0, 1.0, allow_nan=False)
+vectors = st.tuples(finite, finite, finite).map(np.array).filter(lambda v: np.linalg.norm(v) > 1e-3)
+
+
+def _contacts(i, j, normal, radius):
+    i, j = np.asarray(i), np.asarray(j)
+    normal = np.asarray(normal, float).reshape(-1, 3)
+    t1, t2 = tangent_basis(normal)
+    ri = radius[i]
+    rj = np.where(j >= 0, radius[np.maximum(j, 0)], 0.0)
+    reff = np.where(j >= 0, ri * rj / (ri + rj), ri)
+    m = len(i)
+    return Contacts(i=i, j=j, family=np.where(j >= 0, PARTICLE, FLOOR), normal=normal, tangent1=t1,
+                    tangent2=t2, gap=np.zeros(m), radius_i=ri, radius_j=rj, rolling_radius=reff,
+                    mu=np.full(m, 0.5), mu_r=np.full(m, 0.1))
+
+
+@settings(max_examples=50, deadline=None)
+@given(n_dir=vectors, radii=st.tuples(st.floats(0.1, 0.3), st.floats(0.1, 0.3), st.floats(0.1, 0.3)),
+       seed=st.integers(0, 2**31 - 1))
+def test_jacobian_rows_are_the_relative_displacement(n_dir, radii, seed):
+    """Rows of B for a pair (0, 2) and a wall contact of 1 against SPEC section 2, to 1e-12:
+    du = (dx_j - R_j dth_j x n) - (dx_i + R_i dth_i x n), B u = (n.du, T'du, R_eff T'(dth_j - dth_i)).
+    The normal row of the pair is n.(dx_j - dx_i): rotations do not move a contact along n."""
+    radius = np.array(radii)
+    normal = n_dir / np.linalg.norm(n_dir)
+    contacts = _contacts([0, 1], [2, WALL], [normal, [0.0, 0.0, -1.0]], radius)
+    B = contact_jacobian(contacts, 3)
+    rng = np.random.default_rng(seed)
+    u = rng.normal(size=18)
+    dx, dth = u[:9].reshape(3, 3), u[9:].reshape(3, 3)
+    local = (B @ u).reshape(-1, 5)
+    for k, (a, b) in enumerate([(0, 2), (1, WALL)]):
+        n, t1, t2 = contacts.normal[k], contacts.tangent1[k], contacts.tangent2[k]
+        du = -(dx[a] + radius[a] * np.cross(dth[a], n))
+        rot = -dth[a]
+        if b >= 0:
+            du += dx[b] - radius[b] * np.cross(dth[b], n)
+            rot = rot + dth[b]
+        expected = [n @ du, t1 @ du, t2 @ du, contacts.rolling_radius[k] * (t1 @ rot),
+                    contacts.rolling_radius[k] * (t2 @ rot)]
+        np.testing.assert_allclose(local[k], expected, atol=1e-12)
+    np.testing.assert_allclose(local[0, 0], normal @ (dx[2] - dx[0]), atol=1e-12)
+    # Newton's third law: any pair force lam acts on the two particles with opposite net forces
+    lam = np.zeros(10)
+    lam[:5] = rng.normal(size=5)
+    generalised = B.T @ lam
+    np.testing.assert_allclose(generalised[0:3] + generalised[6:9], 0.0, atol=1e-12)

@@ -1,0 +1,80 @@
+"""The time step (colsim.engine.stepper): its two failure modes, a missed contact (redone, or OverlapError)
+and a solver that does not converge (SolverError)."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from colsim.engine.contacts import overlaps
+from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.stepper import OverlapError, base_margin, next_margin, step
+from colsim.solvers import ClarabelSolver, SolverError
+
+
+def _train(max_redo: int):
+    """Sphere C (x = 0) flies at 2 along +x into A (resting, gap 0.001); B rests 0.01 beyond A.
+
+    Gravity off, no walls, detection margin 1e-6 d and no slack: A-B is not predicted (neither
+    moves in free flight), but C pushes A about 0.02 in the step, into B.
+    """
+    radius = np.full(3, 0.2)
+    position = np.array([[0.0, 0, 0], [0.401, 0, 0], [0.811, 0, 0]])
+    velocity = np.array([[2.0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    state = ParticleState(position, velocity, np.zeros((3, 3)), radius)
+    settings = StepSettings(dt=0.02, gravity=(0.0, 0.0, 0.0), walls=Walls(floor=False),
+                            law=ContactLaw.uniform(0.3, 0.0), detection_margin_fraction=1e-6,
+                            detection_slack=0.0, max_redo=max_redo)
+    return state, settings
+
+
+def test_missed_contact_is_redone():
+    """The first attempt overlaps A and B by ~0.009 (> tolerance 0.004); the step is redone with
+    the missed pair and ends within the tolerance, conserving momentum (1e-9 relative: no external
+    force; Clarabel's tolerance)."""
+    state, settings = _train(max_redo=3)
+    result = step(state, settings, ClarabelSolver(), step_number=5)
+    tolerance = settings.overlap_tolerance * 0.4
+    assert result.diagnostics.redone >= 1
+    assert result.diagnostics.largest_overlap <= tolerance
+    assert overlaps(result.state, settings.walls).largest <= tolerance
+    assert result.contacts.m >= 2  # C-A and the added A-B
+    momentum = (result.state.mass[:, None] * result.state.velocity).sum(axis=0)
+    np.testing.assert_allclose(momentum, (state.mass[:, None] * state.velocity).sum(axis=0),
+                               rtol=1e-9, atol=1e-9 * state.mass[0] * 2.0)
+    assert result.state.velocity[2, 0] > 0.1  # B was pushed: the contact was really taken
+
+
+def test_next_step_starts_from_the_margin_that_caught_the_missed_pair():
+    """The redone step records the missed pair and its grown margin; the next step starts there,
+    and each clean step after that halves it, down to the base margin (here 1e-6 d)."""
+    state, settings = _train(max_redo=3)
+    result = step(state, settings, ClarabelSolver(), step_number=5)
+    base = base_margin(state, settings)
+    d = result.diagnostics
+    assert d.missed_contacts >= 1
+    assert d.detection_margin == pytest.approx(base * settings.margin_growth ** d.redone)
+    assert next_margin(d, base) == d.detection_margin
+    clean = replace(d, redone=0, missed_contacts=0)
+    assert next_margin(clean, base) == pytest.approx(0.5 * d.detection_margin)
+    assert next_margin(replace(clean, detection_margin=base), base) == base
+
+
+def test_missed_contact_without_redo_raises():
+    """With no redo allowed the overlapping step is an OverlapError naming the step, not a result."""
+    state, settings = _train(max_redo=0)
+    with pytest.raises(OverlapError, match="step 5"):
+        step(state, settings, ClarabelSolver(), step_number=5)
+
+
+def test_unconverged_solver_raises_with_step_and_status():
+    """Clarabel stopped after one iteration: SolverError names the step (17) and the status."""
+    state = ParticleState.at_rest([[0.0, 0.0, 0.2]], [0.2])
+    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.5, 0.1))
+    with pytest.raises(SolverError) as caught:
+        step(state, settings, ClarabelSolver(max_iter=1), step_number=17)
+    error = caught.value
+    assert error.step == 17
+    assert error.status == "MaxIterations"
+    assert "step 17" in str(error) and "MaxIterations" in str(error)

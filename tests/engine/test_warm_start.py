@@ -1,0 +1,46 @@
+"""Contact forces carried by pair (colsim.engine.warm_start): from step to step and through a renumbering."""
+import numpy as np
+
+from colsim.solvers import WarmStart
+from colsim.solvers.apgd import ApgdSolver
+
+from solver_cases import collapse_program
+
+
+def test_warm_start_by_pair(solver_pile):
+    program, found = collapse_program(solver_pile)
+    cold = ApgdSolver().solve(program)
+    warm = WarmStart.from_step(found, cold.forces)
+    # the stored forces come back in the same frames, and a restart from them is immediate
+    np.testing.assert_allclose(warm.match(found, solver_pile.n), cold.forces, atol=1e-12 * np.abs(cold.forces).max())
+    again = ApgdSolver().solve(program, warm_start=warm.match(found, solver_pile.n))
+    assert again.info["start"] == "warm" and again.iterations < cold.iterations / 3
+    # contacts that were not there before start from zero
+    fewer = WarmStart(warm.i[:-5], warm.j[:-5], warm.family[:-5], warm.force[:-5], warm.rolling[:-5])
+    guess = fewer.match(found, solver_pile.n)
+    assert np.count_nonzero(np.all(guess == 0, axis=1)) >= 5
+
+
+def test_warm_start_survives_renumbering(solver_pile):
+    """Removing particles (as trim does) keeps the forces of the pairs that stay, in the new numbers."""
+    _, found = collapse_program(solver_pile)
+    forces = np.random.default_rng(3).uniform(0.5, 1.0, (found.m, 5)) * [1, 0.1, 0.1, 0.01, 0.01]  # in the cones
+    warm = WarmStart.from_step(found, forces)
+    keep = np.ones(solver_pile.n, dtype=bool)
+    keep[::3] = False
+    column = solver_pile.subset(keep)
+    _, found_after = collapse_program(column)
+    guess = warm.subset(keep).match(found_after, column.n)
+    # the same pair before and after, by the particles' old numbers
+    old = np.flatnonzero(keep)
+    before = {(i, j, f): row for i, j, f, row in zip(found.i, found.j, found.family, forces)}
+    compared = 0
+    for k in range(found_after.m):
+        j = old[found_after.j[k]] if found_after.j[k] >= 0 else -1
+        row = before.get((old[found_after.i[k]], j, found_after.family[k]))
+        if row is not None:
+            np.testing.assert_allclose(guess[k], row, rtol=0, atol=1e-12)  # same positions, same frames
+            compared += 1
+    assert compared > found_after.m // 2
+    # pairs with a removed particle are gone
+    assert warm.subset(keep).m < warm.m

@@ -1,0 +1,65 @@
+"""A collapse's checkpoint (colsim.io.checkpoint): what is saved comes back exactly, and a checkpoint
+of other inputs or a damaged file is ignored with a warning, never taken for this run's."""
+import logging
+
+import numpy as np
+
+from colsim.engine.records import Carry, StepDiagnostics
+from colsim.engine.state import ParticleState
+from colsim.engine.warm_start import WarmStart
+from colsim.io.checkpoint import load_checkpoint, save_checkpoint
+
+
+def _diagnostics(step: int) -> StepDiagnostics:
+    numbers = {name: step + 0.5 for name in StepDiagnostics.__dataclass_fields__}
+    integers = ("step", "n_contacts", "n_active", "solver_iterations", "friction_iterations", "redone",
+                "missed_contacts")
+    return StepDiagnostics(**{**numbers, **{name: step for name in integers},
+                              "solver_status": "Solved", "solver_backend": "apgd"})
+
+
+def _run():
+    rng = np.random.default_rng(5)
+    state = ParticleState(rng.normal(size=(4, 3)), rng.normal(size=(4, 3)), rng.normal(size=(4, 3)),
+                          rng.uniform(0.1, 0.2, 4), 2.5, 0.3)
+    frames = [(0, ParticleState.at_rest(rng.normal(size=(4, 3)), state.radius, 2.5)), (10, state)]
+    warm = WarmStart(np.array([0, 1]), np.array([1, -1]), np.array([0, 1]), rng.normal(size=(2, 3)),
+                     rng.normal(size=(2, 3)))
+    return state, frames, [_diagnostics(1), _diagnostics(2)], Carry(warm, 0.01)
+
+
+def test_a_checkpoint_comes_back_exactly(tmp_path):
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "run.checkpoint.npz"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 12.5)
+    saved = load_checkpoint(path, "abc")
+    for name in ("position", "velocity", "angular_velocity", "radius"):
+        np.testing.assert_array_equal(getattr(saved["state"], name), getattr(state, name))
+    assert saved["state"].time == state.time and saved["state"].density == state.density
+    assert [k for k, _ in saved["frames"]] == [0, 10]
+    np.testing.assert_array_equal(saved["frames"][0][1].position, frames[0][1].position)
+    assert saved["diagnostics"] == diagnostics
+    assert saved["carry"].margin == 0.01 and saved["elapsed"] == 12.5
+    for name in ("i", "j", "family", "force", "rolling"):
+        np.testing.assert_array_equal(getattr(saved["carry"].warm_start, name), getattr(carry.warm_start, name))
+
+
+def test_no_warm_start_and_no_margin_come_back_as_none(tmp_path):
+    state, frames, diagnostics, _ = _run()
+    save_checkpoint(tmp_path / "c.npz", "abc", state, frames, diagnostics, Carry(), 0.0)
+    carry = load_checkpoint(tmp_path / "c.npz", "abc")["carry"]
+    assert carry.warm_start is None and carry.margin is None
+
+
+def test_another_run_s_or_a_damaged_checkpoint_is_ignored(tmp_path, caplog):
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "c.npz"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    caplog.set_level(logging.WARNING, logger="colsim")
+    assert load_checkpoint(path, "other settings") is None
+    assert "belongs to other inputs or settings" in caplog.text
+    path.write_bytes(path.read_bytes()[:100])
+    assert load_checkpoint(path, "abc") is None
+    assert "unreadable checkpoint" in caplog.text
+    assert load_checkpoint(tmp_path / "absent.npz", "abc") is None
+    assert load_checkpoint(None, "abc") is None

@@ -1,0 +1,72 @@
+"""The solver registry (colsim.solvers.registry): the solver by name and the auto rule (APGD for warm, small
+steps; Clarabel otherwise and at the iteration cap)."""
+import numpy as np
+
+from colsim.engine.stepper import run
+from colsim.solvers import AutoSolver, ClarabelSolver, WarmStart, make_solver
+from colsim.solvers.apgd import ApgdSolver
+
+from solver_cases import COLLAPSE, collapse_program
+
+
+def test_auto_picks_apgd_only_for_warm_small_steps(solver_pile):
+    program, found = collapse_program(solver_pile)
+    reference = ClarabelSolver().solve(program)
+    warm = WarmStart.from_step(found, reference.forces).match(found, solver_pile.n)
+    assert AutoSolver().solve(program).backend == "clarabel"                 # no warm start
+    assert AutoSolver().solve(program, warm_start=warm).backend == "apgd"
+    assert AutoSolver(scaled_time_step=0.04).solve(program, warm_start=warm).backend == "apgd"
+    assert AutoSolver(scaled_time_step=0.08).solve(program, warm_start=warm).backend == "clarabel"
+    assert AutoSolver().solve(program, warm_start=np.zeros_like(warm)).backend == "clarabel"
+    assert isinstance(make_solver("auto"), AutoSolver)
+
+
+def test_stepper_records_the_backend_of_each_step(solver_pile):
+    results = list(run(solver_pile, COLLAPSE, 3, make_solver("apgd")))
+    assert [r.solution.info["start"] for r in results] == ["cold", "warm", "warm"]
+    backends = [r.diagnostics.solver_backend for r in run(solver_pile, COLLAPSE, 3, AutoSolver())]
+    assert backends == ["clarabel", "apgd", "apgd"]
+
+
+def test_auto_falls_back_to_clarabel_at_the_iteration_cap(solver_pile):
+    """A warm-started step that APGD cannot finish within the cap is solved by Clarabel, and the
+    step's diagnostics say so."""
+    backends = [r.diagnostics.solver_backend for r in run(solver_pile, COLLAPSE, 3, AutoSolver(max_iter=3))]
+    assert backends == ["clarabel", "clarabel-fallback", "clarabel-fallback"]
+
+
+def test_auto_uses_the_length_floor_in_both_stages():
+    from colsim.cli import build_parser
+    from colsim.cli.commands import _pack_solver, _solver
+    assert AutoSolver().apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR > 0
+    assert ApgdSolver().length_floor == 0.0
+    parser = build_parser()
+    collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
+    assert _solver(collapse_args, 0.004).apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR
+    pack_args = parser.parse_args(["pack", "--height", "2", "--output", "p.nc"])
+    assert _pack_solver(pack_args).apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR
+    chosen = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc", "--solver", "apgd",
+                                "--solver-length-floor", "0.5"])
+    assert _solver(chosen, 0.004).length_floor == 0.5
+
+
+def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
+    """Under auto the collapse's APGD may stop at a largest violation of 1e-4 mean diameters; the
+    packing's own primal bound (tolerance 1e-3 x at least 0.1 d) is already that loose, so the
+    packing goes without it, and records its settings as before the option existed."""
+    from colsim.cli import build_parser
+    from colsim.cli.commands import _pack_solver, _solver
+    from colsim.solvers.defaults import PACK_APGD_TOLERANCE as APGD_TOLERANCE
+    assert AutoSolver().apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE > 0
+    assert ApgdSolver().overlap_tolerance == 0.0
+    assert AutoSolver.APGD_OVERLAP_TOLERANCE <= APGD_TOLERANCE * AutoSolver.APGD_LENGTH_FLOOR
+    parser = build_parser()
+    collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
+    assert _solver(collapse_args, 0.004).apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE
+    pack_args = parser.parse_args(["pack", "--height", "2", "--output", "p.nc"])
+    packing = _pack_solver(pack_args)
+    assert packing.apgd.overlap_tolerance == 0.0
+    assert "overlap_tolerance" not in packing.describe()["apgd"]
+    assert _solver(collapse_args, 0.004).describe()["apgd"]["overlap_tolerance"] == 1e-4
+    chosen = parser.parse_args(["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "1e-5"])
+    assert _pack_solver(chosen).apgd.overlap_tolerance == 1e-5
