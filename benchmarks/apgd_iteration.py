@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+import record
 from colsim import io
 from colsim.solvers.apgd import ApgdSolver
 from colsim.stages.collapse import CollapseSettings
@@ -23,7 +24,7 @@ from colsim.engine.contacts import detect
 from colsim.engine.program import assemble
 from colsim.engine.stepper import base_margin, predicted_displacement
 
-CACHE = Path(__file__).resolve().parent / ".cache"
+CACHE = record.cache_dir()
 
 
 def first_step(column: Path):
@@ -62,14 +63,16 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=200)
     args = parser.parse_args(argv)
     columns = args.columns or sorted(CACHE.glob("column_*.nc"))
-    print("| spheres | contacts | numba ms/iteration | numpy ms/iteration | numba speed-up | gradient check ms |")
-    print("|---|---|---|---|---|---|")
+    table = record.table(["spheres", "contacts", "numba ms/iteration", "numpy ms/iteration", "numba speed-up",
+                          "gradient check ms"])
     for column in columns:
         program, guess, n = first_step(column)
         fast, check = per_iteration(program, guess, "numba", args.iterations)
         plain, _ = per_iteration(program, guess, "numpy", max(20, args.iterations // 5))
-        print(f"| {n} | {program.m} | {fast:.2f} | {plain:.2f} | {plain / fast:.1f} | {check:.2f} |", flush=True)
+        table.row(n, program.m, f"{fast:.2f}", f"{plain:.2f}", f"{plain / fast:.1f}", f"{check:.2f}",
+                  data={"column": str(column), "spheres": n, "contacts": program.m, "numba_ms": fast,
+                        "numpy_ms": plain, "gradient_check_ms": check})
 
 
 if __name__ == "__main__":
-    main()
+    record.run("apgd_iteration", main)

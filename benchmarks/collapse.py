@@ -30,10 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
+import record
 from colsim.stages.pack import LAYER_HEIGHT
 
 HERE = Path(__file__).resolve().parent
-CACHE = HERE / ".cache"
+CACHE = record.cache_dir()
+#: the colsim command of this interpreter (the colsim it imports, not whichever is installed as `colsim`)
+COLSIM = [sys.executable, "-m", "colsim.cli"]
 RUNS = {"clarabel-100": ("clarabel", 100, None), "auto-1000": ("auto", 1000, None),
         "clarabel-1000": ("clarabel", 1000, 20)}
 
@@ -41,31 +44,32 @@ RUNS = {"clarabel-100": ("clarabel", 100, None), "auto-1000": ("auto", 1000, Non
 def column_file(r0: float, aspect_ratio: float, seed: int, pack_solver: str, pack_dt: float,
                 layer_height: str = "none", threads: int = 1) -> Path:
     """The trimmed column (made once with the colsim CLI and cached)."""
-    CACHE.mkdir(exist_ok=True)
+    CACHE.mkdir(parents=True, exist_ok=True)
     layer_height = str(layer_height).lower()
     layers = "" if layer_height == "none" else f"_layers{float(layer_height):g}"
     stem = f"r0_{r0:g}_seed_{seed}_{pack_solver}_dt{pack_dt:g}{layers}"
     packing = CACHE / f"packing_{stem}_h{aspect_ratio * r0:g}.nc"
     if not packing.exists():
         start, cpu = time.perf_counter(), _children_cpu()
-        subprocess.run(["colsim", "pack", "--r0", f"{r0:g}", "--height", f"{aspect_ratio * r0:g}",
+        subprocess.run([*COLSIM, "pack", "--r0", f"{r0:g}", "--height", f"{aspect_ratio * r0:g}",
                         "--seed", str(seed), "--root-seed", "2024", "--dt", f"{pack_dt:g}",
                         "--solver", pack_solver, "--max-steps", "20000", "--layer-height", layer_height,
                         "--threads", str(threads), "--output", str(packing)],
                        check=True)
-        record = {"wall_s": time.perf_counter() - start, "cpu_s": _children_cpu() - cpu,
-                  "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
-                  "threads": threads}
-        packing.with_suffix(".json").write_text(json.dumps(record))
-    record = json.loads(packing.with_suffix(".json").read_text())
+        built = {"wall_s": time.perf_counter() - start, "cpu_s": _children_cpu() - cpu,
+                 "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+                 "threads": threads}
+        packing.with_suffix(".json").write_text(json.dumps(built))
+    built = json.loads(packing.with_suffix(".json").read_text())
     import xarray as xr
     with xr.open_dataset(packing) as source:
-        record.update(spheres=int(source.sizes["particle"]), steps=int(source.attrs["steps"]),
-                      solid_fraction=float(source.attrs["solid_fraction"]))
-    print("packing", packing.name, json.dumps(record), flush=True)
+        built.update(spheres=int(source.sizes["particle"]), steps=int(source.attrs["steps"]),
+                     solid_fraction=float(source.attrs["solid_fraction"]))
+    print("packing", packing.name, json.dumps(built), flush=True)
+    record.note("packing", {"file": packing.name, **built})
     column = CACHE / f"column_{stem}_a{aspect_ratio:g}.nc"
     if not column.exists():
-        subprocess.run(["colsim", "trim", "--input", str(packing), "--aspect-ratio", f"{aspect_ratio:g}",
+        subprocess.run([*COLSIM, "trim", "--input", str(packing), "--aspect-ratio", f"{aspect_ratio:g}",
                         "--output", str(column)], check=True)
     return column
 
@@ -147,19 +151,20 @@ def main(argv=None):
                 continue
             out = subprocess.run([sys.executable, __file__, "--one", str(column), name, "--threads", str(args.threads)],
                                  check=True, capture_output=True, text=True).stdout
-            record = json.loads(out.strip().splitlines()[-1])
-            record["r0"] = r0
-            records.append(record)
-            print(json.dumps(record), flush=True)
-    print("\n| r0 | spheres | run | steps timed | CPU s (whole collapse) | wall s | peak MB | iterations fast / slowing / rest | back-ends |")
-    print("|---|---|---|---|---|---|---|---|---|")
+            result = json.loads(out.strip().splitlines()[-1])
+            result["r0"] = r0
+            records.append(result)
+            print(json.dumps(result), flush=True)
+    print()
+    table = record.table(["r0", "spheres", "run", "steps timed", "CPU s (whole collapse)", "wall s", "peak MB",
+                          "iterations fast / slowing / rest", "back-ends"])
     for r in records:
         whole = r["cpu_s"] * r["n_steps"] / r["steps"]
         phases = " / ".join("-" if v is None else f"{v:.0f}" for v in r["phases"].values())
-        print(f"| {r['r0']:g} | {r['spheres']} | {r['run']} | {r['steps']} | {whole:.0f}"
-              f"{' (extrapolated)' if r['steps'] < r['n_steps'] else ''} | {r['wall_s']:.0f} | "
-              f"{r['peak_mb']:.0f} | {phases} | {r['backends']} |")
+        table.row(f"{r['r0']:g}", r["spheres"], r["run"], r["steps"],
+                  f"{whole:.0f}{' (extrapolated)' if r['steps'] < r['n_steps'] else ''}", f"{r['wall_s']:.0f}",
+                  f"{r['peak_mb']:.0f}", phases, r["backends"], data=r)
 
 
 if __name__ == "__main__":
-    main()
+    record.run("collapse", main)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+import record
 from colsim import io
 from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import ApgdSolver, ClarabelSolver
@@ -49,13 +50,15 @@ def main(argv=None):
         return whole_collapses(args)
     apgd = ApgdSolver(max_iter=50_000, **({} if args.tolerance is None else {"tolerance": args.tolerance}))
     print(f"{args.column.name}: first {args.steps} steps, APGD tolerance {apgd.tolerance:g}")
-    print("| dt/sqrt(h0/g) | Clarabel s/step | iterations | APGD s/step | iterations mean (max) | APGD / Clarabel |")
-    print("|---|---|---|---|---|---|")
+    table = record.table(["dt/sqrt(h0/g)", "Clarabel s/step", "iterations", "APGD s/step", "iterations mean (max)",
+                          "APGD / Clarabel"], title=f"{args.column.name}: first {args.steps} steps")
     for scaled_dt in args.scaled_dt:
         reference, ref_iterations = cost_per_step(args.column, ClarabelSolver(), scaled_dt, args.steps)
         fast, iterations = cost_per_step(args.column, apgd, scaled_dt, args.steps)
-        print(f"| {scaled_dt:g} | {reference:.2f} | {np.mean(ref_iterations):.0f} | {fast:.2f} | "
-              f"{np.mean(iterations):.0f} ({max(iterations)}) | {fast / reference:.2f} |", flush=True)
+        table.row(f"{scaled_dt:g}", f"{reference:.2f}", f"{np.mean(ref_iterations):.0f}", f"{fast:.2f}",
+                  f"{np.mean(iterations):.0f} ({max(iterations)})", f"{fast / reference:.2f}",
+                  data={"scaled_dt": scaled_dt, "clarabel_s": reference, "clarabel_iterations": ref_iterations,
+                        "apgd_s": fast, "apgd_iterations": iterations})
 
 
 def whole_collapses(args):
@@ -64,13 +67,15 @@ def whole_collapses(args):
     reference, ref_iterations = cost_per_step(args.column, ClarabelSolver(), coarsest, None)
     print(f"{args.column.name}: whole collapses to t/sqrt(h0/g) = 4, APGD tolerance {apgd.tolerance:g}; "
           f"Clarabel at {coarsest:g}: {reference:.2f} s/step, {np.mean(ref_iterations):.0f} iterations")
-    print("| dt/sqrt(h0/g) | steps | APGD s/step | iterations mean (max) | APGD / Clarabel per step | APGD whole CPU s |")
-    print("|---|---|---|---|---|---|")
+    record.note("clarabel", {"scaled_dt": coarsest, "s_per_step": reference, "iterations": ref_iterations})
+    table = record.table(["dt/sqrt(h0/g)", "steps", "APGD s/step", "iterations mean (max)",
+                          "APGD / Clarabel per step", "APGD whole CPU s"], title=f"{args.column.name}: whole collapses")
     for scaled_dt in sorted(args.scaled_dt, reverse=True):
         fast, iterations = cost_per_step(args.column, apgd, scaled_dt, None)
-        print(f"| {scaled_dt:g} | {len(iterations)} | {fast:.2f} | {np.mean(iterations):.0f} ({max(iterations)}) | "
-              f"{fast / reference:.2f} | {fast * len(iterations):.0f} |", flush=True)
+        table.row(f"{scaled_dt:g}", len(iterations), f"{fast:.2f}", f"{np.mean(iterations):.0f} ({max(iterations)})",
+                  f"{fast / reference:.2f}", f"{fast * len(iterations):.0f}",
+                  data={"scaled_dt": scaled_dt, "apgd_s": fast, "apgd_iterations": iterations})
 
 
 if __name__ == "__main__":
-    main()
+    record.run("crossover", main)

@@ -3,14 +3,17 @@
     from packings import settled_packing            # with benchmarks/ on sys.path
     state = settled_packing(1000)                   # ParticleState, about at rest on the floor z = 0
 
+    python -m benchmarks packings 1000 4000         # build them (or show the cached ones)
+
 How a packing is made (``build_packing``):
 
-1. **Cloud**: a cubic lattice of spacing 0.52 inside a cylinder of radius r0 (about the z axis),
-   the bottom layer at z = 0.27, each point jittered by up to 0.005 per axis, radii uniform in
-   [0.125, 0.25] (the paper's diameters 0.25-0.5). Neighbours keep a gap of at least 0.003, so the
-   cloud does not overlap. r0 is the smallest radius (in steps of 0.1) for which the lattice column
-   is at most ``aspect`` (2.5) r0 tall, so the settled column (solid fraction about 0.58 against the
-   lattice's 0.22) stands about r0 high: wide and shallow columns settle in fewer steps than tall ones.
+1. **Cloud**: the pack stage's own generator, :func:`colsim.stages.pack.starting_cloud` (the tests'
+   pile starts there too): a cubic lattice of spacing 0.52 (1.04 d_max) inside a cylinder of radius
+   r0 (about the z axis), the bottom layer at z = 0.26, radii uniform in [0.125, 0.25] (the paper's
+   diameters 0.25-0.5), each sphere at a random place inside its own cell, so the cloud does not
+   overlap. r0 is the smallest radius (in steps of 0.1) for which the lattice column is at most
+   ``aspect`` (2.5) r0 tall, so the settled column (solid fraction about 0.58 against the lattice's
+   0.22) stands about r0 high: wide and shallow columns settle in fewer steps than tall ones.
 2. **Pour**: mu = mu_r = 0 with the cylinder, dt = 0.02, until the kinetic energy per particle is
    below ``pour_tolerance`` (1e-4) m g d (mean mass, mean diameter), or ``max_pour_steps``.
    Frictionless spheres keep rearranging for hundreds of steps at about 1e-4 m g d.
@@ -20,7 +23,8 @@ How a packing is made (``build_packing``):
    changing it measurably; the result is what the collapse starts from.
 
 Large packings (``n_target > tile_above``, 2,000 by default) are not poured: on the shared 2-core
-machine a frictionless 1,000-sphere pour took 10 minutes (331 + 11 steps) and 4,000 spheres did not
+machine a frictionless 1,000-sphere pour took 10 minutes (331 + 11 steps, from the former cloud: a
+lattice centred on the axis, jittered by 0.005) and 4,000 spheres did not
 get past 50 steps in 3 minutes, so 4,000 would take about an hour and 16,000 many hours. They are
 2 x 2 copies of a settled packing of n_target / 4 spheres (itself
 poured or tiled), their axes at (+-s, +-s) with s = r0 + 0.005, r0 the half-width of the copy (its
@@ -29,9 +33,10 @@ identical, which a one-step benchmark does not notice (the program has the same 
 as a poured one); at the seams the columns meet with a gap of >= 0.01 instead of interlocking.
 Velocities are kept (about 0).
 
-Cache: ``benchmarks/.cache/settled_<n>_seed<seed>.npz`` (git-ignored) with position, velocity,
+Cache: ``benchmarks/.cache/settled_v2_<n>_seed<seed>.npz`` (git-ignored) with position, velocity,
 angular_velocity, radius, cylinder_radius, and the build's record (steps, final kinetic energy).
-Delete a file to rebuild it.
+Delete a file to rebuild it. (``v2``: poured from the pack stage's cloud; the former
+``settled_<n>_seed<seed>.npz`` came from the former cloud and are not read.)
 """
 from __future__ import annotations
 
@@ -43,53 +48,25 @@ from pathlib import Path
 
 import numpy as np
 
+import record as run_record
 from colsim.solvers import ClarabelSolver, Solver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
+from colsim.stages.pack import LATTICE_FACTOR, lattice_layer, starting_cloud
 
-CACHE = Path(__file__).resolve().parent / ".cache"
-SPACING = 0.52
-RADIUS_RANGE = (0.125, 0.25)
-JITTER = 0.005
-
-
-def _per_layer_points(r0: float, spacing: float = SPACING) -> np.ndarray:
-    """(k, 2) lattice points whose largest sphere (radius 0.25) stays 0.01 inside radius r0."""
-    half = math.ceil(r0 / spacing)
-    g = spacing * np.arange(-half, half + 1)
-    x, y = np.meshgrid(g, g, indexing="ij")
-    xy = np.column_stack([x.ravel(), y.ravel()])
-    return xy[np.hypot(xy[:, 0], xy[:, 1]) <= r0 - RADIUS_RANGE[1] - 0.01 - math.sqrt(2) * JITTER]
+CACHE = run_record.cache_dir()
+DIAMETER_RANGE = (0.25, 0.5)
+SPACING = LATTICE_FACTOR * DIAMETER_RANGE[1]   # the pack stage's lattice: 0.52
 
 
-def cylinder_radius_for(n_target: int, aspect: float = 2.5, spacing: float = SPACING) -> float:
-    """Smallest r0 (steps of 0.1) whose lattice column of n_target points is at most aspect r0 tall."""
+def cylinder_radius_for(n_target: int, aspect: float = 2.5) -> float:
+    """Smallest r0 (steps of 0.1) whose lattice column of n_target spheres is at most aspect r0 tall."""
     r0 = 1.0
     while True:
-        per_layer = len(_per_layer_points(r0, spacing))
-        if per_layer and math.ceil(n_target / per_layer) * spacing <= aspect * r0:
+        per_layer = len(lattice_layer(r0, SPACING))
+        if per_layer and math.ceil(n_target / per_layer) * SPACING <= aspect * r0:
             return round(r0, 1)
         r0 += 0.1
-
-
-def lattice_cloud(n: int, cylinder_radius: float, seed: int = 0, spacing: float = SPACING) -> ParticleState:
-    """n spheres at rest on a jittered cubic lattice inside the cylinder (see the module docstring).
-
-    The top layer is filled at random places, so the cloud has exactly n spheres.
-    """
-    rng = np.random.default_rng(seed)
-    xy = _per_layer_points(cylinder_radius, spacing)
-    if len(xy) == 0:
-        raise ValueError(f"cylinder radius {cylinder_radius} holds no sphere of radius {RADIUS_RANGE[1]}")
-    layers = math.ceil(n / len(xy))
-    points = []
-    for k in range(layers):
-        z = RADIUS_RANGE[1] + 0.02 + k * spacing
-        take = xy if (k + 1) * len(xy) <= n else xy[rng.choice(len(xy), n - k * len(xy), replace=False)]
-        points.append(np.column_stack([take, np.full(len(take), z)]))
-    position = np.concatenate(points) + rng.uniform(-JITTER, JITTER, (n, 3))
-    radius = rng.uniform(*RADIUS_RANGE, n)
-    return ParticleState.at_rest(position, radius)
 
 
 def energy_scale(state: ParticleState, gravity: float = 9.81) -> float:
@@ -104,7 +81,7 @@ def build_packing(n: int, seed: int = 0, dt: float = 0.02, solver: Solver | None
     """Pour and lock a packing of n spheres (module docstring); returns (state, record)."""
     solver = solver or ClarabelSolver()
     r0 = cylinder_radius or cylinder_radius_for(n)
-    state = lattice_cloud(n, r0, seed)
+    state = starting_cloud(n, r0, seed, diameter_range=DIAMETER_RANGE)
     scale = energy_scale(state)
     walls = Walls(floor=True, cylinder_radius=r0)
     phases = [
@@ -149,7 +126,7 @@ def tile(state: ParticleState, cylinder_radius: float) -> ParticleState:
 
 
 def cache_path(n_target: int, seed: int = 0) -> Path:
-    return CACHE / f"settled_{n_target}_seed{seed}.npz"
+    return CACHE / f"settled_v2_{n_target}_seed{seed}.npz"
 
 
 def settled_packing(n_target: int, seed: int = 0, tile_above: int = 2000, verbose: bool = True,
@@ -188,13 +165,23 @@ def packing_record(n_target: int, seed: int = 0) -> dict:
     return {key: data[key].item() for key in data.files if data[key].ndim == 0}
 
 
-if __name__ == "__main__":
+def main(argv=None):
     import argparse
 
     parser = argparse.ArgumentParser(description="Build (or show) cached settled packings.")
     parser.add_argument("n", type=int, nargs="+", help="target sphere counts, e.g. 1000 4000")
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    table = run_record.table(["target", "spheres", "cylinder radius", "pour steps", "lock steps", "build s",
+                          "tiled from"])
     for n in args.n:
         packing = settled_packing(n, args.seed)
-        print(n, packing.n, packing_record(n, args.seed))
+        built = packing_record(n, args.seed)
+        cells = [built.get(key, "-") for key in ("cylinder_radius", "pour_steps", "lock_steps", "seconds",
+                                                   "tiled_from")]
+        table.row(n, packing.n, *(f"{c:.4g}" if isinstance(c, float) else c for c in cells),
+                  data={"target": n, "spheres": packing.n, **built})
+
+
+if __name__ == "__main__":
+    run_record.run("packings", main)

@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.stages.pack import lattice_cloud
+import record
+from colsim.stages.pack import starting_cloud
 
 from colsim.solvers.admm import AdmmSolver
 from colsim.solvers.apgd import ApgdSolver
@@ -40,7 +41,7 @@ from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import predicted_displacement, run, step
 
 HERE = Path(__file__).resolve().parent
-CACHE = HERE / ".cache"
+CACHE = record.cache_dir()
 COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
 
 
@@ -52,8 +53,7 @@ def radius_for(n: int) -> float:
 def pour(n: int, seed: int = 0, max_steps: int = 2000, verbose=True) -> ParticleState:
     """n spheres poured into a cylinder (mu = mu_r = 0) until at rest; APGD does the pouring."""
     r0 = radius_for(n)
-    position, radius = lattice_cloud(r0, n, 0.0, (0.25, 0.5), np.random.default_rng(seed))
-    state = ParticleState.at_rest(position[:n], radius[:n])
+    state = starting_cloud(n, r0, seed)
     settings = StepSettings(dt=0.02, walls=Walls(cylinder_radius=r0))
     weight_scale = float(np.mean(state.mass)) * 9.81 * 2 * float(np.mean(state.radius))
     solver = ApgdSolver(tolerance=1e-4)
@@ -81,7 +81,7 @@ def packing(n: int, seed: int = 0) -> ParticleState:
         settled_packing = None
     if settled_packing is not None:
         return settled_packing(n, seed)
-    CACHE.mkdir(exist_ok=True)
+    CACHE.mkdir(parents=True, exist_ok=True)
     path = CACHE / f"poured_{n}_{seed}.pkl"
     if path.exists():
         return pickle.loads(path.read_bytes())  # noqa: S301 (our own cache)
@@ -111,8 +111,15 @@ def measure(solver, program, warm=None, step_number=None):
     return solution, seconds, peak
 
 
-def report(label, solution, seconds, peak, reference=None):
+#: every solve reported, for the table at the end (and the record)
+ROWS: list[dict] = []
+
+
+def report(label, solution, seconds, peak, reference=None, spheres=None, stage=None):
+    row = {"spheres": spheres, "stage": stage, "solver": label, "seconds": seconds, "peak_traced_mb": peak}
+    ROWS.append(row)
     if isinstance(solution, Exception):
+        row["status"] = f"FAILED: {solution}"
         print(f"    {label:<16} FAILED after {seconds:7.2f} s: {solution}", flush=True)
         return
     it = max(solution.iterations, 1)
@@ -120,7 +127,10 @@ def report(label, solution, seconds, peak, reference=None):
     if reference is not None and not isinstance(reference, Exception):
         du = np.linalg.norm(solution.increments - reference.increments) / np.linalg.norm(reference.increments)
         diff = f"  |du|/|u| vs clarabel {du:.1e}"
+        row["du_vs_clarabel"] = float(du)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    row.update(iterations=solution.iterations, ms_per_iteration=1e3 * seconds / it, rss_mb=rss,
+               status=str(solution.status))
     extra = ""
     if "factor_time" in solution.info:
         i = solution.info
@@ -142,6 +152,8 @@ def main(argv=None):
     parser.add_argument("--no-apgd", action="store_true", help="skip APGD (ADMM steps to 'mid')")
     parser.add_argument("--no-admm", action="store_true", help="skip ADMM")
     args = parser.parse_args(argv)
+    os.environ.setdefault("OMP_NUM_THREADS", "1")   # as when run as a script (python -m benchmarks solvers)
+    ROWS.clear()
 
     apgd = None if args.no_apgd else ApgdSolver(tolerance=args.tolerance)
     admm = None if args.no_admm else AdmmSolver(tolerance=args.admm_tolerance)
@@ -165,16 +177,26 @@ def main(argv=None):
             reference = None
             if clarabel is not None:
                 reference, seconds, peak = measure(clarabel, program)
-                report("clarabel", reference, seconds, peak)
+                report("clarabel", reference, seconds, peak, spheres=state.n, stage=stage)
             guess = warm.match(found, current.n) if stage == "mid" else None
             for label, solver in (("apgd", apgd), ("admm", admm)):
                 if solver is None:
                     continue
-                report(f"{label} cold", *measure(solver, program), reference)
+                report(f"{label} cold", *measure(solver, program), reference, spheres=state.n, stage=stage)
                 if guess is not None:
-                    report(f"{label} warm", *measure(solver, program, guess), reference)
+                    report(f"{label} warm", *measure(solver, program, guess), reference, spheres=state.n,
+                           stage=stage)
             if args.scs:
-                report("scs", *measure(_Scs(), program), reference)
+                report("scs", *measure(_Scs(), program), reference, spheres=state.n, stage=stage)
+    print()
+    table = record.table(["spheres", "program", "solver", "s", "iterations", "ms/iteration", "traced peak MB",
+                          "RSS MB", "status", "du vs Clarabel"])
+    for r in ROWS:
+        du = r.get("du_vs_clarabel")
+        table.row(r["spheres"], r["stage"], r["solver"], f"{r['seconds']:.3f}", r.get("iterations", "-"),
+                  f"{r['ms_per_iteration']:.2f}" if "ms_per_iteration" in r else "-", f"{r['peak_traced_mb']:.1f}",
+                  f"{r['rss_mb']:.0f}" if "rss_mb" in r else "-", r["status"], "-" if du is None else f"{du:.1e}",
+                  data=r)
 
 
 class _Scs:
@@ -215,4 +237,4 @@ def _cone_dim(cone) -> int:
 
 if __name__ == "__main__":
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    main()
+    record.run("solvers", main)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+import record
+
 HERE = Path(__file__).resolve().parent
 DEFAULT_CONFIGS = ["qdldl:1", "faer:1", "faer:2"]
 
@@ -87,17 +89,15 @@ def measure(n: int, config: str, repeat: int, seed: int) -> tuple[dict, np.ndarr
     return best, u
 
 
-def table(rows: list[dict]) -> str:
-    head = ("| spheres | contacts | solver | detect s | assemble s | setup s | solve s | iters | "
-            "step s | step cpu s | outside % | base MB | peak MB | du rel |")
-    lines = [head, "|" + "|".join(["---"] * (head.count("|") - 1)) + "|"]
+def print_table(rows: list[dict]) -> None:
+    """The Markdown table of the rows (printed, and kept in the benchmark's record)."""
+    table = record.table(["spheres", "contacts", "solver", "detect s", "assemble s", "setup s", "solve s", "iters",
+                          "step s", "step cpu s", "outside %", "base MB", "peak MB", "du rel"])
     for r in rows:
-        lines.append(
-            f"| {r['spheres']} | {r['contacts']} | {r['method']} x{r['threads']} | {r['detection']:.3f} | "
-            f"{r['assembly']:.3f} | {r['setup']:.2f} | {r['solve']:.2f} | {r['iterations']} | "
-            f"{r['step']:.2f} | {r['cpu']:.2f} | {100 * r['outside'] / r['step']:.1f} | {r['base_mb']:.0f} | "
-            f"{r['peak_mb']:.0f} | {r['du']:.1e} |")
-    return "\n".join(lines)
+        table.row(r["spheres"], r["contacts"], f"{r['method']} x{r['threads']}", f"{r['detection']:.3f}",
+                  f"{r['assembly']:.3f}", f"{r['setup']:.2f}", f"{r['solve']:.2f}", r["iterations"],
+                  f"{r['step']:.2f}", f"{r['cpu']:.2f}", f"{100 * r['outside'] / r['step']:.1f}",
+                  f"{r['base_mb']:.0f}", f"{r['peak_mb']:.0f}", f"{r['du']:.1e}", data=r)
 
 
 def main(argv=None):
@@ -133,8 +133,8 @@ def main(argv=None):
             rows.append(row)
             print(f"{n} {config}: step {row['step']:.2f} s, solve {row['solve']:.2f} s, "
                   f"{row['iterations']} iterations, {row['status']}", file=sys.stderr, flush=True)
-    print(table(rows))
+    print_table(rows)
 
 
 if __name__ == "__main__":
-    main()
+    record.run("step", main)

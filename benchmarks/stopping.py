@@ -18,6 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
+import record
 from colsim import io
 from colsim.solvers.apgd import ApgdSolver
 from colsim.stages.collapse import CollapseSettings, collapse
@@ -65,10 +66,13 @@ class Probe(Solver):
         return self.inner.solve(program, warm_start=warm_start, step=step)
 
     @staticmethod
-    def format(row) -> str:
+    def cells(row) -> list:
         step, m, first = row
-        cells = [str(first.get(key, "-")) for key in ("complementarity", *LEVELS)]
-        return f"| {step} | {m:,} | " + " | ".join(cells) + " |"
+        return [step, f"{m:,}", *(str(first.get(key, "-")) for key in ("complementarity", *LEVELS))]
+
+    @staticmethod
+    def format(row) -> str:
+        return "| " + " | ".join(map(str, Probe.cells(row))) + " |"
 
 
 def main(argv=None):
@@ -82,12 +86,14 @@ def main(argv=None):
     settings = CollapseSettings(mu_r=0.12, n_steps=args.n_steps, checkpoint_every=10**9)
     probe = Probe(make_solver("auto", scaled_time_step=settings.duration / args.n_steps), set(args.steps))
     print(f"{args.column}: {state.n} spheres, dt/sqrt(h0/g) = {settings.duration / args.n_steps:g}")
-    print("| step | contacts | complementarity 1e-5 | violation 1e-3 d | 1e-4 d | 1e-5 d | 1e-6 d |")
-    print("|---|---|---|---|---|---|---|")
     collapse(state, float(source.attrs["h0"]), settings, probe, warm_start=io.contact_forces_of(source),
              stop_after=max(args.steps))
-    print("\n".join(Probe.format(row) for row in probe.rows))
+    table = record.table(["step", "contacts", "complementarity 1e-5", "violation 1e-3 d", "1e-4 d", "1e-5 d",
+                          "1e-6 d"])
+    for row in probe.rows:
+        table.row(*Probe.cells(row), data={"step": row[0], "contacts": row[1],
+                                           "iterations": {str(k): v for k, v in row[2].items()}})
 
 
 if __name__ == "__main__":
-    main()
+    record.run("stopping", main)

@@ -27,6 +27,7 @@ import numpy as np
 import xarray as xr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import record   # noqa: E402
 from apgd_iteration import first_step   # noqa: E402
 
 from colsim.solvers.apgd import ApgdSolver   # noqa: E402
@@ -71,17 +72,18 @@ def main(argv=None):
     args = parser.parse_args(argv)
     program, guess, n = first_step(args.column)
     print(f"{args.column}: {n} spheres, {program.m} contacts at the first step; {os.cpu_count()} cores")
-    print("| threads | ms/iteration | speed-up | collapse wall s | CPU s | speed-up (wall) | iterations/step | solve share |")
-    print("|---|---|---|---|---|---|---|---|")
+    table = record.table(["threads", "ms/iteration", "speed-up", "collapse wall s", "CPU s", "speed-up (wall)",
+                          "iterations/step", "solve share"])
     base = None
     for count in args.threads:
         use_threads(count)
         ms = per_iteration(program, guess, args.iterations)
         run = collapse(args.column, args.steps, count)
         base = base or (ms, run["wall"])
-        print(f"| {count} | {ms:.2f} | {base[0] / ms:.2f} | {run['wall']:.1f} | {run['cpu']:.1f} | "
-              f"{base[1] / run['wall']:.2f} | {run['iterations']:.0f} | {100 * run['solve_share']:.0f} % |", flush=True)
+        table.row(count, f"{ms:.2f}", f"{base[0] / ms:.2f}", f"{run['wall']:.1f}", f"{run['cpu']:.1f}",
+                  f"{base[1] / run['wall']:.2f}", f"{run['iterations']:.0f}", f"{100 * run['solve_share']:.0f} %",
+                  data={"threads": count, "ms_per_iteration": ms, **run})
 
 
 if __name__ == "__main__":
-    main()
+    record.run("threads", main)

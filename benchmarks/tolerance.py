@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+import record
 from colsim import io
 from colsim.stages.analyse import measure_deposit
 from colsim.stages.collapse import CollapseSettings, collapse
@@ -74,22 +75,23 @@ def label(record: dict) -> str:
 
 
 def report(records: list[dict]) -> None:
-    print("| a | seed | run | h_inf/r0 | run-out/r0 | CPU s | iterations/step | fallbacks | overlap/d_min |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    table = record.table(["a", "seed", "run", "h_inf/r0", "run-out/r0", "CPU s", "iterations/step", "fallbacks",
+                          "overlap/d_min"], title="runs")
     for r in sorted(records, key=lambda r: (r["aspect_ratio"], r["seed"], label(r))):
-        print(f"| {r['aspect_ratio']:g} | {r['seed']} | {label(r)} | {r['h_inf_over_r0']:.3f} | "
-              f"{r['runout_over_r0']:.3f} | {r['cpu_s']:.0f} | {r['mean_iterations']:.0f} | "
-              f"{r['fallbacks']} | {r['largest_overlap_over_dmin']:.4f} |")
-    print("\n| a | run | seeds | h_inf/r0 mean (sd) | run-out/r0 mean (sd) | CPU s mean | iterations/step |")
-    print("|---|---|---|---|---|---|---|")
+        table.row(f"{r['aspect_ratio']:g}", r["seed"], label(r), f"{r['h_inf_over_r0']:.3f}",
+                  f"{r['runout_over_r0']:.3f}", f"{r['cpu_s']:.0f}", f"{r['mean_iterations']:.0f}",
+                  r["fallbacks"], f"{r['largest_overlap_over_dmin']:.4f}", data=r)
+    print()
+    table = record.table(["a", "run", "seeds", "h_inf/r0 mean (sd)", "run-out/r0 mean (sd)", "CPU s mean",
+                          "iterations/step"], title="over seeds")
     for a in sorted({r["aspect_ratio"] for r in records}):
         for name in sorted({label(r) for r in records if r["aspect_ratio"] == a}):
             runs = [r for r in records if r["aspect_ratio"] == a and label(r) == name]
             h, out = ([r[q] for r in runs] for q in ("h_inf_over_r0", "runout_over_r0"))
             sd = (lambda v: np.std(v, ddof=1) if len(v) > 1 else np.nan)
-            print(f"| {a:g} | {name} | {len(runs)} | {np.mean(h):.3f} ({sd(h):.3f}) | {np.mean(out):.3f} "
-                  f"({sd(out):.3f}) | {np.mean([r['cpu_s'] for r in runs]):.0f} | "
-                  f"{np.mean([r['mean_iterations'] for r in runs]):.0f} |")
+            table.row(f"{a:g}", name, len(runs), f"{np.mean(h):.3f} ({sd(h):.3f})", f"{np.mean(out):.3f} ({sd(out):.3f})",
+                      f"{np.mean([r['cpu_s'] for r in runs]):.0f}",
+                      f"{np.mean([r['mean_iterations'] for r in runs]):.0f}")
 
 
 def main(argv=None):
@@ -126,4 +128,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    record.run("tolerance", main)

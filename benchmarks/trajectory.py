@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+import record
 from colsim import io
 from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import make_solver
@@ -94,14 +95,17 @@ def main(argv=None):
     energy_ref = last_ref.kinetic_energy + last_ref.rotational_energy
     print(f"{args.column}: {start[0].n} spheres, steps {args.from_step} to {args.from_step + args.steps} "
           f"at dt/sqrt(h0/g) = {4.0 / args.n_steps:g}")
-    print("| run | largest distance / d | rms distance / d | kinetic energy vs reference | CPU s | iterations a step |")
-    print("|---|---|---|---|---|---|")
+    table = record.table(["run", "largest distance / d", "rms distance / d", "kinetic energy vs reference", "CPU s",
+                          "iterations a step"])
     for name, (last, end, cpu, iterations) in results.items():
         distance = np.linalg.norm(end.position - ref.position, axis=1) / d
         energy = last.kinetic_energy + last.rotational_energy
-        print(f"| {name} | {distance.max():.2e} | {np.sqrt(np.mean(distance ** 2)):.2e} | "
-              f"{energy / energy_ref - 1:+.2e} | {cpu:.1f} | {iterations:.0f} |", flush=True)
+        rms = float(np.sqrt(np.mean(distance ** 2)))
+        table.row(name, f"{distance.max():.2e}", f"{rms:.2e}", f"{energy / energy_ref - 1:+.2e}", f"{cpu:.1f}",
+                  f"{iterations:.0f}", data={"run": name, "largest_distance_d": float(distance.max()),
+                                              "rms_distance_d": rms, "energy_vs_reference": energy / energy_ref - 1,
+                                              "cpu_s": cpu, "iterations": float(iterations)})
 
 
 if __name__ == "__main__":
-    main()
+    record.run("trajectory", main)

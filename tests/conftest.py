@@ -1,7 +1,8 @@
 """Shared fixtures of the engine tests: a small packing poured and settled by the engine itself.
 
 The packing is made once per session (about 10 s on 2 cores): 200 spheres with radii uniform in
-[0.125, 0.25] on a jittered cubic lattice of spacing 0.52 inside a cylinder of radius 1.5, poured
+[0.125, 0.25] placed by the pack stage's generator (colsim.stages.pack.starting_cloud: a cubic
+lattice of spacing 0.52, each sphere at random in its cell) inside a cylinder of radius 1.5, poured
 with mu = mu_r = 0 and dt = 0.02 for 150 steps, then locked by the collapse's friction
 (mu = 0.577, mu_r = 0.12, cylinder still on) until its largest translational speed is below
 1e-4 sqrt(g d) (d the mean diameter). The last movers are single wedged spheres whose sinking decays
@@ -21,31 +22,13 @@ from colsim.engine.contacts import overlaps
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
-from colsim.stages.pack import pack
+from colsim.stages.pack import pack, starting_cloud
 from solver_cases import small_pile
 from helpers import COLLAPSE_LAW, DT, G, PACKING_R0, max_speed
 
 CYLINDER_RADIUS = 1.5
 N_SPHERES = 200
 POUR_STEPS = 150
-
-
-def pile_cloud(n: int, cylinder_radius: float, seed: int = 0, spacing: float = 0.52) -> ParticleState:
-    """n spheres at rest on a jittered cubic lattice in the cylinder; no two overlap.
-
-    Radii uniform in [0.125, 0.25]; jitter up to 0.005 per axis, so neighbours keep a gap >= 0.003.
-    """
-    rng = np.random.default_rng(seed)
-    half = math.ceil(cylinder_radius / spacing)
-    g = spacing * np.arange(-half, half + 1)
-    x, y = np.meshgrid(g, g, indexing="ij")
-    xy = np.column_stack([x.ravel(), y.ravel()])
-    xy = xy[np.hypot(xy[:, 0], xy[:, 1]) <= cylinder_radius - 0.25 - 0.02]
-    layers = math.ceil(n / len(xy))
-    z = 0.27 + spacing * np.arange(layers)
-    points = np.concatenate([np.column_stack([xy, np.full(len(xy), zk)]) for zk in z])[:n]
-    points = points + rng.uniform(-0.005, 0.005, points.shape)
-    return ParticleState.at_rest(points, rng.uniform(0.125, 0.25, n))
 
 
 def energy_per_particle(state: ParticleState) -> float:
@@ -83,7 +66,7 @@ class Pile:
 
 @pytest.fixture(scope="session")
 def pile() -> Pile:
-    cloud = pile_cloud(N_SPHERES, CYLINDER_RADIUS)
+    cloud = starting_cloud(N_SPHERES, CYLINDER_RADIUS, seed=0)
     walls = Walls(floor=True, cylinder_radius=CYLINDER_RADIUS)
     pour = StepSettings(dt=DT, walls=walls, law=ContactLaw.uniform(0.0, 0.0))
     tolerance = pour.overlap_tolerance * 2.0 * cloud.radius.min()

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from colsim.engine.contacts import detect
-from colsim.stages.pack import lattice_cloud
+from colsim.stages.pack import starting_cloud
 from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
@@ -15,8 +15,7 @@ COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
 
 def small_pile() -> ParticleState:
     """About 90 spheres (d in [0.25, 0.5]) poured into a cylinder of radius 1.2 (mu = mu_r = 0), 100 steps."""
-    position, radius = lattice_cloud(1.2, 90, 0.0, (0.25, 0.5), np.random.default_rng(7))
-    state = ParticleState.at_rest(position[:90], radius[:90])
+    state = starting_cloud(90, 1.2, seed=7)
     for result in run(state, StepSettings(dt=0.02, walls=Walls(cylinder_radius=1.2)), 100, ClarabelSolver()):
         state = result.state
     state.velocity[:] = 0.0

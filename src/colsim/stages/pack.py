@@ -55,16 +55,26 @@ class PackingResult:
     most_fixed: int = 0
 
 
-def lattice_cloud(r0: float, n_target: int, z_bottom: float, diameter_range, rng) -> tuple[np.ndarray, np.ndarray]:
-    """About n_target non-overlapping spheres (positions (k, 3), radii (k,)) inside radius r0 above z_bottom."""
-    d_min, d_max = diameter_range
-    spacing = LATTICE_FACTOR * d_max
+def lattice_layer(r0: float, spacing: float) -> np.ndarray:
+    """(k, 2) centres of the lattice cells of side `spacing` that lie whole inside radius r0."""
     ticks = np.arange(-r0 + spacing / 2, r0, spacing)
     gx, gy = np.meshgrid(ticks, ticks, indexing="ij")
     inside = np.hypot(gx, gy) + spacing / np.sqrt(2.0) <= r0
-    if not inside.any():
+    return np.c_[gx[inside], gy[inside]]
+
+
+def lattice_cloud(r0: float, n_target: int, z_bottom: float, diameter_range, rng) -> tuple[np.ndarray, np.ndarray]:
+    """About n_target non-overlapping spheres (positions (k, 3), radii (k,)) inside radius r0 above z_bottom.
+
+    Whole layers of :func:`lattice_layer` (spacing 1.04 d_max), bottom layer first, so k >= n_target;
+    the radii are drawn first, then each sphere's place inside its own cell. The generator of
+    starting positions of the pack stage, and through :func:`starting_cloud` of the tests and the
+    benchmarks."""
+    d_min, d_max = diameter_range
+    spacing = LATTICE_FACTOR * d_max
+    layer = lattice_layer(r0, spacing)
+    if not len(layer):
         raise ValueError(f"cylinder radius r0 = {r0} is too small for particles of diameter up to {d_max}")
-    layer = np.c_[gx[inside], gy[inside]]
     n_layers = int(np.ceil(n_target / len(layer)))
     z = z_bottom + spacing / 2 + spacing * np.arange(n_layers)
     sites = np.c_[np.tile(layer, (n_layers, 1)), np.repeat(z, len(layer))]
@@ -72,6 +82,18 @@ def lattice_cloud(r0: float, n_target: int, z_bottom: float, diameter_range, rng
     room = 0.5 * (spacing - 2 * radius)[:, None]
     position = sites + rng.uniform(-1.0, 1.0, sites.shape) * room
     return position, radius
+
+
+def starting_cloud(n: int, r0: float, seed: int | np.random.Generator = 0, z_bottom: float = 0.0,
+                   diameter_range=(0.25, 0.5), density: float = 1.0) -> ParticleState:
+    """Exactly n spheres at rest, none overlapping, inside radius r0 above z_bottom: the first n of
+    :func:`lattice_cloud` (its lowest layers; the top layer is filled from its first cells).
+
+    seed: a seed or a numpy Generator. For the same generator this is the pack stage's own first cloud
+    (pack uses every sphere of :func:`lattice_cloud`; this keeps the first n). The tests' pile and
+    the benchmarks' packings start here."""
+    position, radius = lattice_cloud(r0, n, z_bottom, diameter_range, np.random.default_rng(seed))
+    return ParticleState.at_rest(position[:n], radius[:n], density)
 
 
 def column_height(state: ParticleState) -> float:

@@ -1,0 +1,151 @@
+"""The benchmarks' entry point (`python -m benchmarks`) and their records (benchmarks/record.py).
+
+No timing is checked: only that the entry point runs, and that a record holds what it should.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPOSITORY = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPOSITORY / "benchmarks"))
+
+import record   # noqa: E402
+
+NAMES = ("apgd_iteration", "collapse", "crossover", "packings", "solvers", "step", "stopping", "threads",
+         "tolerance", "trajectory")
+FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
+
+
+def benchmarks(*args, env: dict | None = None) -> subprocess.CompletedProcess:
+    """`python -m benchmarks ARGS` from the repository, with this checkout's colsim first."""
+    path = os.pathsep.join([str(REPOSITORY / "src"), str(REPOSITORY), os.environ.get("PYTHONPATH", "")])
+    return subprocess.run([sys.executable, "-m", "benchmarks", *args], cwd=REPOSITORY, capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": path, **(env or {})}, timeout=600)
+
+
+def check_fields(content: dict) -> None:
+    assert set(FIELDS) <= set(content)
+    assert {"cpu", "cores", "memory_gib"} <= set(content["machine"]) and content["machine"]["cores"] >= 1
+    assert {"python", "numpy", "scipy", "numba", "clarabel"} <= set(content["versions"])
+    assert content["versions"]["numpy"]
+    assert {"commit", "dirty"} <= set(content["git"])
+
+
+def test_list_names_every_benchmark_with_a_description():
+    done = benchmarks("list")
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert sorted(line.split()[0] for line in lines) == sorted(NAMES)
+    assert all(len(line.split(maxsplit=1)) == 2 for line in lines), "a benchmark without a description"
+
+
+def test_unknown_benchmark_is_an_error():
+    done = benchmarks("no_such_benchmark")
+    assert done.returncode != 0 and "list" in done.stderr
+
+
+def test_one_benchmark_writes_its_record(tmp_path):
+    """The smallest benchmark (a settled packing of 30 spheres, in a cache under tmp_path) writes one
+    record with the machine, the versions, the commit, the arguments and the printed table's rows."""
+    results = tmp_path / "results"
+    done = benchmarks("--results", str(results), "packings", "30", "--seed", "3",
+                      env={record.CACHE_ENV: str(tmp_path / "cache")})
+    assert done.returncode == 0, done.stderr
+    files = list(results.glob("packings-*.json"))
+    assert len(files) == 1 and not list(results.glob(".*"))   # no temporary file left
+    content = json.loads(files[0].read_text())
+    check_fields(content)
+    assert content["benchmark"] == "packings" and content["arguments"] == ["30", "--seed", "3"]
+    assert content["complete"] is True
+    assert content["git"]["commit"] is None or len(content["git"]["commit"]) == 40
+    (table,) = content["tables"]
+    assert table["columns"][:2] == ["target", "spheres"]
+    assert table["rows"] == [dict(zip(table["columns"], row)) for row in
+                             ([c.strip() for c in line.strip("|").split("|")] for line in done.stdout.splitlines()
+                              if line.startswith("| 30 "))]
+    assert table["data"][0]["spheres"] == 30
+    assert (tmp_path / "cache" / "settled_v2_30_seed3.npz").exists()
+
+
+# record.py on its own
+
+
+def test_table_prints_and_keeps_its_rows(capsys):
+    rec = record.Record("demo", ["--x", 1])
+    table = rec.table(["a", "b"], title="t")
+    table.row(1, "2.50", data={"a": 1, "b": 2.5})
+    table.row("x", "y")
+    assert capsys.readouterr().out.splitlines() == ["| a | b |", "|---|---|", "| 1 | 2.50 |", "| x | y |"]
+    assert rec.as_dict()["tables"] == [{"title": "t", "columns": ["a", "b"],
+                                        "rows": [{"a": "1", "b": "2.50"}, {"a": "x", "b": "y"}],
+                                        "data": [{"a": 1, "b": 2.5}]}]
+    assert rec.arguments == ["--x", "1"]
+    with pytest.raises(ValueError):
+        table.row(1)
+
+
+def test_write_is_atomic_and_names_are_unique(tmp_path):
+    rec = record.Record("demo")
+    rec.table(["a"], echo=False).row(1)
+    first, second = rec.write(tmp_path), rec.write(tmp_path)
+    assert first != second and first.name.startswith("demo-") and first.name.endswith("Z.json")
+    assert second.name == first.name.replace(".json", "-2.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([first.name, second.name])
+    content = json.loads(first.read_text())
+    check_fields(content)
+    assert content["tables"][0]["rows"] == [{"a": "1"}]
+
+
+def test_write_json_leaves_the_old_file_when_it_fails(tmp_path):
+    path = record.write_json(tmp_path / "r.json", {"a": 1})
+    with pytest.raises(TypeError):
+        record.write_json(path, {1j: 2})   # a key JSON cannot hold: fails half-way through
+    assert json.loads(path.read_text()) == {"a": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["r.json"]
+
+
+def test_run_writes_a_record_only_with_tables(tmp_path, monkeypatch):
+    monkeypatch.setenv(record.RESULTS_ENV, str(tmp_path))
+
+    def quiet(argv):
+        return "done"
+
+    def measures(argv):
+        record.note("setup", {"n": 3})
+        record.table(["n"]).row(3)
+
+    assert record.run("quiet", quiet, []) == "done"
+    assert not list(tmp_path.iterdir())   # a child process (--one) or a help text: no file
+    record.run("measures", measures, ["--n", "3"])
+    (path,) = tmp_path.glob("measures-*.json")
+    content = json.loads(path.read_text())
+    assert content["arguments"] == ["--n", "3"] and content["notes"] == {"setup": {"n": 3}}
+    assert record.current() is None
+
+
+def test_a_failed_run_keeps_its_rows_marked_incomplete(tmp_path):
+    def fails(argv):
+        record.table(["n"], echo=False).row(1)
+        raise RuntimeError("solver diverged")
+
+    with pytest.raises(RuntimeError):
+        record.run("fails", fails, [], folder=tmp_path)
+    content = json.loads(next(tmp_path.glob("fails-*.json")).read_text())
+    assert content["complete"] is False and "solver diverged" in content["notes"]["error"]
+    assert content["tables"][0]["rows"] == [{"n": "1"}]
+
+
+def test_machine_versions_and_commit():
+    machine = record.machine()
+    assert machine["cpu"] and machine["cores"] >= 1 and machine["usable_cores"] >= 1
+    versions = record.versions()
+    assert versions["python"].count(".") == 2 and versions["numpy"]
+    state = record.git_state(REPOSITORY)
+    assert state["commit"] is None or (len(state["commit"]) == 40 and isinstance(state["dirty"], bool))
+    assert record.git_state(Path("/"))["commit"] is None   # not a repository: no commit, no error
