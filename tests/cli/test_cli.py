@@ -51,6 +51,7 @@ def test_all_stages_through_the_cli(tmp_path):
                  ["export-vtk", "--input", "collapse.nc", "--output-dir", "vtk"]):
         done = _run_cli(*args, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
+    assert not list(tmp_path.glob("*.checkpoint"))      # each stage removes its checkpoint once its output is written
     result = io.open_dataset(tmp_path / "analysis.nc", io.ANALYSIS_KIND)
     for name, kind in (("pack.nc", io.STATE_KIND), ("column.nc", io.STATE_KIND),
                        ("collapse.nc", io.TRAJECTORY_KIND), ("analysis.nc", io.ANALYSIS_KIND)):

@@ -63,3 +63,41 @@ def test_solid_fraction_of_a_known_arrangement():
     assert solid_fraction(state, 1.0, 1.0) == pytest.approx(1 / 6, rel=1e-12)
     # cut at mid-height: half the sphere in half the volume
     assert solid_fraction(state, 1.0, 0.5) == pytest.approx(1 / 6, rel=1e-12)
+
+
+class _Killed(Exception):
+    pass
+
+
+def _killed_after(steps: int):
+    """A progress callback that stops the packing, as a kill would, at its `steps`-th step."""
+    seen = [0]
+
+    def progress(diagnostics, state):
+        seen[0] += 1
+        if seen[0] == steps:
+            raise _Killed
+    return progress
+
+
+@pytest.mark.parametrize("layers", [None, 0.6], ids=["one-cloud", "layers"])
+def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_path, layers):
+    """Killed after 23 steps with a checkpoint every 10, then run again: the same spheres, forces
+    and step count as a packing never stopped, to the last bit (the checkpoint holds the state, the
+    forces by pair, the margin and the generator's state); a checkpoint of other settings is not used."""
+    options = {"layer_height": layers, "freeze_depth": 0.3, "dt": 0.04, "rest_energy": 0.05}
+    whole = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options)
+    checkpoint = tmp_path / "pack.checkpoint"
+    with pytest.raises(_Killed):
+        pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
+             checkpoint_every=10, progress=_killed_after(23))
+    assert checkpoint.is_file()
+    resumed = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
+                   checkpoint_every=10)
+    assert resumed.steps == whole.steps and resumed.clouds == whole.clouds
+    for name in ("position", "velocity", "angular_velocity", "radius"):
+        np.testing.assert_array_equal(getattr(resumed.state, name), getattr(whole.state, name))
+    for name in ("i", "j", "family", "force", "rolling"):
+        np.testing.assert_array_equal(getattr(resumed.contact_forces, name), getattr(whole.contact_forces, name))
+    other = pack(1.0, 1.2, np.random.default_rng(12), AutoSolver(), **options, checkpoint=checkpoint)
+    assert other.state.n != whole.state.n or not np.array_equal(other.state.position, whole.state.position)

@@ -48,7 +48,7 @@ def check_outputs(args) -> None:
     (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder), no two
     outputs are one file (a collapse's checkpoint included) and no output is one of its inputs."""
     outputs = _paths(args, OUTPUT_ARGUMENTS)
-    if args.command == "collapse" and not args.checkpoint:
+    if args.command in ("collapse", "pack") and not args.checkpoint:
         outputs.append(Path(f"{args.output}.checkpoint"))
     for path in outputs:
         io.check_writable(path)
@@ -106,16 +106,19 @@ def pack(args):
     rng = np.random.default_rng([args.seed, args.root_seed])
     use_threads(args.threads)
     solver = _pack_solver(args)
+    checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
                       args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu,
                       max_spheres=args.max_spheres, layer_height=args.layer_height,
-                      freeze_depth=args.freeze_depth)
+                      freeze_depth=args.freeze_depth, checkpoint=checkpoint,
+                      checkpoint_every=args.checkpoint_every)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_settings(args), "solver_settings": solver.describe()}, args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity,
                   "clouds": result.clouds, "most_fixed": result.most_fixed})
     io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
+    checkpoint.unlink(missing_ok=True)
     log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s",
              result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time)
 

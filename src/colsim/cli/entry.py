@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
 from ..solvers import defaults
-from ..stages.pack_defaults import DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
+from ..stages.pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 
 log = logging.getLogger("colsim")
 
@@ -142,6 +142,10 @@ def build_parser() -> argparse.ArgumentParser:
     _length_floor_argument(p, _floor_under_auto(defaults.PACK_APGD_TOLERANCE, "the packing's tolerance"))
     _overlap_tolerance_argument(p)
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=CHECKPOINT_EVERY,
+                   help="checkpoint every k steps (default: %(default)s)")
+    p.add_argument("--checkpoint", default=None,
+                   help="checkpoint file (default: OUTPUT.checkpoint); the same command resumes from it")
 
     p = sub.add_parser("trim", help="remove the spheres that reach above h0 = a r0 (z + R > h0)")
     p.add_argument("--input", required=True, help="packing file from `colsim pack`")
@@ -283,7 +287,7 @@ def main(argv=None) -> int:
 
 def _interrupted(args) -> str:
     """What an interrupted command leaves behind, and how to go on."""
-    if args.command != "collapse":
+    if args.command not in ("collapse", "pack"):
         return "no output was written"
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     if not checkpoint.is_file():

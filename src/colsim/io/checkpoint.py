@@ -1,7 +1,10 @@
-"""A collapse's checkpoint: a numpy .npz archive of plain arrays (the state, the frames so far, the
-steps' diagnostics, the warm start and margin carried to the next step), read with
+"""The checkpoints of a collapse and of a packing: numpy .npz archives of plain arrays, read with
 allow_pickle=False: loading one can run no code, and its fingerprint (the run's inputs and
 settings) is compared before anything else in it is used. Written to a temporary name, then renamed.
+
+A collapse's holds the state, the frames so far, the steps' diagnostics, and the warm start and
+margin carried to the next step; a packing's, the state and what its filling loop carries
+(:func:`save_packing_checkpoint`).
 """
 from __future__ import annotations
 
@@ -37,14 +40,56 @@ def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapse
     if carry.warm_start is not None:
         for name in WARM_FIELDS:
             arrays[f"warm_{name}"] = getattr(carry.warm_start, name)
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as handle:
-            np.savez(handle, **arrays)
+    _write(path, arrays)
 
 
 def load_checkpoint(path, fingerprint):
     """The saved run ({state, frames, diagnostics, carry, elapsed}) if `path` holds a checkpoint of
     this fingerprint; None (with a warning) for another run's or an unreadable file."""
+    return _read(path, fingerprint, _restore)
+
+
+def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed):
+    """A packing in the middle of a cloud: `state` (all spheres placed), the forces by pair `warm`
+    (WarmStart in the numbering of `state`, or None) and the detection `margin` (None: the base
+    one) that the next step starts from, and `loop`: the filling loop's arrays and numbers
+    (name -> array, bool, int, float or str)."""
+    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "radius": state.radius,
+              "density": np.array(state.density), "state_time": np.array(state.time),
+              "margin": np.array(np.nan if margin is None else margin)}
+    for name in STATE_FIELDS:
+        arrays[f"state_{name}"] = getattr(state, name)
+    if warm is not None:
+        for name in WARM_FIELDS:
+            arrays[f"warm_{name}"] = getattr(warm, name)
+    for name, value in loop.items():
+        arrays[f"loop_{name}"] = np.asarray(value)
+    _write(path, arrays)
+
+
+def load_packing_checkpoint(path, fingerprint):
+    """The saved packing ({state, warm, margin, loop, elapsed}) if `path` holds a packing checkpoint
+    of this fingerprint; None (with a warning) otherwise. loop's values come back as numpy arrays
+    (0-d for numbers and text)."""
+    def restore(arrays):
+        state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), arrays["radius"],
+                              float(arrays["density"]), float(arrays["state_time"]))
+        warm = WarmStart(*(arrays[f"warm_{name}"] for name in WARM_FIELDS)) if "warm_i" in arrays else None
+        margin = float(arrays["margin"])
+        loop = {name[len("loop_"):]: value for name, value in arrays.items() if name.startswith("loop_")}
+        return {"state": state, "warm": warm, "margin": None if np.isnan(margin) else margin, "loop": loop,
+                "elapsed": float(arrays["elapsed"])}
+    return _read(path, fingerprint, restore)
+
+
+def _write(path, arrays: dict) -> None:
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez(handle, **arrays)
+
+
+def _read(path, fingerprint, restore):
+    """restore(arrays) of the checkpoint at `path` if its fingerprint is `fingerprint`, else None."""
     if path is None or not Path(path).is_file():
         return None
     try:
@@ -52,7 +97,7 @@ def load_checkpoint(path, fingerprint):
             if str(archive["fingerprint"]) != fingerprint:
                 log.warning("ignoring checkpoint %s: it belongs to other inputs or settings", path)
                 return None
-            return _restore(dict(archive))
+            return restore(dict(archive))
     except Exception as error:  # a checkpoint from another version, a damaged or foreign file
         log.warning("ignoring unreadable checkpoint %s (%s)", path, error)
         return None

@@ -18,9 +18,12 @@ m g d (1e-3 by default: a speed below 0.045 sqrt(g d)) and 99 % carry a contact 
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -31,7 +34,8 @@ from ..engine.solver_contract import Solver
 from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
-from .pack_defaults import DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
+from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint
+from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +163,8 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
          density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
          max_steps: int = 5000, progress=None, mu: float = 0.0,
          max_spheres: int | None = DEFAULT_MAX_SPHERES, layer_height: float | None = LAYER_HEIGHT,
-         freeze_depth: float = FREEZE_DEPTH) -> PackingResult:
+         freeze_depth: float = FREEZE_DEPTH, checkpoint: str | Path | None = None,
+         checkpoint_every: int = CHECKPOINT_EVERY) -> PackingResult:
     """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
     solving each step with `solver`. mu: sliding friction between the spheres and with the floor
     while filling (the paper's 0; the cylinder stays frictionless, rolling is free).
@@ -172,7 +177,11 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     the program, and the cloud and the top of the packing settle on them. A cloud is followed by
     the next once it has landed (:data:`LANDED_ENERGY_FACTOR`); the last one and the spheres not
     fixed step until :func:`is_at_rest` (the fixed ones were at rest when fixed). The forces
-    handed on are the last step's, and between fixed spheres those of when they last moved."""
+    handed on are the last step's, and between fixed spheres those of when they last moved.
+
+    checkpoint: a file written every `checkpoint_every` steps (atomically); a packing started again
+    with the same inputs, settings and generator state resumes from it and ends with the same
+    packing as one never stopped. None: no checkpoint."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")
@@ -192,28 +201,55 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                          f"spheres (diameters {d_min:g}-{d_max:g}), above the bound of {max_spheres:,} "
                          "(raise it with --max-spheres, or pack.max_spheres in a study)")
     mean_volume = mean_sphere_volume(diameter_range)
+    fingerprint = _fingerprint(rng, solver, r0=r0, height=height, diameter_range=diameter_range,
+                               density=density, gravity=gravity, dt=dt, rest_energy=rest_energy,
+                               max_steps=max_steps, mu=mu, layer_height=layer_height, freeze_depth=freeze_depth)
+    saved = load_packing_checkpoint(checkpoint, fingerprint)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
     fixed = np.zeros(0, dtype=bool)
     start, steps, warm = time.perf_counter(), 0, None
     clouds, most_fixed = 0, 0
-    while column_height(state) < height:
-        surface = column_height(state)
-        missing = height + 2 * d_max - surface
-        last = layer_height is None or missing <= layer_height + 2 * d_max
-        thickness = missing if last else layer_height
-        n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * thickness / mean_volume))
-        z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
-        if layer_height is not None:
-            fixed |= _buried_at_rest(state, surface - freeze_depth, gravity, rest_energy)
-        position, radius = lattice_cloud(r0, n_new, z_bottom, diameter_range, rng)
-        state = _add(state, position, radius)
-        fixed = np.concatenate([fixed, np.zeros(len(radius), dtype=bool)])
-        clouds, most_fixed = clouds + 1, max(most_fixed, int(np.count_nonzero(fixed)))
-        log.info("pouring %d spheres (%d in all, %d fixed) from z = %.2f", len(radius), state.n,
-                 np.count_nonzero(fixed), z_bottom)
-        energy = rest_energy if last else LANDED_ENERGY_FACTOR * rest_energy
+    if saved:
+        loop = saved["loop"]
+        state, warm, fixed = saved["state"], saved["warm"], loop["fixed"].astype(bool)
+        steps, clouds, most_fixed = int(loop["steps"]), int(loop["clouds"]), int(loop["most_fixed"])
+        rng.bit_generator.state = json.loads(str(loop["rng"]))
+        start -= saved["elapsed"]
+        log.info("resuming the packing from its checkpoint at step %d (cloud %d, %d spheres)", steps, clouds, state.n)
+    while saved or column_height(state) < height:
+        if saved:   # the cloud the checkpoint was written in
+            last, energy = bool(loop["last"]), float(loop["energy"])
+            resume = {"supports": loop["supports"].astype(np.int64), "margin": saved["margin"]}
+            saved = None
+        else:
+            last, energy, resume = None, None, None
+        if resume is None:
+            surface = column_height(state)
+            missing = height + 2 * d_max - surface
+            last = layer_height is None or missing <= layer_height + 2 * d_max
+            thickness = missing if last else layer_height
+            n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * thickness / mean_volume))
+            z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
+            if layer_height is not None:
+                fixed |= _buried_at_rest(state, surface - freeze_depth, gravity, rest_energy)
+            position, radius = lattice_cloud(r0, n_new, z_bottom, diameter_range, rng)
+            state = _add(state, position, radius)
+            fixed = np.concatenate([fixed, np.zeros(len(radius), dtype=bool)])
+            clouds, most_fixed = clouds + 1, max(most_fixed, int(np.count_nonzero(fixed)))
+            log.info("pouring %d spheres (%d in all, %d fixed) from z = %.2f", len(radius), state.n,
+                     np.count_nonzero(fixed), z_bottom)
+            energy = rest_energy if last else LANDED_ENERGY_FACTOR * rest_energy
+        save = None
+        if checkpoint is not None:
+            def save(placed, forces, margin, steps_done, supports, fixed=fixed, last=last, energy=energy):
+                loop = {"fixed": fixed, "steps": steps_done, "clouds": clouds, "most_fixed": most_fixed,
+                        "rng": json.dumps(rng.bit_generator.state), "last": last, "energy": energy,
+                        "supports": supports}
+                save_packing_checkpoint(checkpoint, fingerprint, placed, forces, margin, loop,
+                                        time.perf_counter() - start)
         try:
-            state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress)
+            state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress,
+                                         resume, save, checkpoint_every)
         except SolverError as error:
             if not fixed.any():
                 raise
@@ -222,13 +258,20 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
             log.warning("%s; settling this cloud again with nothing fixed", error)
             fixed[:] = False
             state, warm, steps = _settle(state, fixed, settings, solver, warm, error.step or steps,
-                                         max_steps, energy, progress)
+                                         max_steps, energy, progress, None, save, checkpoint_every)
     state.velocity[:] = 0.0
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
                          steps, time.perf_counter() - start,
                          warm, clouds, most_fixed)
+
+
+def _fingerprint(rng: np.random.Generator, solver: Solver, **settings) -> str:
+    """What a packing checkpoint must match: the generator's state at the start, the solver and
+    every setting of :func:`pack`."""
+    described = [rng.bit_generator.state, solver.describe(), settings]
+    return hashlib.sha256(json.dumps(described, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def _buried_at_rest(state: ParticleState, depth_z: float, gravity: float, rest_energy: float) -> np.ndarray:
@@ -244,18 +287,26 @@ def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarra
 
 
 def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
-            warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress):
+            warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress,
+            resume: dict | None = None, save=None, save_every: int = CHECKPOINT_EVERY):
     """Step the spheres not `fixed` ((n,) bool) on the fixed ones until :func:`is_at_rest` with
     rest_energy. warm: forces by pair in the numbering of `state` (None: cold). Returns the new
     state, the forces by pair (numbering of `state`: the last step's, and those of pairs of fixed
-    spheres from when they last moved) and the step count."""
+    spheres from when they last moved) and the step count.
+
+    resume: {supports, margin} of a cloud resumed from a checkpoint (the fixed spheres it settles
+    on, and the detection margin its next step starts from); save: optional callable(state, warm,
+    margin, steps, supports), called every `save_every` steps with the whole packing."""
     moving = np.flatnonzero(~fixed)
-    below = state.position[moving, 2] - state.radius[moving]
-    near = fixed & (state.position[:, 2] + state.radius > float(below.min()) - 2.0 * state.radius.max())
-    supports = np.flatnonzero(near)
+    if resume is None:
+        below = state.position[moving, 2] - state.radius[moving]
+        near = fixed & (state.position[:, 2] + state.radius > float(below.min()) - 2.0 * state.radius.max())
+        supports, margin = np.flatnonzero(near), None
+    else:
+        supports, margin = resume["supports"], resume["margin"]
     walls = replace(settings.walls, fixed=FixedSpheres(state.position[supports], state.radius[supports]))
     local = replace(settings, walls=walls)
-    carry = Carry(None if warm is None else _renumber(warm, moving, supports, state.n))
+    carry = Carry(None if warm is None else _renumber(warm, moving, supports, state.n), margin)
     sub = state.subset(moving)
     gravity = -settings.gravity[2]
     logged = time.perf_counter()
@@ -270,6 +321,10 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
                      steps, sub.n, d.n_contacts, d.kinetic_energy + d.rotational_energy, d.solve_time)
         if is_at_rest(result, gravity, rest_energy):
             break
+        if save is not None and steps % save_every == 0:
+            forces = _number_back(WarmStart.from_step(result.contacts, result.solution.forces), moving, supports)
+            save(_place(state, moving, sub), _merge(_between_fixed(warm, fixed), forces),
+                 result.carry.margin, steps, supports)
     else:
         raise RuntimeError(f"packing not at rest after {max_steps} steps (raise max_steps or dt)")
     _check_clear_of_fixed(sub, state.subset(fixed), settings.overlap_tolerance)

@@ -11,3 +11,6 @@ DEFAULT_MAX_SPHERES = 500_000
 #: settled surface from which slow spheres are fixed.
 LAYER_HEIGHT = None
 FREEZE_DEPTH = 3.5
+#: a packing writes its checkpoint every this many steps (an r0 = 4 pour's steps take 3-4 s of CPU,
+#: so at most about 100 s of work is lost to a killed job)
+CHECKPOINT_EVERY = 25
