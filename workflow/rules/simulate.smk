@@ -91,7 +91,7 @@ rule collapse:
     params:
         mu=config["mu"],
         mu_r=lambda wildcards: run_of(wildcards)["mu_r"],
-        options=collapse_options,
+        options=lambda wildcards: collapse_options(run_of(wildcards)),
         checkpoint_every=config["collapse"]["checkpoint_every"],
     log:
         logged(f"{RUN_DIR}/collapse.log"),
@@ -109,8 +109,8 @@ rule analyse:
         f"{RUN_DIR}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
-        check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
-        mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
+        check_tolerances=numbers(config["analysis"]["check_tolerances"]),
+        mass_shares=numbers(config["analysis"]["mass_shares"]),
     log:
         logged(f"{RUN_DIR}/analyse.log"),
     benchmark:
