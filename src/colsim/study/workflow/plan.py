@@ -17,8 +17,6 @@ from __future__ import annotations
 import hashlib
 import json
 
-import yaml
-
 from ...io import atomic_path
 
 RESULTS = "results"
@@ -63,6 +61,8 @@ def study_dir(config) -> str:
 
 def write_settings(settings, path) -> None:
     """Write a run's or packing's settings (its identity) as YAML, atomically."""
+    import yaml   # Snakemake's dependency, not colsim's: only the workflow writes settings
+
     with atomic_path(path) as tmp, open(tmp, "w") as stream:
         yaml.safe_dump(settings, stream, sort_keys=True)
 
