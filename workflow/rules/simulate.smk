@@ -1,6 +1,7 @@
 # Stages 1-4 of the study, one job per file: pack per (r0, seed), trim per a, collapse per mu_r,
-# analyse per collapse. Every value reaches `colsim` from the settings its folder's key names
-# (common.smk: packing_of, run_of), so a changed setting is a new folder and never an overwrite.
+# analyse per collapse. Every swept value reaches `colsim` from the settings its folder's key names
+# (common.smk: packing_of, column_of, run_of; colsim.study.workflow.plan), never parsed back from the
+# folder's name, so a changed setting is a new folder and never an overwrite.
 
 
 # A packing's and a run's settings, readable beside its files; the simulation rules take them as
@@ -31,6 +32,8 @@ rule pack:
     priority: 1000
     threads: config["pack"]["threads"]
     params:
+        r0=lambda wildcards: fmt(packing_of(wildcards)["r0"]),
+        seed=lambda wildcards: packing_of(wildcards)["seed"],
         height=lambda wildcards: fmt(packing_of(wildcards)["height"]),
         root_seed=config["root_seed"],
         diameter_min=config["diameter_min"],
@@ -50,7 +53,7 @@ rule pack:
     benchmark:
         benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
-        "colsim pack --r0 {wildcards.r0} --height {params.height} --seed {wildcards.seed}"
+        "colsim pack --r0 {params.r0} --height {params.height} --seed {params.seed}"
         " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
         " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
         " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
@@ -66,12 +69,14 @@ rule trim:
     output:
         COLUMN,
     priority: 1000
+    params:
+        a=lambda wildcards: fmt(column_of(wildcards)),
     log:
         logged(f"{PACKING_DIR}/a_{{a}}/trim.log"),
     benchmark:
         benchmarked(f"{PACKING_DIR}/a_{{a}}/trim.tsv")
     shell:
-        "colsim trim --input {input:q} --aspect-ratio {wildcards.a} --output {output:q} > {log:q} 2>&1"
+        "colsim trim --input {input:q} --aspect-ratio {params.a} --output {output:q} > {log:q} 2>&1"
 
 
 # `colsim collapse` keeps OUTPUT.checkpoint while it runs and deletes it on success; a job that was
@@ -89,9 +94,9 @@ rule collapse:
         mem_mb=4000,
         runtime=collapse_runtime,
     params:
-        mu=config["mu"],
+        mu=lambda wildcards: run_of(wildcards)["mu"],
         mu_r=lambda wildcards: run_of(wildcards)["mu_r"],
-        options=collapse_options,
+        options=lambda wildcards: collapse_options(run_of(wildcards)),
         checkpoint_every=config["collapse"]["checkpoint_every"],
     log:
         logged(f"{RUN_DIR}/collapse.log"),
@@ -109,8 +114,8 @@ rule analyse:
         f"{RUN_DIR}/analysis.nc",
     params:
         contact_tolerance=config["analysis"]["contact_tolerance"],
-        check_tolerances=" ".join(fmt(t) for t in config["analysis"]["check_tolerances"]),
-        mass_shares=" ".join(fmt(s) for s in config["analysis"]["mass_shares"]),
+        check_tolerances=numbers(config["analysis"]["check_tolerances"]),
+        mass_shares=numbers(config["analysis"]["mass_shares"]),
     log:
         logged(f"{RUN_DIR}/analyse.log"),
     benchmark:

@@ -76,6 +76,7 @@ rule study_config:
     benchmark:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
-        write_study_files(dict(params.config), input[0], params.template, output.config, output.description)
+        study_report.write_study_files(dict(params.config), input[0], params.template, output.config,
+                                     output.description, STUDY_DIR)
         with open(log[0], "w") as stream:
             print(f"wrote {output.config} and {output.description}", file=stream)

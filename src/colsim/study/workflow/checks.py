@@ -1,0 +1,116 @@
+"""The configuration's checks beyond Snakemake's validation: one line naming the first key or value
+the schema rejects, an alias bomb, a NaN or an infinity, and settings that contradict each other.
+Each returns that line, or None when the configuration passes."""
+from __future__ import annotations
+
+import math
+import re
+
+import jsonschema
+import yaml
+
+#: far above any study's configuration (the default has about 100)
+CONFIG_MAX_ITEMS = 100_000
+
+
+def load_schema(path) -> dict:
+    """The configuration schema (YAML) at `path`, as a tree."""
+    with open(path) as stream:
+        return yaml.safe_load(stream)
+
+
+def schema_problem(config, schema):
+    """One line naming the first key or value of `config` that the schema rejects, or None."""
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(config), key=lambda e: list(e.path))
+    if not errors:
+        return None
+    error = errors[0]
+    where = ".".join(str(p) for p in error.path)
+    if error.validator == "additionalProperties":
+        allowed = list(error.schema.get("properties", {}))
+        unknown = sorted(set(error.instance) - set(allowed))
+        return (f"config: unknown key {', '.join(f'{where}.{k}' if where else k for k in unknown)};"
+                f" allowed{' in ' + where if where else ''}: {', '.join(allowed)}")
+    return f"config: {where or 'the configuration'}: {error.message}"
+
+
+def size_problem(tree, limit=CONFIG_MAX_ITEMS):
+    """One line if `tree` holds more than `limit` keys and values once YAML's aliases are expanded
+    (an alias bomb, a configuration that refers to itself), else None: the validator never walks it."""
+    stack, seen = [tree], 0
+    while stack:
+        node = stack.pop()
+        seen += 1
+        if seen > limit:
+            return (f"config: more than {limit:,} keys and values once YAML's aliases are expanded;"
+                    " is an alias repeated, or does the configuration refer to itself?")
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, list):
+            stack.extend(node)
+    return None
+
+
+def non_finite_number(tree, where=""):
+    """The dotted key of the first number in the configuration that is NaN or infinite (the schema's
+    minimum and maximum let NaN through), or None."""
+    if isinstance(tree, dict):
+        items = tree.items()
+    elif isinstance(tree, list):
+        items = enumerate(tree)
+    else:
+        return where if isinstance(tree, float) and not math.isfinite(tree) else None
+    for key, value in items:
+        found = non_finite_number(value, f"{where}.{key}" if where else str(key))
+        if found is not None:
+            return found
+    return None
+
+
+def before_validation(config, schema):
+    """The first problem the configuration as given has (its size, then the schema's), or None;
+    the checks that need the schema's defaults filled in are cross_field_problem's."""
+    return size_problem(config) or schema_problem(config, schema)
+
+
+def cross_field_problem(config):
+    """One line naming the first pair of settings that contradict each other, or None (on a
+    configuration whose defaults the schema has filled in)."""
+    from ...stages.pack import expected_spheres   # the packing's size estimate (the engine loads once)
+
+    bad = non_finite_number(config)
+    if bad is not None:
+        return f"config: {bad}: must be a finite number"
+    if not re.fullmatch(r"[A-Za-z0-9_-]*", config["study"]):
+        return f"config: study: {config['study']!r} may hold only letters, digits, _ and -"
+    d_min, d_max, r0 = config["diameter_min"], config["diameter_max"], config["r0"]
+    if d_min > d_max:
+        return f"config: diameter_min {d_min} exceeds diameter_max {d_max}"
+    if r0 < d_max:
+        return f"config: r0 {r0} is below diameter_max {d_max}: the largest particle does not fit in the cylinder"
+    columns = [(a, r0) for a in config["aspect_ratios"]]
+    study = config.get("convergence") or {}
+    columns += [(entry["aspect_ratio"], r) for entry in study.get("column_size", []) for r in entry["r0"]]
+    columns += [(a, r0) for a in study.get("time_step", {}).get("aspect_ratios", [])]
+    columns += [(a, r0) for a in study.get("end_time", {}).get("aspect_ratios", [])]
+    columns += [(study["seeds"]["aspect_ratio"], r0)] if "seeds" in study else []
+    for a, radius in columns:
+        if radius < d_max:
+            return f"config: convergence r0 {radius} is below diameter_max {d_max}"
+        if a * radius < d_max:
+            return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
+                    f" the column would hold less than one layer of particles (diameters {d_min}-{d_max})")
+    if config["friction_law"] != "associated" and config["friction_law_comparison"]:
+        return "config: friction_law_comparison needs friction_law: associated (it adds the coulomb runs itself)"
+    if config["friction_law"] != "associated" and config.get("convergence"):
+        return "config: the convergence study runs the associated law only; leave out convergence with friction_law: coulomb"
+    pack = config["pack_aspect_ratio"]
+    if pack is not None and pack < max(config["aspect_ratios"]):
+        return f"config: pack_aspect_ratio {pack} is below the largest aspect ratio {max(config['aspect_ratios'])}"
+    limit = config["pack"]["max_spheres"]
+    for a, radius in [(pack or max(config["aspect_ratios"]), r0)] + columns:
+        spheres = expected_spheres(radius, a * radius, (d_min, d_max))
+        if spheres > limit:
+            return (f"config: a packing of r0 {radius:g} for a = {a:g} would hold about {spheres:,.0f} spheres,"
+                    f" above pack.max_spheres {limit:,} (raise it if the machine has the memory)")
+    return None

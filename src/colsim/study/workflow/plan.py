@@ -1,0 +1,250 @@
+"""A study's files: the folder of each packing, column and run, and the settings that its key names.
+
+A run's identity is every setting that changes its result. Its folder names the swept values for a
+reader (r0, seed, a, mu_r) and a key: the first ten hex digits of the SHA-256 of its settings
+(settings_key), written out beside it as settings.yaml. A packing's key covers its height, seeds,
+diameters, density, gravity, pack.* but NOT_IDENTITY, and the solver; a collapse's covers mu, mu_r,
+the rolling lever, the friction law, steps, end time, the rest settings, the solver and frame_every
+(not checkpoint_every, which does not change a result). Two studies share a file only when it is the
+same computation; the key of a setting changed means a new folder, never an overwrite.
+
+Values travel as numbers: a folder's name is written from a value (fmt), and a rule reads the value
+back from the settings its folder's key names (packing_of, column_of, run_of), never by parsing the
+name.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+
+from ...io import atomic_path
+
+RESULTS = "results"
+PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
+COLUMN = PACKING_DIR + "/a_{a}/column.nc"
+RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
+
+#: pack.* settings that do not change a packing
+NOT_IDENTITY = ("max_spheres", "threads")
+#: ... nor do the layers' settings of a packing poured in one cloud (layer_height null), which so
+#: keeps the folder it had before layers existed
+ONE_CLOUD_NOT_IDENTITY = NOT_IDENTITY + ("layer_height", "freeze_depth")
+
+
+def fmt(value) -> str:
+    """A number as it appears in paths and on the colsim command line, without loss: 1 -> '1',
+    0.06 -> '0.06', pi/24 -> '0.1308996938995747' (%g where it gives the same number back)."""
+    short = f"{float(value):g}"
+    return short if float(short) == float(value) else repr(float(value))
+
+
+def settings_key(settings) -> str:
+    """Ten hex digits of the SHA-256 of `settings` as canonical JSON (a folder name)."""
+    text = json.dumps(settings, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
+def logged(path: str) -> str:
+    """The log file of a job whose output is `path` (below results/): the same path below results/logs."""
+    return f"{RESULTS}/logs{path[len(RESULTS):]}"
+
+
+def benchmarked(path: str) -> str:
+    """The benchmark file of a job whose output is `path` (below results/): below results/benchmarks."""
+    return f"{RESULTS}/benchmarks{path[len(RESULTS):]}"
+
+
+def study_dir(config) -> str:
+    """Where the study's summary, tables and figures go (runs are shared between studies)."""
+    return f"{RESULTS}/{config['study']}" if config["study"] else RESULTS
+
+
+def write_settings(settings, path) -> None:
+    """Write a run's or packing's settings (its identity) as YAML, atomically."""
+    import yaml   # Snakemake's dependency, not colsim's: only the workflow writes settings
+
+    with atomic_path(path) as tmp, open(tmp, "w") as stream:
+        yaml.safe_dump(settings, stream, sort_keys=True)
+
+
+class UnknownFolder(LookupError):
+    """A folder whose key this study does not name: its settings are not in this configuration, so
+    the file cannot be made again from it."""
+
+
+class StudyPlan:
+    """The packings, columns and runs of one (validated) configuration. Naming a run's file
+    (run_path, runs, convergence_runs) registers its packing, column and run by key, so that the
+    rules read their settings back (packing_of, column_of, run_of)."""
+
+    def __init__(self, config):
+        self.config = config
+        self.r0 = float(config["r0"])
+        self.aspect_ratios = [float(a) for a in config["aspect_ratios"]]
+        self.mu_r = [float(m) for m in config["mu_r"]]
+        self.seeds = list(config["seeds"])
+        self.pack_aspect_ratio = float(config["pack_aspect_ratio"] or max(config["aspect_ratios"]))
+        self.friction_law = config["friction_law"]
+        #: (steps, end time) of the study's own runs
+        self.length = (int(config["collapse"]["steps"]), float(config["collapse"]["duration"]))
+        self.to_rest = config["collapse"]["max_duration"] is not None
+        self.study_dir = study_dir(config)
+        self.packings = {}   # key -> packing settings, of every packing this study names
+        self.columns = {}    # (packing key, a as in its folder) -> a, of every column this study names
+        self.runs = {}       # key -> collapse settings, of every run this study names
+
+    # -- packings
+
+    def pack_height(self, r0: float, seed: int) -> float:
+        """Height (length) the packing of radius r0 and seed `seed` must exceed: pack_aspect_ratio
+        (or the largest a) times r0. A packing only the convergence study uses (another r0, or a seed
+        outside `seeds`) is packed just tall enough for its sub-study's (largest) aspect ratio."""
+        r0, seed = float(r0), int(seed)
+        study = self.config.get("convergence")
+        sizes = [entry["aspect_ratio"] for entry in (study or {}).get("column_size", [])
+                 if r0 != self.r0 and r0 in [float(size) for size in entry["r0"]]]
+        if sizes:
+            return max(sizes) * r0
+        if study and seed not in self.seeds:   # tall enough for every sub-study using the seed
+            needs = [study["seeds"]["aspect_ratio"]] if seed in study["seeds"]["seeds"] else []
+            needs += study["time_step"]["aspect_ratios"] if seed in study["time_step"].get("seeds", []) else []
+            return max(needs or [self.pack_aspect_ratio]) * r0
+        return self.pack_aspect_ratio * r0
+
+    def packing_settings(self, r0: float, seed: int) -> dict:
+        """Everything `colsim pack` is given for the packing of (r0, seed): its identity."""
+        config = self.config
+        not_identity = NOT_IDENTITY if config["pack"]["layer_height"] is not None else ONE_CLOUD_NOT_IDENTITY
+        return {"r0": float(r0), "seed": int(seed), "height": float(self.pack_height(r0, seed)),
+                "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
+                "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
+                "gravity": float(config["gravity"]), "solver": config["solver"],
+                "pack": {key: value for key, value in config["pack"].items() if key not in not_identity}}
+
+    def packing_key(self, r0: float, seed: int) -> str:
+        """The key of the packing of (r0, seed) under this study's settings (registered)."""
+        settings = self.packing_settings(r0, seed)
+        key = settings_key(settings)
+        self.packings[key] = settings
+        return key
+
+    def packing_dir(self, r0: float, seed: int) -> str:
+        """The folder of the packing of (r0, seed) under this study's settings (registered)."""
+        return PACKING_DIR.format(r0=fmt(r0), seed=seed, packing=self.packing_key(r0, seed))
+
+    # -- runs
+
+    def goes_to_rest(self, steps: int, duration: float) -> bool:
+        """Whether a run of these steps and end time goes on to rest: only the study's own runs, and
+        only when the study sets max_duration; a convergence run of other steps or end time stops."""
+        return self.to_rest and (steps, duration) == self.length
+
+    def run_settings(self, mu_r: float, steps: int, duration: float, law: str) -> dict:
+        """Everything `colsim collapse` is given for one run of a column (its identity, with the column)."""
+        config = self.config
+        collapse = config["collapse"]
+        rest = None
+        if self.goes_to_rest(steps, duration):
+            rest = {key: float(collapse[key]) for key in ("max_duration", "rest_window", "rest_tolerance", "rest_energy")}
+        return {"mu": float(config["mu"]), "mu_r": float(mu_r), "rolling_lever": config["rolling_lever"],
+                "friction_law": law, "friction_tolerance": config["friction_tolerance"] if law == "coulomb" else None,
+                "steps": int(steps), "duration": float(duration), "rest": rest, "solver": config["solver"],
+                "solver_overlap_tolerance": config["solver_overlap_tolerance"],
+                "frame_every": int(collapse["frame_every"])}
+
+    def run_path(self, name: str, r0: float, seed: int, a: float, mu_r: float,
+                 steps=None, duration=None, law=None) -> str:
+        """Path of file `name` of one run (steps and end time: the study's unless given; a run of the
+        study's own length goes on to rest if the study does, any other stops at its end time; the
+        friction law: the study's unless given). Its packing, column and run are registered."""
+        steps = self.length[0] if steps is None else int(steps)
+        duration = self.length[1] if duration is None else float(duration)
+        settings = self.run_settings(mu_r, steps, duration, law or self.friction_law)
+        key = settings_key(settings)
+        self.runs[key] = settings
+        packing = self.packing_key(r0, seed)
+        self.columns[(packing, fmt(a))] = float(a)
+        return (PACKING_DIR.format(r0=fmt(r0), seed=seed, packing=packing)
+                + f"/a_{fmt(a)}/mu_r_{fmt(mu_r)}/run_{key}/{name}")
+
+    def study_runs(self, name: str, mu_r=None, seeds=None, law=None) -> list[str]:
+        """Paths of one file `name` of every run of the study (optionally one mu_r, some seeds,
+        another friction law than the study's)."""
+        return [self.run_path(name, self.r0, seed, a, m, law=law or self.friction_law)
+                for seed in seeds or self.seeds for a in self.aspect_ratios
+                for m in (self.mu_r if mu_r is None else [mu_r])]
+
+    def side_view_mu_r(self) -> float:
+        """The swept mu_r nearest to figures.side_view_mu_r."""
+        target = self.config["figures"]["side_view_mu_r"]
+        return min(self.mu_r, key=lambda m: abs(m - target))
+
+    def convergence_runs(self, name: str) -> dict:
+        """{sub-study: [paths of file `name`]} of the convergence study (empty without one)."""
+        study = self.config.get("convergence")
+        if not study:
+            return {}
+        mu_r, seed, (steps, end) = study["mu_r"], self.seeds[0], self.length
+        longer = study["end_time"]["duration"]
+
+        def same_dt(duration):
+            """(steps, end time) of a run to `duration` at the study's dt."""
+            return round(steps * duration / end), duration
+
+        run_path = self.run_path
+        return {
+            "time_step": [run_path(name, self.r0, s, a, mu_r, n, end)
+                          for a in study["time_step"]["aspect_ratios"] for n in study["time_step"]["steps"]
+                          for s in study["time_step"].get("seeds", [seed])],
+            "end_time": [run_path(name, self.r0, seed, a, mu_r, *same_dt(longer))
+                         for a in study["end_time"]["aspect_ratios"]],
+            "column_size": [run_path(name, r0, s, entry["aspect_ratio"], mu_r, *same_dt(entry.get("duration", end)))
+                            for entry in study["column_size"] for r0 in entry["r0"]
+                            for s in entry.get("seeds", [seed])],
+            "seeds": [run_path(name, self.r0, s, study["seeds"]["aspect_ratio"], mu_r)
+                      for s in study["seeds"]["seeds"]],
+        }
+
+    # -- the study's own products
+
+    def convergence_outputs(self) -> list[str]:
+        """The convergence study's products, or none."""
+        if not self.config.get("convergence"):
+            return []
+        where = self.study_dir
+        return [f"{where}/convergence.nc", f"{where}/convergence.md", f"{where}/figures/convergence.png",
+                f"{where}/column_size_limits.nc", f"{where}/figures/column_size_limits.png"]
+
+    def friction_law_outputs(self) -> list[str]:
+        """The friction-law comparison's products (friction_law_comparison: true), or none."""
+        if not self.config["friction_law_comparison"]:
+            return []
+        where = self.study_dir
+        return [f"{where}/friction_law.nc", f"{where}/friction_law.md", f"{where}/figures/friction_law.png"]
+
+    # -- a folder's settings, from its key
+
+    def packing_of(self, wildcards) -> dict:
+        """The settings of the packing that {packing} names (wildcards: r0, seed, packing, as in
+        its folder); a key this study does not name is an UnknownFolder."""
+        settings = self.packings.get(wildcards.packing)
+        if settings is None or fmt(settings["r0"]) != wildcards.r0 or str(settings["seed"]) != wildcards.seed:
+            raise UnknownFolder(f"no packing of this study has the folder r0_{wildcards.r0}/seed_{wildcards.seed}/"
+                                f"pack_{wildcards.packing}: its settings.yaml says what made it")
+        return settings
+
+    def column_of(self, wildcards) -> float:
+        """The aspect ratio of the column that {a} names below the packing {packing}."""
+        a = self.columns.get((wildcards.packing, wildcards.a))
+        if a is None:
+            raise UnknownFolder(f"no column of this study has the folder pack_{wildcards.packing}/a_{wildcards.a}")
+        return a
+
+    def run_of(self, wildcards) -> dict:
+        """The settings of the run that {run} names (wildcards: mu_r, run); an UnknownFolder for a
+        key this study does not name."""
+        settings = self.runs.get(wildcards.run)
+        if settings is None or fmt(settings["mu_r"]) != wildcards.mu_r:
+            raise UnknownFolder(f"no run of this study has the folder mu_r_{wildcards.mu_r}/run_{wildcards.run}:"
+                                " its settings.yaml says what made it")
+        return settings

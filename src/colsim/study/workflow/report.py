@@ -1,0 +1,41 @@
+"""The study's own files for the Snakemake report: its configuration and the report's description,
+rendered from the configuration and the summary it describes."""
+from __future__ import annotations
+
+import os
+
+import yaml
+
+from ...io import atomic_path
+
+#: the report's description while the study has not been run (relative to the Snakefile)
+NOT_RUN = "workflow/report/not_run.rst"
+
+
+def write_study_files(study, summary_path, template, config_path, description_path, study_dir) -> None:
+    """Write the study's configuration (YAML) and the report's description rendered from it and from
+    the summary (its attributes, and the table against Lube at figures.side_view_mu_r), each to a
+    temporary name and then renamed."""
+    import jinja2
+    import xarray
+
+    from ..markdown import lube_rst
+
+    with xarray.open_dataset(summary_path) as summary:
+        attrs = dict(summary.attrs)
+        table = lube_rst(summary, study["figures"]["side_view_mu_r"])
+    with open(template) as stream:
+        text = jinja2.Template(stream.read(), undefined=jinja2.StrictUndefined, keep_trailing_newline=True).render(
+            study=study, summary=attrs, study_dir=study_dir, lube_table=table)
+    for path, write in ((config_path, lambda s: yaml.safe_dump(study, s, sort_keys=False)),
+                        (description_path, lambda s: s.write(text))):
+        with atomic_path(path) as tmp, open(tmp, "w") as stream:
+            write(stream)
+
+
+def report_description(description: str) -> str:
+    """The description of the report: the study's own (`description`, written with its summary), or
+    a note that the study has not been run."""
+    if os.path.exists(description):
+        return os.path.abspath(description)
+    return NOT_RUN
