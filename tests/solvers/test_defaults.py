@@ -11,7 +11,7 @@ import yaml
 
 from colsim.solvers import defaults
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def module_defaults() -> dict:
