@@ -3,16 +3,11 @@ velocities, angular velocities), the per-step diagnostics over `step`, and the r
 attributes."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import xarray as xr
 
 from ..engine.records import TEXT_DIAGNOSTICS, StepDiagnostics
 from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate
-
-if TYPE_CHECKING:   # annotations only: the file format does not load the stage
-    from ..stages.collapse import CollapseRun, CollapseSettings
 
 DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in TEXT_DIAGNOSTICS]
 
@@ -25,8 +20,12 @@ STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
                    "wall_time": "wall-clock time of the step"}
 
 
-def trajectory_dataset(run: CollapseRun, h0: float, r0: float, settings: CollapseSettings, attrs: dict) -> xr.Dataset:
-    """An xarray Dataset of the run: frames over `time`, diagnostics over `step`."""
+def trajectory_dataset(run, h0: float, r0: float, settings, attrs: dict) -> xr.Dataset:
+    """An xarray Dataset of the run: frames over `time`, diagnostics over `step`.
+
+    run: a collapse's run (colsim.stages.collapse.CollapseRun: initial, frames, diagnostics, ...);
+    settings: its CollapseSettings; h0, r0: the column's height and radius (length). The file
+    format takes them as they come and imports nothing of the stage."""
     steps = np.array([k for k, _ in run.frames])
     frames = [s for _, s in run.frames]
     t_scale = np.sqrt(h0 / settings.gravity)
