@@ -18,13 +18,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .compiled import HAVE_NUMBA, numba
 from .program import ROWS_PER_CONTACT, ConeProgram
-
-try:
-    import numba
-except ImportError:  # pragma: no cover - numba is a dependency; numpy is the fallback
-    numba = None
-HAVE_NUMBA = numba is not None
 
 
 # --------------------------------------------------------------------------------------------
@@ -137,7 +132,12 @@ def row_scaling(B: sp.csr_matrix, inv_mass: np.ndarray) -> np.ndarray:
 
     With lam = S z the scaled cone is again a coupled cone, with mu' = mu s_n/s_t and
     mu_r' = mu_r s_n/s_r (:func:`scaled_coefficients`), so its projection stays exact."""
-    diag = (B.multiply(B) @ inv_mass).reshape(-1, ROWS_PER_CONTACT)
+    return scales_of_diagonal((B.multiply(B) @ inv_mass).reshape(-1, ROWS_PER_CONTACT))
+
+
+def scales_of_diagonal(diag: np.ndarray) -> np.ndarray:
+    """(m, 5) the row scales of :func:`row_scaling` from diag(B Mbar^-1 B') (m, 5) (the matrix-free
+    path: :meth:`colsim.engine.operator.ContactOperator.diagonal`)."""
     s = np.empty_like(diag)
     s[:, 0] = diag[:, 0]
     s[:, 1:3] = 0.5 * (diag[:, 1] + diag[:, 2])[:, None]

@@ -25,12 +25,14 @@ them by name.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
+from .compiled import HAVE_NUMBA
 from .contacts import Contacts
+from .operator import ContactOperator
 from .state import ParticleState
 
 ROWS_PER_CONTACT = 5  # normal, two sliding, two rolling
@@ -42,19 +44,22 @@ class ConeProgram:
 
     mass: (6n,) diagonal of Mbar = diag(m, m, m, ..., I, I, I, ...)/dt^2, mass/time^2
     fbar: (6n,) fbar, force (and moment) units
-    jacobian: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns)
     gap: (m,) length; mu, mu_r: (m,) coefficients
-    contacts: the contacts B was built from (their frames and radii give B without the matrix:
-    :mod:`colsim.solvers.apgd`'s compiled kernels use them); None for a program given by B alone
+    contacts: the contacts B is built from (their frames and radii also give B without the matrix:
+    :attr:`operator`); None for a program given by its matrix alone
+    matrix: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns), or None: built from
+    the contacts when first asked for (:attr:`jacobian`). A step solved by APGD never asks: its
+    products with B and B' run on :attr:`operator`.
     """
 
     mass: np.ndarray
     fbar: np.ndarray
-    jacobian: sp.csr_matrix
     gap: np.ndarray
     mu: np.ndarray
     mu_r: np.ndarray
     contacts: Contacts | None = None
+    matrix: sp.csr_matrix | None = field(default=None, repr=False)
+    _operator: ContactOperator | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def n_unknowns(self) -> int:
@@ -64,16 +69,34 @@ class ConeProgram:
     def m(self) -> int:
         return len(self.gap)
 
+    @property
+    def jacobian(self) -> sp.csr_matrix:
+        """(5m, 6n) B, built from the contacts on first use."""
+        if self.matrix is None:
+            self.matrix = contact_jacobian(self.contacts, self.n_unknowns // 6)
+        return self.matrix
+
+    @property
+    def operator(self) -> ContactOperator | None:
+        """B applied from the contacts' frames (None without contacts or without numba)."""
+        if self._operator is None and self.contacts is not None and HAVE_NUMBA:
+            self._operator = ContactOperator(self.contacts, self.n_unknowns // 6)
+        return self._operator
+
     def free_motion(self) -> np.ndarray:
         """(6n,) the increments without any contact force: Mbar^-1 fbar."""
         return self.fbar / self.mass
 
     def increments(self, forces: np.ndarray) -> np.ndarray:
         """(6n,) u = Mbar^-1 (fbar + B' lam) for contact forces lam (m, 5)."""
+        if self.matrix is None and self.operator is not None:
+            return (self.fbar + self.operator.transpose(forces.reshape(-1))) / self.mass
         return (self.fbar + self.jacobian.T @ forces.reshape(-1)) / self.mass
 
     def local_displacement(self, u: np.ndarray) -> np.ndarray:
         """(m, 5) B u: (du_n, du_t1, du_t2, dphi_1, dphi_2) of every contact."""
+        if self.matrix is None and self.operator is not None:
+            return self.operator.apply(u).reshape(-1, ROWS_PER_CONTACT)
         return (self.jacobian @ u).reshape(-1, ROWS_PER_CONTACT)
 
     def end_of_step_gaps(self, u: np.ndarray) -> np.ndarray:
@@ -130,7 +153,8 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
 
 
 def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> ConeProgram:
-    """The cone program of one step of length dt (time) from `state` with `contacts`."""
+    """The cone program of one step of length dt (time) from `state` with `contacts` (B is built
+    when a back-end first asks for it: :attr:`ConeProgram.jacobian`)."""
     m_i, inertia = state.mass, state.inertia
     mass = np.concatenate([np.repeat(m_i, 3), np.repeat(inertia, 3)]) / dt**2
     f_ext = m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]
@@ -138,10 +162,8 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
         (f_ext + m_i[:, None] * state.velocity / dt).ravel(),
         (inertia[:, None] * state.angular_velocity / dt).ravel(),
     ])
-    return ConeProgram(
-        mass=mass, fbar=fbar, jacobian=contact_jacobian(contacts, state.n),
-        gap=contacts.gap.copy(), mu=contacts.mu.copy(), mu_r=contacts.mu_r.copy(), contacts=contacts,
-    )
+    return ConeProgram(mass=mass, fbar=fbar, gap=contacts.gap.copy(), mu=contacts.mu.copy(),
+                       mu_r=contacts.mu_r.copy(), contacts=contacts)
 
 
 def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> dict[str, float]:

@@ -10,14 +10,7 @@ from __future__ import annotations
 
 import logging
 
-from .cones import HAVE_NUMBA
-
-if HAVE_NUMBA:
-    import numba
-    prange = numba.prange
-else:  # pragma: no cover - numba is a dependency
-    numba = None
-    prange = range
+from .compiled import HAVE_NUMBA, numba, prange   # noqa: F401 - prange for the kernels' modules
 
 log = logging.getLogger(__name__)
 

@@ -48,11 +48,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import defaults
-from ..engine.cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_coupled_cone,
-                    project_point, row_scaling, scaled_coefficients, scaled_residuals)
+from ..engine.cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_compiled,
+                            project_coupled_cone, project_point, row_scaling, scaled_coefficients,
+                            scaled_residuals, scales_of_diagonal)
+from ..engine.operator import ContactOperator
+from ..engine.operator import apply_gradient as _apply_gradient
+from ..engine.operator import apply_transpose as _apply_transpose
 from ..engine.program import ROWS_PER_CONTACT, ConeProgram
 from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
-from ..engine.threads import prange, threads
+from ..engine.compiled import prange
+from ..engine.threads import threads
 
 if HAVE_NUMBA:
     import numba
@@ -63,85 +68,6 @@ log = logging.getLogger(__name__)
 # --------------------------------------------------------------------------------------------
 # The iterations: fused numba kernels, or the same steps in numpy
 # --------------------------------------------------------------------------------------------
-
-def _body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Each body's contacts, for applying B' body by body: body b's are entry[start[b]:start[b + 1]],
-    in increasing contact order, each 2 k for contact k's first body and 2 k + 1 for its second
-    (second < 0: a wall, no second body). Returns (start (n + 1,), entry) as int64."""
-    bodies = np.column_stack([first, second]).ravel().astype(np.int64)   # entry e's body is bodies[e]
-    entry = np.flatnonzero(bodies >= 0)
-    bodies = bodies[entry]
-    start = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(bodies, minlength=n), out=start[1:])
-    return start, entry[np.argsort(bodies, kind="stable")]
-
-
-def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work):
-    """work (m, 9): contact k's force on its second body (minus that on its first), its moment on
-    the first body and on the second, from scaled forces z (5m,)."""
-    for k in prange(len(ri)):
-        o = 5 * k
-        p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
-        r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
-        for d in range(3):
-            sliding = q2 * t1[k, d] - q1 * t2[k, d]
-            rolling = reff[k] * (r1 * t1[k, d] + r2 * t2[k, d])
-            work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
-            work[k, 3 + d] = ri[k] * sliding - rolling
-            work[k, 6 + d] = rj[k] * sliding + rolling
-
-
-def _apply_transpose(z, s, nrm, t1, t2, ri, rj, reff, start, entry, work, out):
-    """out (6n,) = B' S z without forming B: each body sums its contacts' forces and moments
-    (:func:`_contact_wrenches`) in contact order, so the sums are the same on any number of
-    threads; work: (m, 9) scratch."""
-    _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work)
-    n = len(start) - 1
-    for body in prange(n):
-        for d in range(3):
-            force = 0.0
-            moment = 0.0
-            for e in range(start[body], start[body + 1]):
-                k = entry[e] // 2
-                if entry[e] % 2 == 1:
-                    force += work[k, d]
-                    moment += work[k, 6 + d]
-                else:
-                    force -= work[k, d]
-                    moment += work[k, 3 + d]
-            out[3 * body + d] = force
-            out[3 * n + 3 * body + d] = moment
-
-
-def _apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
-    """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion."""
-    rot = len(h) // 2
-    for k in prange(len(ci)):
-        a, b = ci[k], cj[k]
-        un = ut1 = ut2 = ur1 = ur2 = 0.0
-        for d in range(3):
-            dx = -h[3 * a + d] * inv_mass[3 * a + d]
-            w = h[rot + 3 * a + d] * inv_mass[rot + 3 * a + d]
-            un += nrm[k, d] * dx
-            ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
-            ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
-            ur1 -= reff[k] * t1[k, d] * w
-            ur2 -= reff[k] * t2[k, d] * w
-            if b >= 0:
-                dx = h[3 * b + d] * inv_mass[3 * b + d]
-                w = h[rot + 3 * b + d] * inv_mass[rot + 3 * b + d]
-                un += nrm[k, d] * dx
-                ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
-                ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
-                ur1 += reff[k] * t1[k, d] * w
-                ur2 += reff[k] * t2[k, d] * w
-        o = 5 * k
-        out[o] = s[o] * un + c[o]
-        out[o + 1] = s[o + 1] * ut1 + c[o + 1]
-        out[o + 2] = s[o + 2] * ut2 + c[o + 2]
-        out[o + 3] = s[o + 3] * ur1 + c[o + 3]
-        out[o + 4] = s[o + 4] * ur2 + c[o + 4]
-
 
 def _project_step(x, y, g, x_new, step, a, b, blocks):
     """x_new = Proj_K(y - step g); returns (||x_new - y||^2, g . (x_new - x)), each summed over
@@ -237,9 +163,6 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
 
 if HAVE_NUMBA:
     _parallel = numba.njit(cache=True, parallel=True)
-    _contact_wrenches = _parallel(_contact_wrenches)
-    _apply_transpose = _parallel(_apply_transpose)
-    _apply_gradient = _parallel(_apply_gradient)
     _project_step = _parallel(_project_step)
     _weighted_change = _parallel(_weighted_change)
     _iterate_compiled = _parallel(_iterate)
@@ -247,17 +170,15 @@ if HAVE_NUMBA:
 
 class _Iteration:
     """The APGD state between residual checks, in scaled forces z (lam = S z); iterate(n) runs n
-    iterations: compiled and matrix-free when given the program's contacts, else numpy with G and T."""
+    iterations: compiled and matrix-free when given the program's operator (B from the contacts'
+    frames, :class:`colsim.engine.operator.ContactOperator`), else numpy with G and T."""
 
-    def __init__(self, G, T, c, a, b, inv_mass, x, scaling, lip_decay=1.0, contacts=None):
+    def __init__(self, G, T, c, a, b, inv_mass, x, scaling, lip_decay=1.0, operator: ContactOperator | None = None):
         self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
         self.scaling = scaling  # (m, 5) S: lam = S z
-        self.geometry = None if contacts is None else (
-            np.ascontiguousarray(scaling.ravel()), contacts.i.astype(np.int64), contacts.j.astype(np.int64),
-            *(np.ascontiguousarray(v, dtype=float) for v in (
-                contacts.normal, contacts.tangent1, contacts.tangent2, contacts.radius_i,
-                contacts.radius_j, contacts.rolling_radius)),
-            *_body_contacts(contacts.i, contacts.j, len(inv_mass) // 6), np.empty((len(a), 9)))
+        self.geometry = None if operator is None else (
+            np.ascontiguousarray(scaling.ravel()), *operator.frames(), operator.start, operator.entry,
+            operator.work)
         hx = self.apply_T(x)
         self.x, self.hx = x.copy(), hx
         self.y, self.hy = x.copy(), hx.copy()
@@ -412,23 +333,30 @@ class ApgdSolver(Solver):
     def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None) -> "_Iteration":
         """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""
         m = program.m
-        B = program.jacobian.tocsr()
         inv_mass = 1.0 / program.mass
-        s = row_scaling(B, inv_mass) if self.precondition else np.ones((m, 5))
+        # the compiled kernels apply B and B' from the contacts' frames and never form B
+        operator = program.operator if self.kernel == "numba" else None
+        B = None if operator is not None else program.jacobian.tocsr()
+        if not self.precondition:
+            s = np.ones((m, 5))
+        elif operator is not None:
+            s = scales_of_diagonal(operator.diagonal(inv_mass))
+        else:
+            s = row_scaling(B, inv_mass)
         a, b = scaled_coefficients(program, s)
         # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
         # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic). The compiled
         # kernels apply T and G from the contacts' frames; the numpy path forms them.
-        c = B @ (program.fbar * inv_mass)
+        c = (program.local_displacement(program.fbar * inv_mass)).ravel()
         c[::ROWS_PER_CONTACT] += program.gap
         c *= s.ravel()
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
-            x = project_coupled_cone(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
+            project = project_compiled if operator is not None else project_coupled_cone
+            x = project(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
         else:
             x = np.zeros(5 * m)
-        if self.kernel == "numba" and program.contacts is not None:
-            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay,
-                              contacts=program.contacts)
+        if operator is not None:
+            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay, operator=operator)
         SB = sp.diags(s.ravel()) @ B
         G = (SB @ sp.diags(inv_mass)).tocsr()
         return _Iteration(G, SB.T.tocsr(), c, a, b, inv_mass, x, s, self.lipschitz_decay)

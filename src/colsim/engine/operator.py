@@ -1,0 +1,169 @@
+"""The contact Jacobian B applied without the matrix: B u and B' lam from each contact's frame and
+radii (12 numbers a contact instead of B's 42 non-zeros), as compiled kernels whose loops over
+contacts and bodies run on numba's threads (:mod:`colsim.engine.threads`). APGD's iteration runs on
+them (:mod:`colsim.solvers.apgd`); the step's program uses them for u = Mbar^-1 (fbar + B' lam) and
+B u, so that a step solved by APGD never forms B (:class:`colsim.engine.program.ConeProgram`).
+
+Each body sums its contacts' forces and moments in contact order, so a product is the same on any
+number of threads.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .compiled import HAVE_NUMBA, numba, prange
+
+
+def body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each body's contacts, for applying B' body by body: body b's are entry[start[b]:start[b + 1]],
+    in increasing contact order, each 2 k for contact k's first body and 2 k + 1 for its second
+    (second < 0: a wall, no second body). Returns (start (n + 1,), entry) as int64."""
+    bodies = np.column_stack([first, second]).ravel().astype(np.int64)   # entry e's body is bodies[e]
+    entry = np.flatnonzero(bodies >= 0)
+    bodies = bodies[entry]
+    start = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(bodies, minlength=n), out=start[1:])
+    return start, entry[np.argsort(bodies, kind="stable")]
+
+
+def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work):
+    """work (m, 9): contact k's force on its second body (minus that on its first), its moment on
+    the first body and on the second, from scaled forces z (5m,)."""
+    for k in prange(len(ri)):
+        o = 5 * k
+        p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
+        r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
+        for d in range(3):
+            sliding = q2 * t1[k, d] - q1 * t2[k, d]
+            rolling = reff[k] * (r1 * t1[k, d] + r2 * t2[k, d])
+            work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
+            work[k, 3 + d] = ri[k] * sliding - rolling
+            work[k, 6 + d] = rj[k] * sliding + rolling
+
+
+def apply_transpose(z, s, nrm, t1, t2, ri, rj, reff, start, entry, work, out):
+    """out (6n,) = B' S z without forming B: each body sums its contacts' forces and moments
+    (:func:`_contact_wrenches`) in contact order, so the sums are the same on any number of
+    threads; work: (m, 9) scratch."""
+    _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work)
+    n = len(start) - 1
+    for body in prange(n):
+        for d in range(3):
+            force = 0.0
+            moment = 0.0
+            for e in range(start[body], start[body + 1]):
+                k = entry[e] // 2
+                if entry[e] % 2 == 1:
+                    force += work[k, d]
+                    moment += work[k, 6 + d]
+                else:
+                    force -= work[k, d]
+                    moment += work[k, 3 + d]
+            out[3 * body + d] = force
+            out[3 * n + 3 * body + d] = moment
+
+
+def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
+    """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion."""
+    rot = len(h) // 2
+    for k in prange(len(ci)):
+        a, b = ci[k], cj[k]
+        un = ut1 = ut2 = ur1 = ur2 = 0.0
+        for d in range(3):
+            dx = -h[3 * a + d] * inv_mass[3 * a + d]
+            w = h[rot + 3 * a + d] * inv_mass[rot + 3 * a + d]
+            un += nrm[k, d] * dx
+            ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
+            ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
+            ur1 -= reff[k] * t1[k, d] * w
+            ur2 -= reff[k] * t2[k, d] * w
+            if b >= 0:
+                dx = h[3 * b + d] * inv_mass[3 * b + d]
+                w = h[rot + 3 * b + d] * inv_mass[rot + 3 * b + d]
+                un += nrm[k, d] * dx
+                ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
+                ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
+                ur1 += reff[k] * t1[k, d] * w
+                ur2 += reff[k] * t2[k, d] * w
+        o = 5 * k
+        out[o] = s[o] * un + c[o]
+        out[o + 1] = s[o + 1] * ut1 + c[o + 1]
+        out[o + 2] = s[o + 2] * ut2 + c[o + 2]
+        out[o + 3] = s[o + 3] * ur1 + c[o + 3]
+        out[o + 4] = s[o + 4] * ur2 + c[o + 4]
+
+
+def jacobian_diagonal(inv_mass, ci, cj, nrm, t1, t2, ri, rj, reff, out):
+    """out (m, 5) = the diagonal of B Mbar^-1 B': for each row of B, its squared entries weighted by
+    the inverse masses and inertias of the body they act on."""
+    rot = len(inv_mass) // 2
+    for k in prange(len(ci)):
+        for row in range(5):
+            out[k, row] = 0.0
+        for side in range(2):
+            body = ci[k] if side == 0 else cj[k]
+            if body < 0:
+                continue
+            radius = ri[k] if side == 0 else rj[k]
+            for d in range(3):
+                lin = inv_mass[3 * body + d]
+                ang = inv_mass[rot + 3 * body + d]
+                out[k, 0] += nrm[k, d] ** 2 * lin
+                out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
+                out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
+                out[k, 3] += (reff[k] * t1[k, d]) ** 2 * ang
+                out[k, 4] += (reff[k] * t2[k, d]) ** 2 * ang
+
+
+if HAVE_NUMBA:
+    _parallel = numba.njit(cache=True, parallel=True)
+    _contact_wrenches = _parallel(_contact_wrenches)
+    apply_transpose = _parallel(apply_transpose)
+    apply_gradient = _parallel(apply_gradient)
+    jacobian_diagonal = _parallel(jacobian_diagonal)
+
+
+class ContactOperator:
+    """B of m contacts among n bodies, applied without the matrix (:func:`apply_gradient`,
+    :func:`apply_transpose`). Walls and fixed spheres (j < 0) do not move: no second body."""
+
+    def __init__(self, contacts, n_bodies: int):
+        self.n = n_bodies
+        self.i = contacts.i.astype(np.int64)
+        self.j = contacts.j.astype(np.int64)
+        self.normal, self.tangent1, self.tangent2, self.radius_i, self.radius_j, self.lever = (
+            np.ascontiguousarray(v, dtype=float) for v in (
+                contacts.normal, contacts.tangent1, contacts.tangent2, contacts.radius_i,
+                contacts.radius_j, contacts.rolling_radius))
+        self.start, self.entry = body_contacts(self.i, self.j, n_bodies)
+        self.work = np.empty((len(self.i), 9))
+
+    @property
+    def m(self) -> int:
+        return len(self.i)
+
+    def frames(self) -> tuple:
+        """(i, j, normal, tangent1, tangent2, R_i, R_j, lever): the kernels' contact arguments."""
+        return (self.i, self.j, self.normal, self.tangent1, self.tangent2, self.radius_i, self.radius_j,
+                self.lever)
+
+    def transpose(self, z: np.ndarray, scaling: np.ndarray | None = None) -> np.ndarray:
+        """(6n,) B' S z for z (5m,) (S = diag(scaling), identity if None)."""
+        s = np.ones(5 * self.m) if scaling is None else scaling
+        out = np.empty(6 * self.n)
+        apply_transpose(np.ascontiguousarray(z, dtype=float), s, self.normal, self.tangent1, self.tangent2,
+                        self.radius_i, self.radius_j, self.lever, self.start, self.entry, self.work, out)
+        return out
+
+    def apply(self, u: np.ndarray) -> np.ndarray:
+        """(5m,) B u for u (6n,)."""
+        out = np.empty(5 * self.m)
+        apply_gradient(np.ascontiguousarray(u, dtype=float), np.ones(6 * self.n), np.ones(5 * self.m),
+                       *self.frames(), np.zeros(5 * self.m), out)
+        return out
+
+    def diagonal(self, inv_mass: np.ndarray) -> np.ndarray:
+        """(m, 5) the diagonal of B Mbar^-1 B' (inv_mass: (6n,) the diagonal of Mbar^-1)."""
+        out = np.empty((self.m, 5))
+        jacobian_diagonal(np.ascontiguousarray(inv_mass, dtype=float), *self.frames(), out)
+        return out
