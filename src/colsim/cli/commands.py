@@ -90,9 +90,9 @@ def _solver(args, scaled_time_step: float):
 
 
 def _pack_solver(args):
-    """The packing's back-end: under auto, APGD for every warm-started step at the packing's own
-    tolerance (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or --solver-tolerance), Clarabel
-    for the rest; no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
+    """The packing's back-end: under auto, APGD for every step at the packing's own tolerance
+    (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or --solver-tolerance), Clarabel where APGD
+    reaches its cap; no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
     if args.solver != "auto":
         return _solver(args, scaled_time_step=None)
     return make_solver("auto", scaled_time_step=None,

@@ -74,8 +74,9 @@ def _integer(text):
 
 def _solver_arguments(parser):
     parser.add_argument("--solver", default=defaults.DEFAULT_SOLVER, choices=defaults.SOLVERS,
-                        help="cone-program back-end (default: %(default)s: APGD for warm-started steps "
-                             f"up to dt/sqrt(h0/g) = {defaults.AUTO_APGD_BELOW:g}, Clarabel otherwise; see docs/solvers.md)")
+                        help="cone-program back-end (default: %(default)s: APGD for every step, warm or cold, "
+                             f"up to dt/sqrt(h0/g) = {defaults.AUTO_APGD_BELOW:g}, Clarabel above and where APGD "
+                             "reaches its cap; see docs/solvers.md)")
     parser.add_argument("--solver-tolerance", type=_positive, default=None,
                         help="solver tolerance (default: the back-end's own; for auto, APGD's)")
     parser.add_argument("--threads", type=_positive_int, default=1,

@@ -20,7 +20,7 @@ APGD_MAX_ITER = 20_000
 ADMM_TOLERANCE = 1e-3
 ADMM_MAX_ITER = 5000
 
-#: auto hands a warm-started step to APGD up to this dt / sqrt(h0/g) (Clarabel above: larger steps
+#: auto hands a step to APGD (warm-started, or cold from zero forces) up to this dt / sqrt(h0/g) (Clarabel above: larger steps
 #: were not measured; at 0.04 warm-started APGD took 0.15 s a step against Clarabel's 0.79 s, r0 = 2)
 AUTO_APGD_BELOW = 0.04
 #: auto's APGD iteration cap; a step that reaches it is solved again by Clarabel (a cold
