@@ -128,7 +128,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
     T = B' S and G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`,
     :func:`_apply_gradient`). After each iteration lip *= lip_decay. The step 1/lip is accepted
     when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact descent test of a
-    quadratic), else lip doubles. Restart when g . (x_new - x) > 0. The loops over contacts and
+    quadratic), or when d = 0 (nothing moved; the test would compare roundings of zero), else lip doubles. Restart when g . (x_new - x) > 0. The loops over contacts and
     bodies run on numba's threads; the sums over them in `blocks` fixed blocks (one: the serial
     order), so a result depends on the block count alone.
     """
@@ -139,7 +139,9 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
         while True:
             dd, uphill = _project_step(x, y, g, x_new, 1.0 / lip, a, b, blocks)
             _apply_transpose(x_new, s, nrm, t1, t2, ri, rj, reff, start, entry, work, h_new)
-            if _weighted_change(h_new, hy, inv_mass, blocks) <= lip * dd * (1.0 + 1e-12):
+            # dd == 0: the step does not move y (every contact already projected onto itself), and
+            # the test would compare two roundings of zero: accept, or lip would double forever
+            if dd == 0.0 or _weighted_change(h_new, hy, inv_mass, blocks) <= lip * dd * (1.0 + 1e-12):
                 break
             lip *= 2.0
             backtracks += 1
@@ -248,7 +250,8 @@ class _Iteration:
                 h_new = self.T @ x_new
                 d = x_new - y
                 dh = h_new - hy
-                if _dot(dh * self.inv_mass, dh) <= lip * _dot(d, d) * (1.0 + 1e-12):
+                dd = _dot(d, d)
+                if dd == 0.0 or _dot(dh * self.inv_mass, dh) <= lip * dd * (1.0 + 1e-12):
                     break
                 lip *= 2.0
                 bt += 1
