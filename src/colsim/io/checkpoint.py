@@ -25,21 +25,14 @@ WARM_FIELDS = ("i", "j", "family", "force", "rolling")
 
 
 def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed):
-    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed),
-              "radius": state.radius, "density": np.array(state.density),
-              "frame_step": np.array([k for k, _ in frames], dtype=np.int64),
-              "frame_time": np.array([f.time for _, f in frames])}
+    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed)
+    arrays["frame_step"] = np.array([k for k, _ in frames], dtype=np.int64)
+    arrays["frame_time"] = np.array([f.time for _, f in frames])
     for name in STATE_FIELDS:
-        arrays[f"state_{name}"] = getattr(state, name)
         arrays[f"frame_{name}"] = np.stack([getattr(f, name) for _, f in frames])
-    arrays["state_time"] = np.array(state.time)
     for name in StepDiagnostics.__dataclass_fields__:
         values = [getattr(d, name) for d in diagnostics]
         arrays[f"diagnostic_{name}"] = np.array(values, dtype=str if name in TEXT_DIAGNOSTICS else None)
-    arrays["margin"] = np.array(np.nan if carry.margin is None else carry.margin)
-    if carry.warm_start is not None:
-        for name in WARM_FIELDS:
-            arrays[f"warm_{name}"] = getattr(carry.warm_start, name)
     _write(path, arrays)
 
 
@@ -54,14 +47,7 @@ def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, 
     (WarmStart in the numbering of `state`, or None) and the detection `margin` (None: the base
     one) that the next step starts from, and `loop`: the filling loop's arrays and numbers
     (name -> array, bool, int, float or str)."""
-    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "radius": state.radius,
-              "density": np.array(state.density), "state_time": np.array(state.time),
-              "margin": np.array(np.nan if margin is None else margin)}
-    for name in STATE_FIELDS:
-        arrays[f"state_{name}"] = getattr(state, name)
-    if warm is not None:
-        for name in WARM_FIELDS:
-            arrays[f"warm_{name}"] = getattr(warm, name)
+    arrays = _common_arrays(fingerprint, state, warm, margin, elapsed)
     for name, value in loop.items():
         arrays[f"loop_{name}"] = np.asarray(value)
     _write(path, arrays)
@@ -72,13 +58,9 @@ def load_packing_checkpoint(path, fingerprint):
     of this fingerprint; None (with a warning) otherwise. loop's values come back as numpy arrays
     (0-d for numbers and text)."""
     def restore(arrays):
-        state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), arrays["radius"],
-                              float(arrays["density"]), float(arrays["state_time"]))
-        warm = WarmStart(*(arrays[f"warm_{name}"] for name in WARM_FIELDS)) if "warm_i" in arrays else None
-        margin = float(arrays["margin"])
+        state, warm, margin = _common_of(arrays)
         loop = {name[len("loop_"):]: value for name, value in arrays.items() if name.startswith("loop_")}
-        return {"state": state, "warm": warm, "margin": None if np.isnan(margin) else margin, "loop": loop,
-                "elapsed": float(arrays["elapsed"])}
+        return {"state": state, "warm": warm, "margin": margin, "loop": loop, "elapsed": float(arrays["elapsed"])}
     return _read(path, fingerprint, restore)
 
 
@@ -105,18 +87,36 @@ def _read(path, fingerprint, restore):
 
 def _restore(arrays) -> dict:
     """The run saved by :func:`save_checkpoint` from its arrays."""
-    radius, density = arrays["radius"], float(arrays["density"])
-    state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), radius, density,
-                          float(arrays["state_time"]))
-    frames = [(int(k), ParticleState(*(arrays[f"frame_{name}"][n] for name in STATE_FIELDS), radius, density,
-                                     float(arrays["frame_time"][n])))
+    state, warm, margin = _common_of(arrays)
+    frames = [(int(k), ParticleState(*(arrays[f"frame_{name}"][n] for name in STATE_FIELDS), state.radius,
+                                     state.density, float(arrays["frame_time"][n])))
               for n, k in enumerate(arrays["frame_step"])]
     fields = StepDiagnostics.__dataclass_fields__
     columns = {name: arrays[f"diagnostic_{name}"].tolist() for name in fields}
     diagnostics = [StepDiagnostics(**{name: columns[name][k] for name in fields})
                    for k in range(len(columns["step"]))]
+    return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": Carry(warm, margin),
+            "elapsed": float(arrays["elapsed"])}
+
+
+def _common_arrays(fingerprint, state, warm, margin, elapsed) -> dict:
+    """What both checkpoints hold: the fingerprint, the state, the forces by pair (if any) and the
+    detection margin (NaN for None) the next step starts from, the seconds spent."""
+    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "radius": state.radius,
+              "density": np.array(state.density), "state_time": np.array(state.time),
+              "margin": np.array(np.nan if margin is None else margin)}
+    for name in STATE_FIELDS:
+        arrays[f"state_{name}"] = getattr(state, name)
+    if warm is not None:
+        for name in WARM_FIELDS:
+            arrays[f"warm_{name}"] = getattr(warm, name)
+    return arrays
+
+
+def _common_of(arrays) -> tuple:
+    """(state, warm start or None, margin or None) from :func:`_common_arrays`' arrays."""
+    state = ParticleState(*(arrays[f"state_{name}"] for name in STATE_FIELDS), arrays["radius"],
+                          float(arrays["density"]), float(arrays["state_time"]))
     warm = WarmStart(*(arrays[f"warm_{name}"] for name in WARM_FIELDS)) if "warm_i" in arrays else None
     margin = float(arrays["margin"])
-    carry = Carry(warm, None if np.isnan(margin) else margin)
-    return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": carry,
-            "elapsed": float(arrays["elapsed"])}
+    return state, warm, None if np.isnan(margin) else margin
