@@ -30,14 +30,20 @@ def _reference_projection(x, a, b):
             rows += [[0] * 5, [0] * 5]
             rows[-2][first], rows[-1][first + 1] = 1, 1
             cones.append(clarabel.ZeroConeT(2))
-    A = sp.csc_matrix(np.array(rows, dtype=float))
+    return _nearest_point(x, sp.identity(5, format="csc"), sp.csc_matrix(np.array(rows, dtype=float)), cones)
+
+
+def _nearest_point(x, P, A, cones):
+    """The first 5 unknowns of min 1/2 v'P v - x'v[:5] subject to -A v in the cones (v = (y, ...)),
+    by Clarabel at 1e-12, solved at unit scale (its tolerances are absolute)."""
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-12
-    scale = max(np.linalg.norm(x), 1e-300)  # Clarabel's tolerances are absolute: solve at unit scale
-    result = clarabel.DefaultSolver(sp.identity(5, format="csc"), -x / scale, A, np.zeros(A.shape[0]),
-                                    cones, settings).solve()
-    return scale * np.asarray(result.x)
+    scale = max(np.linalg.norm(x), 1e-300)
+    q = np.zeros(P.shape[0])
+    q[:5] = -x / scale
+    result = clarabel.DefaultSolver(P, q, A, np.zeros(A.shape[0]), cones, settings).solve()
+    return scale * np.asarray(result.x)[:5]
 
 
 def test_projection_is_exact():
@@ -152,20 +158,12 @@ def test_compiled_residuals_match_numpy(solver_pile):
 def _reference_gap_projection(x, a, b):
     """Projection of x (5,) onto {y_n >= a ||y_t|| + b ||y_r||} by Clarabel: variables (y, s, t)
     with y_n - s - t >= 0, (s, a y_t) and (t, b y_r) in second-order cones."""
-    import scipy.sparse as sp
-
     rows = [[-1, 0, 0, 0, 0, 1, 1],
             [0, 0, 0, 0, 0, -1, 0], [0, -a, 0, 0, 0, 0, 0], [0, 0, -a, 0, 0, 0, 0],
             [0, 0, 0, 0, 0, 0, -1], [0, 0, 0, -b, 0, 0, 0], [0, 0, 0, 0, -b, 0, 0]]
-    A = sp.csc_matrix(np.array(rows, dtype=float))
-    P = sp.diags([1.0] * 5 + [0.0, 0.0], format="csc")
-    scale = max(np.linalg.norm(x), 1e-300)
-    settings = clarabel.DefaultSettings()
-    settings.verbose = False
-    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-12
     cones = [clarabel.NonnegativeConeT(1), clarabel.SecondOrderConeT(3), clarabel.SecondOrderConeT(3)]
-    result = clarabel.DefaultSolver(P, np.r_[-x / scale, 0, 0], A, np.zeros(7), cones, settings).solve()
-    return scale * np.asarray(result.x)[:5]
+    return _nearest_point(x, sp.diags([1.0] * 5 + [0.0, 0.0], format="csc"),
+                          sp.csc_matrix(np.array(rows, dtype=float)), cones)
 
 
 def test_projection_onto_gap_cone_is_exact():
