@@ -11,6 +11,7 @@ from colsim.engine.contacts import overlaps
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import OverlapError, base_margin, next_margin, step
 from colsim.solvers import ClarabelSolver, SolverError
+from colsim.solvers.apgd import ApgdSolver
 
 
 def _train(max_redo: int):
@@ -44,6 +45,38 @@ def test_missed_contact_is_redone():
     np.testing.assert_allclose(momentum, (state.mass[:, None] * state.velocity).sum(axis=0),
                                rtol=1e-9, atol=1e-9 * state.mass[0] * 2.0)
     assert result.state.velocity[2, 0] > 0.1  # B was pushed: the contact was really taken
+
+
+class _RecordingApgd(ApgdSolver):
+    """APGD that keeps each call's contacts' warm start ((m, 5) or None) and forces."""
+
+    def __init__(self):
+        super().__init__(tolerance=1e-8)
+        self.calls = []
+
+    def solve(self, program, warm_start=None, step=None, max_iter=None):
+        solution = super().solve(program, warm_start=warm_start, step=step, max_iter=max_iter)
+        self.calls.append((None if warm_start is None else np.array(warm_start), solution.forces.copy()))
+        return solution
+
+
+def test_redo_starts_from_the_attempt_it_redoes():
+    """A redone step warm-starts from its first attempt's forces (the pairs it shares with it), not
+    from the previous step's: the redo then only has to take up the missed pair. The first attempt
+    here starts cold; the redo's start holds that attempt's C-A force (to rounding: the same
+    frame) and zero for the added A-B pair, and the step still meets the overlap tolerance."""
+    state, settings = _train(max_redo=3)
+    solver = _RecordingApgd()
+    result = step(state, settings, solver, step_number=5)
+    assert result.diagnostics.redone >= 1
+    assert len(solver.calls) == result.diagnostics.redone + 1
+    first_start, first_forces = solver.calls[0]
+    redo_start, _ = solver.calls[1]
+    assert first_start is None
+    assert first_forces[0, 0] > 0            # the attempt's C-A push, contact 0 in both attempts
+    np.testing.assert_allclose(redo_start[0], first_forces[0], rtol=1e-12, atol=1e-15)
+    assert np.all(redo_start[1:] == 0.0)     # A-B: new in the redo
+    assert result.diagnostics.largest_overlap <= settings.overlap_tolerance * 0.4
 
 
 def test_next_step_starts_from_the_margin_that_caught_the_missed_pair():
