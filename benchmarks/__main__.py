@@ -32,7 +32,7 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step")
+         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -56,12 +56,14 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "tolerance": [*c, "--tolerances", "1e-3", "--steps", "100", "--record",
                           str(scratch / "tolerance.jsonl")],
             "cold_step": c,
+            "gauss_seidel": [*c, "--steps", "2", "--n-steps", "100", "--variants", "down:1"],
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
         "packings": ["1000", "4000"], "step": [], "solvers": [], "collapse": [],
         "apgd_iteration": [], "threads": c, "crossover": c, "stopping": [*c, "--steps", "2", "50", "300", "900"],
         "trajectory": c, "tolerance": [*c, "--record", str(scratch / "tolerance.jsonl")], "cold_step": c,
+        "gauss_seidel": [*c, "--steps", "2", "50", "150", "400"],
     }[name]
 
 
