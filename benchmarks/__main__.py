@@ -32,14 +32,14 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel")
+         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
 
 
-def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path) -> list[str]:
-    """A benchmark's arguments in `all` (quick: seconds each on a 100-200 sphere packing)."""
+def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path) -> list[str] | None:
+    """A benchmark's arguments in `all` (quick: seconds each on a 100-200 sphere packing); None: skip it."""
     c = [str(column)] if column is not None else []
     if quick:
         r0, a = COLUMN["quick"][:2]
@@ -57,6 +57,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
                           str(scratch / "tolerance.jsonl")],
             "cold_step": c,
             "gauss_seidel": [*c, "--steps", "2", "--n-steps", "100", "--variants", "down:1"],
+            "study_cost": _study_results(),
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -64,7 +65,15 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "apgd_iteration": [], "threads": c, "crossover": c, "stopping": [*c, "--steps", "2", "50", "300", "900"],
         "trajectory": c, "tolerance": [*c, "--record", str(scratch / "tolerance.jsonl")], "cold_step": c,
         "gauss_seidel": [*c, "--steps", "2", "50", "150", "400"],
+        "study_cost": _study_results(),
     }[name]
+
+
+def _study_results() -> list[str] | None:
+    """study_cost's argument: the repository's results/ when a study has made runs there, else None
+    (`all` then skips it: it reads a study's runs and makes none)."""
+    results = HERE.parent / "results"
+    return [str(results)] if any(results.glob("r0_*/seed_*/pack_*/packing.nc")) else None
 
 
 def describe(name: str) -> str:
@@ -93,6 +102,9 @@ def run_all(quick: bool) -> int:
 
                 column = collapse.column_file(*COLUMN["quick" if quick else "full"])
             argv = arguments_for_all(name, quick, column, Path(scratch))
+            if argv is None:
+                print(f"\n## {name}: skipped (no study's runs under results/)", flush=True)
+                continue
             print(f"\n## {name} {' '.join(argv)}", flush=True)
             start = time.perf_counter()
             done = subprocess.run([sys.executable, "-m", "benchmarks", name, *argv], cwd=HERE.parent,

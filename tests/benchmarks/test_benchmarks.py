@@ -17,7 +17,7 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 
 import record   # noqa: E402
 
-NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "gauss_seidel", "packings", "solvers", "step", "stopping", "threads",
+NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "gauss_seidel", "packings", "solvers", "step", "stopping", "study_cost", "threads",
          "tolerance", "trajectory")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
@@ -149,3 +149,34 @@ def test_machine_versions_and_commit():
     state = record.git_state(REPOSITORY)
     assert state["commit"] is None or (len(state["commit"]) == 40 and isinstance(state["dirty"], bool))
     assert record.git_state(Path("/"))["commit"] is None   # not a repository: no commit, no error
+
+
+# study_cost.py: the figures it reads and the growth it reports
+
+
+def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path):
+    """A job's figures come from its Snakemake benchmark file (the last line); a job whose wall is
+    under 0.9 of its file's wall over all sittings was resumed from a checkpoint."""
+    import study_cost
+
+    run = tmp_path / "r0_4" / "seed_1" / "pack_x" / "packing.nc"
+    tsv = tmp_path / "benchmarks" / "r0_4" / "seed_1" / "pack_x" / "pack.tsv"
+    tsv.parent.mkdir(parents=True)
+    tsv.write_text("s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
+                   "3873.60\t1:04:33\t676.99\t919.42\t563.98\t610.69\t8.32\t37.74\t33.91\t1314.41\n")
+    bench = study_cost.benchmark_of(tmp_path, run, "pack.tsv")
+    assert bench == {"wall": 3873.60, "cpu": 1314.41, "rss": 676.99}
+    assert study_cost.benchmark_of(tmp_path, run, "collapse.tsv") is None
+    assert study_cost.with_benchmark({"wall_all": 9870.0}, bench)["resumed"] is True
+    assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["resumed"] is False
+    assert study_cost.with_benchmark({"wall_all": 3900.0, "resumed_from": 300}, bench)["resumed"] is True
+
+
+def test_study_cost_growth_is_the_log_log_slope_between_sizes():
+    """cost = N^1.25 exactly gives k = 1.25 between every pair of sizes; the first size has none."""
+    import study_cost
+
+    sizes = [(n, 3.0 * n ** 1.25) for n in (2_474.0, 8_447.0, 20_388.0)]
+    k = study_cost.growth(sizes)
+    assert k[0] is None
+    assert k[1:] == pytest.approx([1.25, 1.25], rel=1e-12)
