@@ -7,7 +7,7 @@ changes of the step). After the step the largest overlap is measured. A step who
 the tolerance is redone: missed pairs are added, linearised about their end-of-attempt normal, the
 margin grows (2x by default) and cylinder gaps are tightened by the overlap the attempt made; a
 solver that takes a warm start starts the redo from the attempt's forces (the missed pairs at
-zero), not from the previous step's: a pour's impact steps, about one redo each, cost 26 % less
+zero), not from the previous step's: a pour's impact steps, about one redo each, make its steps 25 % cheaper
 (r0 = 2, three seeds, docs/performance.md "Packings"). A step
 that still overlaps after `max_redo` redos fails with an :class:`OverlapError` naming the step.
 The next step starts from the margin that caught a missed contact (at most 4x the base), halved
