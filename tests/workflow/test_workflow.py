@@ -109,6 +109,33 @@ def test_figures_logs_and_benchmarks_exist(tiny_study):
 
 
 @pytest.mark.slow
+def test_study_cost_reads_the_studys_own_benchmark_files(tiny_study, tmp_path):
+    """`python -m benchmarks study_cost` on the study's results: one row a packing and one a
+    collapse, each with the CPU, wall and memory of its Snakemake benchmark file (none resumed),
+    the spheres of its file, and APGD's iterations a step."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "COLSIM_BENCHMARK_RESULTS": str(tmp_path), "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "benchmarks", "study_cost", str(tiny_study / "results"),
+                           "--aspect-ratio", "0.5", "1"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    (record,) = tmp_path.glob("study_cost-*.json")
+    jobs, sizes = json.loads(record.read_text())["tables"]
+    packs = [row for row in jobs["data"] if "a" not in row]
+    runs = [row for row in jobs["data"] if "a" in row]
+    assert len(packs) == 1 and len(runs) == 4
+    for row in packs + runs:
+        assert row["cpu"] > 0 and row["wall"] > 0 and row["rss"] > 0 and not row["resumed"]
+    collapses = sorted((tiny_study / "results").rglob("collapse.nc"))
+    assert sorted(row["spheres"] for row in runs) == sorted(
+        int(xr.load_dataset(path).attrs["n_particles"]) for path in collapses)
+    assert all(row["iterations"] > 0 for row in runs)
+    assert [row["r0"] for row in sizes["data"]] == [1.0, 1.0]   # one size, at a = 0.5 and at a = 1
+
+
+@pytest.mark.slow
 def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
     result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml")
     assert result.returncode == 0
