@@ -5,7 +5,8 @@ non-overlapping places uniformly across the cylinder, above what is already ther
 gravity with mu = mu_r = 0 until they are at rest. (`mu` sets a sliding friction while filling,
 between the spheres and with the floor, for a looser packing than the paper's.) Places come from a jittered cubic lattice of
 spacing 1.04 d_max: each sphere moves at random inside its own lattice cell, so no two overlap.
-Clouds are added until the settled packing is taller than the requested height.
+One cloud holds enough spheres for the whole height (:data:`CLOUD_SOLID_FRACTION`); should the
+packing settle short of it, clouds are added until it is taller than the requested height.
 
 In layers (`layer_height`, off by default): each cloud adds about that much settled packing and falls a few
 diameters, not the column's height; before it falls, the spheres at rest more than `freeze_depth`
@@ -40,7 +41,11 @@ from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, 
 log = logging.getLogger(__name__)
 
 LATTICE_FACTOR = 1.04
-SOLID_FRACTION_GUESS = 0.58
+#: A cloud holds the spheres of this solid fraction of the cylinder over the height it must fill:
+#: above the 0.61-0.63 the pours settle to at r0 = 2-4, so that one cloud fills the whole height.
+#: With 0.58 the first cloud settled short (r0 = 3 and 4) and a second one fell onto the settled
+#: packing, whose impacts strike the whole column at once (docs/performance.md, "Packings").
+CLOUD_SOLID_FRACTION = 0.64
 
 
 @dataclass
@@ -146,9 +151,9 @@ def mean_sphere_volume(diameter_range) -> float:
 
 
 def expected_spheres(r0: float, height: float, diameter_range) -> float:
-    """About how many spheres a packing of radius r0 and height `height` holds (the pour's own
-    estimate: SOLID_FRACTION_GUESS of the cylinder, two largest diameters taller)."""
-    return SOLID_FRACTION_GUESS * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
+    """How many spheres the pour of radius r0 to height `height` creates: one cloud of
+    CLOUD_SOLID_FRACTION of the cylinder, two largest diameters taller."""
+    return CLOUD_SOLID_FRACTION * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
 
 
 #: A layer has landed (the next cloud may come) at the rest criterion with this many times
@@ -228,7 +233,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
             missing = height + 2 * d_max - surface
             last = layer_height is None or missing <= layer_height + 2 * d_max
             thickness = missing if last else layer_height
-            n_new = int(np.ceil(SOLID_FRACTION_GUESS * np.pi * r0**2 * thickness / mean_volume))
+            n_new = int(np.ceil(CLOUD_SOLID_FRACTION * np.pi * r0**2 * thickness / mean_volume))
             z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
             if layer_height is not None:
                 fixed |= _buried_at_rest(state, surface - freeze_depth, gravity, rest_energy)
