@@ -128,8 +128,9 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
     T = B' S and G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`,
     :func:`_apply_gradient`). After each iteration lip *= lip_decay. The step 1/lip is accepted
     when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact descent test of a
-    quadratic), or when d = 0 (nothing moved; the test would compare roundings of zero), else lip doubles. Restart when g . (x_new - x) > 0. The loops over contacts and
-    bodies run on numba's threads; the sums over them in `blocks` fixed blocks (one: the serial
+    quadratic), or when d = 0 (nothing moved; the test would compare roundings of zero), else lip
+    doubles. Restart when g . (x_new - x) > 0. The loops over contacts and bodies run on numba's
+    threads; the sums over them in `blocks` fixed blocks (one: the serial
     order), so a result depends on the block count alone.
     """
     s, ci, cj, nrm, t1, t2, ri, rj, reff, start, entry, work = geometry
