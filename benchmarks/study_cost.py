@@ -6,9 +6,10 @@
 Issue 30's table, read from the runs a study made rather than from new runs: each job's Snakemake
 benchmark file (results/benchmarks/<the job's folder>/pack.tsv or collapse.tsv: wall `s`,
 `cpu_time` in s, `max_rss` in MB) and the run's own file (packing.nc: spheres, steps, and
-`wall_time` over all sittings; collapse.nc: spheres, steps, APGD iterations a step, threads from its
-config). A job resumed from its checkpoint has benchmark figures for its last sitting only: its row
-says `resumed`, its CPU is that sitting's, and its wall over all sittings is the file's.
+`wall_time` and `cpu_time` over all sittings; collapse.nc: spheres, steps, APGD iterations a step,
+threads from its config). A job resumed from its checkpoint has benchmark figures for its last
+sitting only: its row says `resumed`, and its CPU over all sittings is the file's where the file
+has one (runs since CPU time was saved), else unknown.
 
 Printed: one row a packing and one a collapse at each `--aspect-ratio`, then one row a column size
 (means over seeds) with the growth of the mean collapse CPU with the spheres, N^k between
@@ -47,6 +48,7 @@ def packing_rows(results: Path) -> list[dict]:
             attrs = ds.attrs
             row = {"r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "spheres": ds.sizes["particle"],
                    "steps": int(attrs["steps"]), "wall_all": float(attrs["wall_time"]),
+                   "cpu_file": float(attrs.get("cpu_time", np.nan)),
                    "threads": json.loads(attrs["config"]).get("threads", 1), "file": str(path)}
         rows.append(with_benchmark(row, benchmark_of(results, path, "pack.tsv")))
     return rows
@@ -66,6 +68,7 @@ def collapse_rows(results: Path, aspect_ratios) -> list[dict]:
             row = {"r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "a": a, "mu_r": float(attrs["mu_r"]),
                    "spheres": int(attrs["n_particles"]), "steps": len(iterations),
                    "iterations": float(np.mean(iterations)), "wall_all": float(attrs["wall_time"]),
+                   "cpu_file": float(attrs.get("cpu_time", np.nan)),
                    "threads": json.loads(attrs["config"]).get("threads", 1),
                    "resumed_from": int(attrs.get("resumed_from_step", 0)), "file": str(path)}
         rows.append(with_benchmark(row, benchmark_of(results, path, "collapse.tsv")))
@@ -74,9 +77,14 @@ def collapse_rows(results: Path, aspect_ratios) -> list[dict]:
 
 def with_benchmark(row: dict, bench: dict | None) -> dict:
     """row with its job's CPU, wall and memory; resumed when the job's wall is well under the file's
-    wall over all sittings (a checkpoint carried the rest)."""
+    wall over all sittings (a checkpoint carried the rest); cpu_all: the CPU over all sittings (the
+    file's, else the job's when it was not resumed, else None)."""
     row.update({"cpu": None, "wall": None, "rss": None} if bench is None else bench)
     row["resumed"] = bool(row.get("resumed_from")) or (bench is not None and bench["wall"] < 0.9 * row["wall_all"])
+    if np.isfinite(row.get("cpu_file", np.nan)):
+        row["cpu_all"] = row["cpu_file"]
+    else:
+        row["cpu_all"] = None if row["resumed"] else row["cpu"]
     return row
 
 
@@ -107,16 +115,16 @@ def main(argv=None):
 
     print(f"{args.results}: {len(packings)} packings, {len(collapses)} collapses at a = "
           f"{', '.join(f'{a:g}' for a in args.aspect_ratio)}")
-    table = record.table(["job", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s", "wall s",
-                          "wall s, all sittings", "peak MB", "iterations a step"])
+    table = record.table(["job", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s, all sittings",
+                          "wall s, all sittings", "last sitting: CPU s", "wall s", "peak MB", "iterations a step"])
     for row in packings:
         table.row("pack" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"], "",
-                  f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu"]), number(row["wall"]),
-                  number(row["wall_all"]), number(row["rss"]), "", data=row)
+                  f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
+                  number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]), "", data=row)
     for row in collapses:
         table.row("collapse" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"],
-                  f"{row['a']:g}", f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu"]),
-                  number(row["wall"]), number(row["wall_all"]), number(row["rss"]),
+                  f"{row['a']:g}", f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
+                  number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]),
                   f"{row['iterations']:.0f}", data=row)
 
     print()
@@ -126,13 +134,13 @@ def main(argv=None):
         by_size = []
         for r0 in sorted({row["r0"] for row in collapses if np.isclose(row["a"], a)}):
             runs = [row for row in collapses if row["r0"] == r0 and np.isclose(row["a"], a)]
-            packs = [row for row in packings if row["r0"] == r0 and row["cpu"] is not None and not row["resumed"]]
-            timed = [row["cpu"] for row in runs if row["cpu"] is not None and not row["resumed"]]
+            packs = [row for row in packings if row["r0"] == r0 and row["cpu_all"] is not None]
+            timed = [row["cpu_all"] for row in runs if row["cpu_all"] is not None]
             by_size.append((r0, runs, packs, timed))
         ks = growth([(np.mean([r["spheres"] for r in runs]), np.mean(timed) if timed else np.nan)
                      for _, runs, _, timed in by_size])
         for (r0, runs, packs, timed), k in zip(by_size, ks):
-            pack_cpu = np.mean([p["cpu"] for p in packs]) if packs else None
+            pack_cpu = np.mean([p["cpu_all"] for p in packs]) if packs else None
             rss = max((r["rss"] for r in runs + packs if r["rss"] is not None), default=None)
             sizes.row(f"{r0:g}", f"{a:g}", f"{np.mean([r['spheres'] for r in runs]):,.0f}", number(pack_cpu),
                       number(np.mean(timed) if timed else None), number(k, "{:.2f}"),

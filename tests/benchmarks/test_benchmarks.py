@@ -170,6 +170,10 @@ def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path)
     assert study_cost.with_benchmark({"wall_all": 9870.0}, bench)["resumed"] is True
     assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["resumed"] is False
     assert study_cost.with_benchmark({"wall_all": 3900.0, "resumed_from": 300}, bench)["resumed"] is True
+    # the CPU over all sittings: the file's where it has one; a resumed job's last sitting is not the whole
+    assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": 5202.7}, bench)["cpu_all"] == 5202.7
+    assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": float("nan")}, bench)["cpu_all"] is None
+    assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["cpu_all"] == 1314.41
 
 
 def test_study_cost_growth_is_the_log_log_slope_between_sizes():

@@ -31,7 +31,7 @@ def _run():
 def test_a_checkpoint_comes_back_exactly(tmp_path):
     state, frames, diagnostics, carry = _run()
     path = tmp_path / "run.checkpoint.npz"
-    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 12.5)
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 12.5, 20.25)
     saved = load_checkpoint(path, "abc")
     for name in ("position", "velocity", "angular_velocity", "radius"):
         np.testing.assert_array_equal(getattr(saved["state"], name), getattr(state, name))
@@ -39,7 +39,7 @@ def test_a_checkpoint_comes_back_exactly(tmp_path):
     assert [k for k, _ in saved["frames"]] == [0, 10]
     np.testing.assert_array_equal(saved["frames"][0][1].position, frames[0][1].position)
     assert saved["diagnostics"] == diagnostics
-    assert saved["carry"].margin == 0.01 and saved["elapsed"] == 12.5
+    assert saved["carry"].margin == 0.01 and saved["elapsed"] == 12.5 and saved["cpu"] == 20.25
     for name in ("i", "j", "family", "force", "rolling"):
         np.testing.assert_array_equal(getattr(saved["carry"].warm_start, name), getattr(carry.warm_start, name))
 
@@ -63,3 +63,18 @@ def test_another_run_s_or_a_damaged_checkpoint_is_ignored(tmp_path, caplog):
     assert "unreadable checkpoint" in caplog.text
     assert load_checkpoint(tmp_path / "absent.npz", "abc") is None
     assert load_checkpoint(None, "abc") is None
+
+
+def test_a_checkpoint_without_cpu_time_resumes_with_it_unknown(tmp_path):
+    """A checkpoint written before CPU time was saved: its run resumes, its CPU time over all
+    sittings is NaN (unknown), not the last sitting's taken for the whole."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "old.npz"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 12.5)
+    with np.load(path) as archive:
+        arrays = {name: archive[name] for name in archive.files if name != "cpu"}
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays)
+    saved = load_checkpoint(path, "abc")
+    assert saved["elapsed"] == 12.5 and np.isnan(saved["cpu"])
+    assert saved["diagnostics"] == diagnostics

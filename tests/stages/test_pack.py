@@ -92,9 +92,13 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
         pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
              checkpoint_every=10, progress=_killed_after(23))
     assert checkpoint.is_file()
+    with np.load(checkpoint) as saved:
+        first_wall, first_cpu = float(saved["elapsed"]), float(saved["cpu"])
     resumed = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
                    checkpoint_every=10)
     assert resumed.steps == whole.steps and resumed.clouds == whole.clouds
+    # the times cover both sittings: at least what the first had spent when it saved
+    assert 0 < first_cpu <= resumed.cpu_time and 0 < first_wall <= resumed.wall_time
     for name in ("position", "velocity", "angular_velocity", "radius"):
         np.testing.assert_array_equal(getattr(resumed.state, name), getattr(whole.state, name))
     for name in ("i", "j", "family", "force", "rolling"):

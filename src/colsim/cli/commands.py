@@ -115,12 +115,14 @@ def pack(args):
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_settings(args), "solver_settings": solver.describe()}, args.seed)
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
-                  "steps": result.steps, "wall_time": result.wall_time, "gravity": args.gravity,
+                  "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
+                  "gravity": args.gravity,
                   "clouds": result.clouds, "most_fixed": result.most_fixed})
     io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
     checkpoint.unlink(missing_ok=True)
-    log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s",
-             result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time)
+    log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s (CPU %.1f s)",
+             result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time,
+             result.cpu_time)
 
 
 def trim(args):
@@ -136,7 +138,8 @@ def trim(args):
     fraction = solid_fraction(column, r0, h0)
     attrs.update({"r0": r0, "h0": h0, "aspect_ratio": args.aspect_ratio, "solid_fraction": fraction,
                   "gravity": float(source.attrs.get("gravity", 9.81)),
-                  "packing_wall_time": float(source.attrs.get("wall_time", np.nan))})
+                  "packing_wall_time": float(source.attrs.get("wall_time", np.nan)),
+                  "packing_cpu_time": float(source.attrs.get("cpu_time", np.nan))})
     extra = {} if forces is None else io.contact_force_variables(forces.subset(kept))
     io.write_state(args.output, column, attrs, extra)
     log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
@@ -176,7 +179,7 @@ def collapse(args):
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)
     backends = Counter(d.solver_backend for d in run.diagnostics)
-    log.info("collapse done: %d steps in %.1f s (%s)", len(run.diagnostics), run.wall_time,
+    log.info("collapse done: %d steps in %.1f s (CPU %.1f s; %s)", len(run.diagnostics), run.wall_time, run.cpu_time,
              ", ".join(f"{count} by {name}" for name, count in sorted(backends.items())))
     if settings.friction_law == "coulomb":
         programs = [d.friction_iterations for d in run.diagnostics]

@@ -24,8 +24,9 @@ STATE_FIELDS = ("position", "velocity", "angular_velocity")
 WARM_FIELDS = ("i", "j", "family", "force", "rolling")
 
 
-def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed):
-    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed)
+def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed, cpu=float("nan")):
+    """A collapse after its last step: `elapsed` and `cpu`, the wall and CPU seconds spent so far."""
+    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed, cpu)
     arrays["frame_step"] = np.array([k for k, _ in frames], dtype=np.int64)
     arrays["frame_time"] = np.array([f.time for _, f in frames])
     for name in STATE_FIELDS:
@@ -37,30 +38,30 @@ def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapse
 
 
 def load_checkpoint(path, fingerprint):
-    """The saved run ({state, frames, diagnostics, carry, elapsed}) if `path` holds a checkpoint of
+    """The saved run ({state, frames, diagnostics, carry, elapsed, cpu}) if `path` holds a checkpoint of
     this fingerprint; None (with a warning) for another run's or an unreadable file."""
     return _read(path, fingerprint, _restore)
 
 
-def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed):
+def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed, cpu=float("nan")):
     """A packing in the middle of a cloud: `state` (all spheres placed), the forces by pair `warm`
     (WarmStart in the numbering of `state`, or None) and the detection `margin` (None: the base
     one) that the next step starts from, and `loop`: the filling loop's arrays and numbers
-    (name -> array, bool, int, float or str)."""
-    arrays = _common_arrays(fingerprint, state, warm, margin, elapsed)
+    (name -> array, bool, int, float or str); `elapsed` and `cpu`: the wall and CPU seconds spent so far."""
+    arrays = _common_arrays(fingerprint, state, warm, margin, elapsed, cpu)
     for name, value in loop.items():
         arrays[f"loop_{name}"] = np.asarray(value)
     _write(path, arrays)
 
 
 def load_packing_checkpoint(path, fingerprint):
-    """The saved packing ({state, warm, margin, loop, elapsed}) if `path` holds a packing checkpoint
+    """The saved packing ({state, warm, margin, loop, elapsed, cpu}) if `path` holds a packing checkpoint
     of this fingerprint; None (with a warning) otherwise. loop's values come back as numpy arrays
     (0-d for numbers and text)."""
     def restore(arrays):
         state, warm, margin = _common_of(arrays)
         loop = {name[len("loop_"):]: value for name, value in arrays.items() if name.startswith("loop_")}
-        return {"state": state, "warm": warm, "margin": margin, "loop": loop, "elapsed": float(arrays["elapsed"])}
+        return {"state": state, "warm": warm, "margin": margin, "loop": loop, **_spent(arrays)}
     return _read(path, fingerprint, restore)
 
 
@@ -96,13 +97,14 @@ def _restore(arrays) -> dict:
     diagnostics = [StepDiagnostics(**{name: columns[name][k] for name in fields})
                    for k in range(len(columns["step"]))]
     return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": Carry(warm, margin),
-            "elapsed": float(arrays["elapsed"])}
+            **_spent(arrays)}
 
 
-def _common_arrays(fingerprint, state, warm, margin, elapsed) -> dict:
+def _common_arrays(fingerprint, state, warm, margin, elapsed, cpu) -> dict:
     """What both checkpoints hold: the fingerprint, the state, the forces by pair (if any) and the
-    detection margin (NaN for None) the next step starts from, the seconds spent."""
-    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "radius": state.radius,
+    detection margin (NaN for None) the next step starts from, the wall and CPU seconds spent."""
+    arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "cpu": np.array(cpu),
+              "radius": state.radius,
               "density": np.array(state.density), "state_time": np.array(state.time),
               "margin": np.array(np.nan if margin is None else margin)}
     for name in STATE_FIELDS:
@@ -111,6 +113,12 @@ def _common_arrays(fingerprint, state, warm, margin, elapsed) -> dict:
         for name in WARM_FIELDS:
             arrays[f"warm_{name}"] = getattr(warm, name)
     return arrays
+
+
+def _spent(arrays) -> dict:
+    """{elapsed, cpu}: the wall and CPU seconds a checkpoint's run had taken (cpu NaN for a checkpoint
+    written before it was saved)."""
+    return {"elapsed": float(arrays["elapsed"]), "cpu": float(arrays["cpu"]) if "cpu" in arrays else float("nan")}
 
 
 def _common_of(arrays) -> tuple:

@@ -68,7 +68,8 @@ def trajectory_dataset(run, h0: float, r0: float, settings, attrs: dict) -> xr.D
                           "dt": settings.time_step(h0),
                           "duration": settings.scaled_time(len(run.diagnostics)),
                           "n_steps": len(run.diagnostics),
-                          "wall_time": run.wall_time, "density": float(run.initial.density)})
+                          "wall_time": run.wall_time, "cpu_time": run.cpu_time,
+                          "density": float(run.initial.density)})
     if settings.friction_law == "coulomb":   # the fixed point's stopping rule, mean diameters
         dataset.attrs["friction_tolerance"] = settings.friction_tolerance
     if settings.max_duration is not None:   # the run went on towards rest: how far (whether: at_rest)

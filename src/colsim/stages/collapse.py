@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_checkpoint, save_checkpoint
 from .analyse import measure_deposit
+from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,8 @@ class CollapseSettings:
 @dataclass
 class CollapseRun:
     """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step);
-    at_rest: whether the deposit was found at rest (None: not checked, no max_duration)."""
+    at_rest: whether the deposit was found at rest (None: not checked, no max_duration);
+    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown)."""
 
     initial: ParticleState
     frames: list
@@ -115,6 +116,7 @@ class CollapseRun:
     wall_time: float
     resumed_from: int = 0
     at_rest: bool | None = None
+    cpu_time: float = float("nan")
 
 
 def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> bool:
@@ -158,14 +160,13 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
     saved = load_checkpoint(checkpoint, fingerprint)
     if saved:
-        state, frames, diagnostics, carry, elapsed = (saved[k] for k in
-                                                      ("state", "frames", "diagnostics", "carry", "elapsed"))
+        state, frames, diagnostics, carry = (saved[k] for k in ("state", "frames", "diagnostics", "carry"))
+        clock = Stopwatch(saved["elapsed"], saved["cpu"])
         log.info("resuming from the checkpoint at step %d", len(diagnostics))
     else:
-        state, frames, diagnostics, elapsed = column.copy(), [(0, column.copy())], [], 0.0
+        state, frames, diagnostics, clock = column.copy(), [(0, column.copy())], [], Stopwatch()
         carry = Carry(warm_start if solver.uses_warm_start else None)
     resumed_from = len(diagnostics)
-    start = time.perf_counter() - elapsed
     rest_check = settings.max_duration is not None
     time_scale = np.sqrt(h0 / settings.gravity)
     history = [_deposit(s, time_scale) for _, s in frames] if rest_check else []
@@ -186,10 +187,10 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
                 break
         if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
             save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
-                             time.perf_counter() - start)
+                             clock.wall(), clock.cpu())
         if stop_after is not None and k - resumed_from >= stop_after:
             break
-    return CollapseRun(column, frames, diagnostics, time.perf_counter() - start, resumed_from, at_rest)
+    return CollapseRun(column, frames, diagnostics, clock.wall(), resumed_from, at_rest, clock.cpu())
 
 
 def _at_rest(history, diagnostics, column, settings) -> bool:

@@ -37,6 +37,7 @@ from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint
 from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
+from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +53,8 @@ CLOUD_SOLID_FRACTION = 0.64
 class PackingResult:
     """The settled packing and what it took. solid_fraction: of the column up to `height`.
     contact_forces: the last step's contact forces (to warm-start what comes next). clouds: how
-    many clouds were poured; most_fixed: the most spheres fixed at once while filling."""
+    many clouds were poured; most_fixed: the most spheres fixed at once while filling.
+    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown)."""
 
     state: ParticleState
     height: float
@@ -62,6 +64,7 @@ class PackingResult:
     contact_forces: WarmStart
     clouds: int = 1
     most_fixed: int = 0
+    cpu_time: float = float("nan")
 
 
 def lattice_layer(r0: float, spacing: float) -> np.ndarray:
@@ -212,14 +215,14 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     saved = load_packing_checkpoint(checkpoint, fingerprint)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
     fixed = np.zeros(0, dtype=bool)
-    start, steps, warm = time.perf_counter(), 0, None
+    clock, steps, warm = Stopwatch(), 0, None
     clouds, most_fixed = 0, 0
     if saved:
         loop = saved["loop"]
         state, warm, fixed = saved["state"], saved["warm"], loop["fixed"].astype(bool)
         steps, clouds, most_fixed = int(loop["steps"]), int(loop["clouds"]), int(loop["most_fixed"])
         rng.bit_generator.state = json.loads(str(loop["rng"]))
-        start -= saved["elapsed"]
+        clock = Stopwatch(saved["elapsed"], saved["cpu"])
         log.info("resuming the packing from its checkpoint at step %d (cloud %d, %d spheres)", steps, clouds, state.n)
     while saved or column_height(state) < height:
         if saved:   # the cloud the checkpoint was written in
@@ -251,7 +254,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                         "rng": json.dumps(rng.bit_generator.state), "last": last, "energy": energy,
                         "supports": supports}
                 save_packing_checkpoint(checkpoint, fingerprint, placed, forces, margin, loop,
-                                        time.perf_counter() - start)
+                                        clock.wall(), clock.cpu())
         try:
             state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress,
                                          resume, save, checkpoint_every)
@@ -268,8 +271,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
-                         steps, time.perf_counter() - start,
-                         warm, clouds, most_fixed)
+                         steps, clock.wall(), warm, clouds, most_fixed, clock.cpu())
 
 
 def _fingerprint(rng: np.random.Generator, solver: Solver, **settings) -> str:
