@@ -105,3 +105,24 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
         np.testing.assert_array_equal(getattr(resumed.contact_forces, name), getattr(whole.contact_forces, name))
     other = pack(1.0, 1.2, np.random.default_rng(12), AutoSolver(), **options, checkpoint=checkpoint)
     assert other.state.n != whole.state.n or not np.array_equal(other.state.position, whole.state.position)
+
+
+def test_a_slow_packing_writes_its_checkpoint_by_the_clock_too(tmp_path, monkeypatch):
+    """With checkpoint_every beyond the packing's steps, a checkpoint still comes when
+    CHECKPOINT_INTERVAL_S has passed (here 0 s: at every step), and the packing killed after 23
+    steps resumes from it to the same packing as one never stopped."""
+    from colsim.stages import stopwatch
+
+    options = {"dt": 0.04, "rest_energy": 0.05}
+    whole = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options)
+    monkeypatch.setattr(stopwatch, "CHECKPOINT_INTERVAL_S", 0.0)
+    checkpoint = tmp_path / "pack.checkpoint"
+    with pytest.raises(_Killed):
+        pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
+             checkpoint_every=10**6, progress=_killed_after(23))
+    with np.load(checkpoint) as saved:
+        assert int(saved["loop_steps"]) == 22     # the last step before the kill
+    resumed = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
+                   checkpoint_every=10**6)
+    assert resumed.steps == whole.steps
+    np.testing.assert_array_equal(resumed.state.position, whole.state.position)

@@ -4,6 +4,7 @@ from how fast this machine is."""
 import math
 import time
 
+from colsim.stages import stopwatch
 from colsim.stages.stopwatch import Stopwatch
 
 
@@ -19,3 +20,11 @@ def test_a_fresh_stopwatch_starts_at_zero_and_an_unknown_cpu_time_stays_unknown(
     fresh = Stopwatch()
     assert 0.0 <= fresh.wall() and 0.0 <= fresh.cpu()
     assert math.isnan(Stopwatch(wall=5.0, cpu=float("nan")).cpu())
+
+
+def test_a_checkpoint_is_due_at_its_step_or_after_the_interval(monkeypatch):
+    clock = Stopwatch()
+    monkeypatch.setattr(stopwatch, "CHECKPOINT_INTERVAL_S", 1e9)
+    assert clock.checkpoint_due(True) and not clock.checkpoint_due(False)
+    monkeypatch.setattr(stopwatch, "CHECKPOINT_INTERVAL_S", 0.0)   # any wall time since the last is enough
+    assert clock.checkpoint_due(False)

@@ -9,8 +9,9 @@ reaches max_duration, whichever comes first. At rest: the final height and run-o
 and the kinetic energy (translational and rotational) is below rest_energy times its peak. The
 energy test is needed: grains at the edge join the main mass in jumps, a time unit or more apart.
 Frames (state every `frame_every` steps, and the first and last) and per-step diagnostics are kept.
-A checkpoint is written every `checkpoint_every` steps (atomically); a run started again with the
-same inputs resumes from it and ends with the same result as an uninterrupted run.
+A checkpoint is written every `checkpoint_every` steps (atomically), and after 10 minutes of wall
+time without one (:data:`colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S`); a run started again with
+the same inputs resumes from it and ends with the same result as an uninterrupted run.
 """
 from __future__ import annotations
 
@@ -185,7 +186,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
             at_rest = k >= settings.n_steps and _at_rest(history, diagnostics, column, settings)
             if at_rest:
                 break
-        if checkpoint is not None and (k % settings.checkpoint_every == 0) and k < last:
+        if checkpoint is not None and k < last and clock.checkpoint_due(k % settings.checkpoint_every == 0):
             save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
                              clock.wall(), clock.cpu())
         if stop_after is not None and k - resumed_from >= stop_after:

@@ -187,7 +187,8 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     fixed step until :func:`is_at_rest` (the fixed ones were at rest when fixed). The forces
     handed on are the last step's, and between fixed spheres those of when they last moved.
 
-    checkpoint: a file written every `checkpoint_every` steps (atomically); a packing started again
+    checkpoint: a file written every `checkpoint_every` steps and after
+    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of wall time without one (atomically); a packing started again
     with the same inputs, settings and generator state resumes from it and ends with the same
     packing as one never stopped. None: no checkpoint."""
     d_min, d_max = diameter_range
@@ -257,7 +258,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                                         clock.wall(), clock.cpu())
         try:
             state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress,
-                                         resume, save, checkpoint_every)
+                                         resume, save, checkpoint_every, clock)
         except SolverError as error:
             if not fixed.any():
                 raise
@@ -266,7 +267,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
             log.warning("%s; settling this cloud again with nothing fixed", error)
             fixed[:] = False
             state, warm, steps = _settle(state, fixed, settings, solver, warm, error.step or steps,
-                                         max_steps, energy, progress, None, save, checkpoint_every)
+                                         max_steps, energy, progress, None, save, checkpoint_every, clock)
     state.velocity[:] = 0.0
     state.angular_velocity[:] = 0.0
     state.time = 0.0
@@ -295,7 +296,8 @@ def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarra
 
 def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
             warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress,
-            resume: dict | None = None, save=None, save_every: int = CHECKPOINT_EVERY):
+            resume: dict | None = None, save=None, save_every: int = CHECKPOINT_EVERY,
+            clock: Stopwatch | None = None):
     """Step the spheres not `fixed` ((n,) bool) on the fixed ones until :func:`is_at_rest` with
     rest_energy. warm: forces by pair in the numbering of `state` (None: cold). Returns the new
     state, the forces by pair (numbering of `state`: the last step's, and those of pairs of fixed
@@ -303,7 +305,9 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
 
     resume: {supports, margin} of a cloud resumed from a checkpoint (the fixed spheres it settles
     on, and the detection margin its next step starts from); save: optional callable(state, warm,
-    margin, steps, supports), called every `save_every` steps with the whole packing."""
+    margin, steps, supports), called every `save_every` steps with the whole packing, and when
+    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of `clock`'s wall time passed since the last."""
+    clock = clock or Stopwatch()
     moving = np.flatnonzero(~fixed)
     if resume is None:
         below = state.position[moving, 2] - state.radius[moving]
@@ -328,7 +332,7 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
                      steps, sub.n, d.n_contacts, d.kinetic_energy + d.rotational_energy, d.solve_time)
         if is_at_rest(result, gravity, rest_energy):
             break
-        if save is not None and steps % save_every == 0:
+        if save is not None and clock.checkpoint_due(steps % save_every == 0):
             forces = _number_back(WarmStart.from_step(result.contacts, result.solution.forces), moving, supports)
             save(_place(state, moving, sub), _merge(_between_fixed(warm, fixed), forces),
                  result.carry.margin, steps, supports)

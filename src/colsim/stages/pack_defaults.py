@@ -12,5 +12,6 @@ DEFAULT_MAX_SPHERES = 500_000
 LAYER_HEIGHT = None
 FREEZE_DEPTH = 3.5
 #: a packing writes its checkpoint every this many steps (an r0 = 4 pour's steps take 3-4 s of CPU,
-#: so at most about 100 s of work is lost to a killed job)
+#: so at most about 100 s of work is lost to a killed job), and after 10 minutes without one
+#: (colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S: an r0 = 6 pour's steps take up to a minute)
 CHECKPOINT_EVERY = 25
