@@ -1,7 +1,11 @@
 """colsim.study.workflow.commands: a run's command-line options and cluster resources, from its settings."""
 from __future__ import annotations
 
-from colsim.study.workflow.commands import collapse_options, collapse_priority, collapse_runtime, numbers
+import pytest
+
+from colsim.study.workflow.commands import (PACK_REFERENCE_S, PACK_REFERENCE_SPHERES, collapse_options,
+                                            collapse_priority, collapse_runtime, numbers, pack_resources,
+                                            spheres_of)
 from test_study_plan import study_config
 from colsim.study.workflow.plan import StudyPlan
 
@@ -34,3 +38,20 @@ def test_a_runs_time_limit_and_priority_come_from_its_settings():
     assert collapse_runtime(plan.run_settings(0.12, 100, 4.0, "coulomb"), length) == 1440
     assert collapse_priority(0.5, plan.run_settings(0, 100, 4.0, "associated"), length) == 5
     assert collapse_priority(2.0, plan.run_settings(0, 200, 4.0, "associated"), length) == 40
+
+
+def test_a_big_columns_jobs_ask_for_time_and_memory_by_its_size():
+    """Up to the measured r0 = 4 the limits are the flat ones; above, they grow with the spheres:
+    a pour twice the reference's spheres gets 4x twice its time (N^2, slower cores), a collapse of
+    twice the spheres 2^1.43 its base; nothing asks for more than 48 hours."""
+    plan = StudyPlan(study_config())
+    run, length = plan.run_settings(0.12, 100, 4.0, "associated"), plan.length
+    assert spheres_of(4, 20, (0.25, 0.5)) == pytest.approx(PACK_REFERENCE_SPHERES, rel=0.01)
+    assert pack_resources(3_000) == {"runtime": 120, "mem_mb": 4000}
+    doubled = pack_resources(2 * PACK_REFERENCE_SPHERES)
+    assert doubled["runtime"] == pytest.approx(2 * 4 * PACK_REFERENCE_S / 60, abs=1)
+    assert doubled["mem_mb"] == pytest.approx(2 * 2 * 1_561 * PACK_REFERENCE_SPHERES / 22_330, abs=1)
+    assert pack_resources(1e7)["runtime"] == 2880
+    assert collapse_runtime(run, length, 10_000) == 120
+    assert collapse_runtime(run, length, 2 * 20_400) == pytest.approx(120 * 2**1.43, abs=1)
+    assert collapse_runtime(plan.run_settings(0.12, 100, 4.0, "coulomb"), length, 1e7) == 2880

@@ -378,7 +378,9 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
     planned = set(planned_outputs(result))
     assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
     # a Coulomb run's cluster time limit comes from its settings: 24 h against 2 h
-    limits = [line for line in result.stdout.splitlines() if "runtime=" in line and "mem_mb=4000" in line]
+    blocks = result.stdout.split("\nrule ")
+    limits = [line for block in blocks if block.startswith("collapse:")
+              for line in block.splitlines() if "runtime=" in line and "mem_mb=4000" in line]
     assert sum("runtime=1440" in line for line in limits) == 9 and sum("runtime=120" in line for line in limits) == 9
     (directory / "coulomb.yaml").write_text("friction_law: coulomb\n")
     alone = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
@@ -468,7 +470,7 @@ def test_a_tiny_convergence_study_runs_end_to_end(tiny_study):
 def test_the_slurm_profile_names_only_rules_that_exist(tmp_path):
     """Every rule the SLURM profile sizes exists (one collapse rule serves every run; its time limit
     comes from the run's settings, test_the_friction_law_study_plans_both_laws), and the rules that
-    simulate are sized there or in the rule."""
+    simulate are sized there or in the rule (pack and collapse in theirs, by the column's size)."""
     directory = copy_workflow(tmp_path)
     listed = snakemake(directory, "--list-rules", timeout=120)
     assert listed.returncode == 0, listed.stderr[-3000:]
@@ -476,7 +478,8 @@ def test_the_slurm_profile_names_only_rules_that_exist(tmp_path):
     profile = yaml.safe_load((ROOT / "workflow" / "profiles" / "slurm" / "config.yaml").read_text())
     resources = profile["set-resources"]
     assert set(resources) <= rules
-    assert {"pack", "analyse"} <= set(resources) and "collapse" in rules
+    assert "analyse" in resources and {"pack", "collapse"} <= rules
+    assert not {"pack", "collapse"} & set(resources)   # the profile would override the rules' sizing
 
 
 def plan_two_studies(tmp_path, other: str):

@@ -65,9 +65,23 @@ convergence_outputs = PLAN.convergence_outputs
 friction_law_outputs = PLAN.friction_law_outputs
 
 
+DIAMETERS = (config["diameter_min"], config["diameter_max"])
+
+
 def collapse_runtime(wildcards):
-    """A collapse's time limit on a cluster (minutes), from its run's settings (commands.py)."""
-    return commands.collapse_runtime(run_of(wildcards), PLAN.length)
+    """A collapse's time limit on a cluster (minutes), from its run's settings and its column's
+    size (commands.py)."""
+    spheres = commands.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
+    return commands.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
+
+
+def pack_resource(name):
+    """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (commands.py)."""
+    def resource(wildcards):
+        packing = packing_of(wildcards)
+        spheres = commands.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+        return commands.pack_resources(spheres)[name]
+    return resource
 
 
 def collapse_priority(wildcards):

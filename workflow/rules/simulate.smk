@@ -31,6 +31,9 @@ rule pack:
         f"{PACKING_DIR}/packing.nc",
     priority: 1000
     threads: config["pack"]["threads"]
+    resources:
+        mem_mb=pack_resource("mem_mb"),
+        runtime=pack_resource("runtime"),
     params:
         r0=lambda wildcards: fmt(packing_of(wildcards)["r0"]),
         seed=lambda wildcards: packing_of(wildcards)["seed"],

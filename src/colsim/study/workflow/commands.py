@@ -3,6 +3,8 @@ from a packing's or a run's settings (plan.py): a value is formatted once, here,
 the command line, and never read back from a folder's name."""
 from __future__ import annotations
 
+import numpy as np
+
 from .plan import fmt
 
 
@@ -29,17 +31,52 @@ def collapse_options(run: dict) -> str:
     return options
 
 
-def collapse_runtime(run: dict, study_length: tuple[int, float]) -> int:
-    """A collapse's time limit on a cluster (minutes; SLURM's runtime), from its settings and the
-    study's (steps, end time), by config/paper.yaml's measured jobs (r0 = 4,
-    docs/validation/paper-scale.md): 623 s to rest at a = 5 and 773 s at mu_r = 0
-    (t/sqrt(h0/g) = 12), so 120 at the study's length; 300 for more steps or a later end (a
-    convergence study's 2,000 steps cost twice); 1440 under the Coulomb law (8-18x the CPU). A
+#: Cluster sizing by the column's spheres, from one-thread jobs on this project's 2-core machine
+#: (docs/performance.md): the r0 = 4, a = 5 collapse to rest (20,400 spheres) 623 s of CPU, growing
+#: N^1.43; the one-cloud r0 = 4 pour for a = 5 (22,022 spheres) 2,190 s of wall, growing about N^2
+#: from r0 = 3 (9,477 spheres, 360-378 s); its peak memory at most 1,561 MB for 22,330 spheres.
+#: Times are doubled for slower cores and memory for safety. A job that runs out of time resumes
+#: from its checkpoint (the SLURM profile's retries); none asks for more than LONGEST_RUNTIME.
+COLLAPSE_REFERENCE_SPHERES, COLLAPSE_GROWTH = 20_400, 1.43
+PACK_REFERENCE_SPHERES, PACK_REFERENCE_S, PACK_GROWTH = 22_000, 2_190.0, 2.0
+PACK_MB_PER_SPHERE = 2 * 1_561 / 22_330
+SLOWER_CORES = 2.0
+LONGEST_RUNTIME = 2880   # minutes: 48 hours, a common partition's limit
+
+
+def collapse_runtime(run: dict, study_length: tuple[int, float], spheres: float = 0.0) -> int:
+    """A collapse's time limit on a cluster (minutes; SLURM's runtime), from its settings, the
+    study's (steps, end time) and about how many spheres its column holds, by config/paper.yaml's
+    measured jobs (r0 = 4, docs/validation/paper-scale.md): 623 s to rest at a = 5 and 773 s at
+    mu_r = 0 (t/sqrt(h0/g) = 12), so 120 at the study's length; 300 for more steps or a later end
+    (a convergence study's 2,000 steps cost twice); 1440 under the Coulomb law (8-18x the CPU);
+    each times (spheres / 20,400)^1.43 for a column larger than r0 = 4, a = 5's (at most 48 h). A
     collapse that runs out of time resumes from its checkpoint (the profile's retries)."""
     if run["friction_law"] == "coulomb":
-        return 1440
-    longer = run["steps"] > study_length[0] or run["duration"] > study_length[1]
-    return 300 if longer else 120
+        base = 1440
+    else:
+        longer = run["steps"] > study_length[0] or run["duration"] > study_length[1]
+        base = 300 if longer else 120
+    larger = max(1.0, spheres / COLLAPSE_REFERENCE_SPHERES) ** COLLAPSE_GROWTH
+    return min(LONGEST_RUNTIME, int(np.ceil(base * larger)))
+
+
+def spheres_of(r0: float, height: float, diameter_range) -> float:
+    """About how many spheres a pour of radius r0 to `height` (lengths) holds: the pack stage's
+    own count of its cloud (imported here, when a job's resources are asked for)."""
+    from colsim.stages.pack import expected_spheres
+
+    return float(expected_spheres(float(r0), float(height), diameter_range))
+
+
+def pack_resources(spheres: float) -> dict:
+    """A packing's time limit (minutes) and memory (MB) on a cluster for a pour of about `spheres`
+    (colsim.stages.pack.expected_spheres): twice the r0 = 4 pour's 2,190 s grown as N^2, at least
+    120 minutes and at most 48 hours; twice its 70 kB a sphere, at least 4,000 MB. r0 = 6, a = 5
+    (about 73,000 spheres): 807 minutes, 10,226 MB."""
+    seconds = SLOWER_CORES * PACK_REFERENCE_S * (spheres / PACK_REFERENCE_SPHERES) ** PACK_GROWTH
+    runtime = min(LONGEST_RUNTIME, max(120, int(np.ceil(seconds / 60))))
+    return {"runtime": runtime, "mem_mb": max(4000, int(np.ceil(PACK_MB_PER_SPHERE * spheres)))}
 
 
 def collapse_priority(a: float, run: dict, study_length: tuple[int, float]) -> int:
