@@ -179,7 +179,8 @@ def collapse(args):
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)
     backends = Counter(d.solver_backend for d in run.diagnostics)
-    log.info("collapse done: %d steps in %.1f s (CPU %.1f s; %s)", len(run.diagnostics), run.wall_time, run.cpu_time,
+    log.info("collapse done: %d steps in %.1f s (CPU %.1f s; %s)", len(run.diagnostics), run.wall_time,
+             run.cpu_time,
              ", ".join(f"{count} by {name}" for name, count in sorted(backends.items())))
     if settings.friction_law == "coulomb":
         programs = [d.friction_iterations for d in run.diagnostics]

@@ -188,9 +188,9 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     handed on are the last step's, and between fixed spheres those of when they last moved.
 
     checkpoint: a file written every `checkpoint_every` steps and after
-    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of wall time without one (atomically); a packing started again
-    with the same inputs, settings and generator state resumes from it and ends with the same
-    packing as one never stopped. None: no checkpoint."""
+    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of wall time without one (atomically);
+    a packing started again with the same inputs, settings and generator state resumes from it and
+    ends with the same packing as one never stopped. None: no checkpoint."""
     d_min, d_max = diameter_range
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {diameter_range}")
