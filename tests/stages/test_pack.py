@@ -26,8 +26,9 @@ def test_packing_is_settled_tall_enough_and_dense(packing):
 
 def test_friction_while_filling_packs_looser():
     """pack(mu = 0.5) against the paper's mu = 0, same cloud (r0 = 1, 200 spheres, auto: APGD):
-    measured 0.576 and 0.534 (0.566 and 0.529 with the 180 spheres of clouds sized at 0.58). Friction holds grains where they first touch, so the solid fraction
-    must drop; by at least 0.02 (seeds 1-4 gave 0.566-0.571 without friction, 0.521-0.533 with)."""
+    measured 0.576 and 0.534 (0.566 and 0.529 with the 180 spheres of clouds sized at 0.58).
+    Friction holds grains where they first touch, so the solid fraction must drop; by at least
+    0.02 (seeds 1-4 gave 0.566-0.571 without friction, 0.521-0.533 with)."""
     fractions = [pack(1.0, 2.0, np.random.default_rng([1, 0]), AutoSolver(apgd={"tolerance": 1e-3}), mu=mu)
                  .solid_fraction for mu in (0.0, 0.5)]
     assert fractions[1] < fractions[0] - 0.02

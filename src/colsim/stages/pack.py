@@ -153,10 +153,16 @@ def mean_sphere_volume(diameter_range) -> float:
     return np.pi / 6.0 * d_max**3
 
 
+def cloud_spheres(r0: float, thickness: float, diameter_range) -> float:
+    """How many spheres a cloud holds that is to settle into `thickness` (length) of the cylinder of
+    radius r0: CLOUD_SOLID_FRACTION of that volume."""
+    return CLOUD_SOLID_FRACTION * np.pi * r0**2 * thickness / mean_sphere_volume(diameter_range)
+
+
 def expected_spheres(r0: float, height: float, diameter_range) -> float:
-    """How many spheres the pour of radius r0 to height `height` creates: one cloud of
-    CLOUD_SOLID_FRACTION of the cylinder, two largest diameters taller."""
-    return CLOUD_SOLID_FRACTION * np.pi * r0**2 * (height + 2 * diameter_range[1]) / mean_sphere_volume(diameter_range)
+    """How many spheres the pour of radius r0 to height `height` creates: one cloud for the
+    height and two largest diameters more (:func:`cloud_spheres`)."""
+    return cloud_spheres(r0, height + 2 * diameter_range[1], diameter_range)
 
 
 #: A layer has landed (the next cloud may come) at the rest criterion with this many times
@@ -209,7 +215,6 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
         raise ValueError(f"the packing of r0 = {r0:g} to height {height:g} would hold about {expected:,.0f} "
                          f"spheres (diameters {d_min:g}-{d_max:g}), above the bound of {max_spheres:,} "
                          "(raise it with --max-spheres, or pack.max_spheres in a study)")
-    mean_volume = mean_sphere_volume(diameter_range)
     fingerprint = _fingerprint(rng, solver, r0=r0, height=height, diameter_range=diameter_range,
                                density=density, gravity=gravity, dt=dt, rest_energy=rest_energy,
                                max_steps=max_steps, mu=mu, layer_height=layer_height, freeze_depth=freeze_depth)
@@ -237,7 +242,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
             missing = height + 2 * d_max - surface
             last = layer_height is None or missing <= layer_height + 2 * d_max
             thickness = missing if last else layer_height
-            n_new = int(np.ceil(CLOUD_SOLID_FRACTION * np.pi * r0**2 * thickness / mean_volume))
+            n_new = int(np.ceil(cloud_spheres(r0, thickness, diameter_range)))
             z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
             if layer_height is not None:
                 fixed |= _buried_at_rest(state, surface - freeze_depth, gravity, rest_energy)
