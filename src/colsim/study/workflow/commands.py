@@ -39,8 +39,8 @@ def collapse_options(run: dict) -> str:
 #: from its checkpoint (the SLURM profile's retries); none asks for more than LONGEST_RUNTIME.
 #: Measured since, in the column-size study (paper's lever, one thread): the r0 = 4 pours 1,757-1,881 s
 #: of CPU (N^1.92 from r0 = 3), the a = 5 collapses to rest 1,084-1,214 s (N^1.89). The 120-minute base
-#: is 6x those collapses, so at N^1.43 it still covers their N^1.89 up to r0 = 8 (2,437 minutes
-#: asked against about 2,030 estimated with the factor 2); the pour's 2,190 s at N^2 stays above both.
+#: is 6x those collapses, so at N^1.43 it still covers their N^1.89 up to r0 = 8 (2,530 minutes
+#: asked against 2,170-2,300 estimated with the factor 2); the pour's 2,190 s at N^2 stays above both.
 COLLAPSE_REFERENCE_SPHERES, COLLAPSE_GROWTH = 20_400, 1.43
 PACK_REFERENCE_SPHERES, PACK_REFERENCE_S, PACK_GROWTH = 22_000, 2_190.0, 2.0
 PACK_MB_PER_SPHERE = 2 * 1_561 / 22_330
