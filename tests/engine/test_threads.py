@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from colsim.engine.threads import use_threads
+from colsim.engine.threads import pins_threads, use_threads
 
 TESTS = Path(__file__).resolve().parents[1]   # tests/, where solver_cases.py is
 
@@ -85,3 +85,56 @@ def test_the_collapse_command_runs_on_threads_and_records_them(tmp_path):
         "--output", "collapse.nc")
     config = json.loads(xr.load_dataset(tmp_path / "collapse.nc").attrs["config"])
     assert config["threads"] == 2 and config["input_config"]["input_config"]["threads"] == 2
+
+
+def test_threads_are_pinned_only_when_they_fill_the_jobs_cpus():
+    """Pinned one to a CPU when the threads are as many as the CPUs the job may use; never one
+    thread (two one-thread jobs would both sit on the first CPU), never fewer threads than CPUs
+    (another job may need the rest), never over the user's own OpenMP binding."""
+    assert pins_threads(2, 2, {}) and pins_threads(16, 16, {})
+    assert not pins_threads(1, 1, {})
+    assert not pins_threads(2, 4, {})
+    assert not pins_threads(2, 2, {"OMP_PROC_BIND": "false"})
+    assert not pins_threads(2, 2, {"OMP_PLACES": "cores"})
+
+
+PIN_CHILD = """
+import os
+import numpy as np
+os.sched_setaffinity(0, {cpus!r})
+from colsim.engine.threads import use_threads
+from colsim.engine.compiled import numba, prange
+
+@numba.njit(parallel=True)
+def double(x):
+    out = np.empty_like(x)
+    for k in prange(len(x)):
+        out[k] = 2.0 * x[k]
+    return out
+
+use_threads(2)
+double(np.ones(1000))   # the threads start at the first parallel call
+single = set()
+for task in os.listdir("/proc/self/task"):
+    with open(f"/proc/self/task/{{task}}/status") as status:
+        allowed = next(line.split()[1] for line in status if line.startswith("Cpus_allowed_list"))
+    if allowed.isdigit():
+        single.add(int(allowed))
+print(os.environ.get("OMP_PROC_BIND"), ",".join(map(str, sorted(single))))
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2
+                    or not Path("/proc/self/task").exists(), reason="needs Linux and 2 CPUs")
+def test_two_threads_on_two_cpus_are_pinned_one_to_each():
+    """A process allowed 2 CPUs that asks for 2 threads runs them on one CPU each: the threads
+    pinned to a single CPU (their affinity in /proc) cover both CPUs."""
+    cpus = sorted(os.sched_getaffinity(0))[:2]
+    child = PIN_CHILD.format(cpus=set(cpus))
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_PROC_BIND", "OMP_PLACES")}
+    env["NUMBA_NUM_THREADS"] = "2"
+    done = subprocess.run([sys.executable, "-c", child], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    bound, pinned = done.stdout.split()[-2:]
+    assert bound == "true"
+    assert sorted(int(cpu) for cpu in pinned.split(",")) == cpus

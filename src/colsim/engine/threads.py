@@ -5,10 +5,16 @@ workflow sets from each rule's `threads:`). The APGD kernels split their loops o
 bodies across these threads and sum in as many fixed blocks, so a result depends on the thread
 count only through the order of those sums (rounding, far below the solver's tolerance), and one
 thread gives exactly the serial sums.
+
+A job whose threads are as many as the CPUs it may run on (a whole machine, or a cluster job's
+allocation) has them pinned one to a CPU (OpenMP's OMP_PROC_BIND=true), unless the user set
+OpenMP's binding: on the project's 2-core machine that took 2-thread collapses from 27.5-52.6 s of
+wall to 27.6-34.2 s (r0 = 2, a = 5, docs/performance.md, "Threads").
 """
 from __future__ import annotations
 
 import logging
+import os
 
 from .compiled import HAVE_NUMBA, numba, prange   # noqa: F401 - prange for the kernels' modules
 
@@ -21,9 +27,25 @@ def available_threads() -> int:
     return int(numba.config.NUMBA_NUM_THREADS) if HAVE_NUMBA else 1
 
 
+def pins_threads(count: int, cpus: int, environ) -> bool:
+    """Whether `count` threads on a process allowed `cpus` CPUs are pinned one to a CPU: only when
+    they fill those CPUs (so no other job of ours shares them) and `environ` sets no OpenMP binding
+    (OMP_PROC_BIND, OMP_PLACES) of its own."""
+    return 1 < count == cpus and "OMP_PROC_BIND" not in environ and "OMP_PLACES" not in environ
+
+
+def allowed_cpus() -> int:
+    """The CPUs this process may run on (its affinity; the machine's count where that is unknown)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:   # pragma: no cover - macOS and Windows have no affinity call
+        return os.cpu_count() or 1
+
+
 def use_threads(count: int) -> int:
     """Run the kernels on `count` threads (>= 1; at most :func:`available_threads`, with a warning
-    if more were asked). Returns the count in use."""
+    if more were asked), pinned one to a CPU where :func:`pins_threads` says so (it takes effect
+    when numba's OpenMP threads start, at the process's first call). Returns the count in use."""
     if int(count) != count or count < 1:
         raise ValueError(f"threads must be a whole number >= 1, got {count}")
     count = int(count)
@@ -31,6 +53,9 @@ def use_threads(count: int) -> int:
     if count > most:
         log.warning("%d threads asked, %d available: using %d", count, most, most)
         count = most
+    if HAVE_NUMBA and pins_threads(count, allowed_cpus(), os.environ):
+        os.environ["OMP_PROC_BIND"] = "true"
+        log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
     if HAVE_NUMBA:
         numba.set_num_threads(count)
     return count
