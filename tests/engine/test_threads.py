@@ -113,7 +113,7 @@ def double(x):
     return out
 
 use_threads(2)
-double(np.ones(1000))   # the threads start at the first parallel call
+double(np.ones(1000))   # a parallel call: the threads have surely started
 single = set()
 for task in os.listdir("/proc/self/task"):
     with open(f"/proc/self/task/{{task}}/status") as status:
