@@ -65,14 +65,11 @@ def machine() -> dict:
     except (ValueError, OSError, AttributeError):
         memory = None
     try:
-        usable = len(os.sched_getaffinity(0))
-    except AttributeError:
-        usable = os.cpu_count()
-    try:
         load = [round(x, 2) for x in os.getloadavg()]
     except OSError:
         load = None
-    return {"cpu": model, "cores": os.cpu_count(), "usable_cores": usable,
+    from colsim.engine.threads import allowed_cpus   # the CPUs this process may use, as colsim counts them
+    return {"cpu": model, "cores": os.cpu_count(), "usable_cores": allowed_cpus(),
             "memory_gib": None if memory is None else round(memory, 1), "load_average": load,
             "platform": platform.platform(), "hostname": platform.node()}
 

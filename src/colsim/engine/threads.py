@@ -53,10 +53,10 @@ def use_threads(count: int) -> int:
     if count > most:
         log.warning("%d threads asked, %d available: using %d", count, most, most)
         count = most
-    if HAVE_NUMBA and pins_threads(count, allowed_cpus(), os.environ):
-        os.environ["OMP_PROC_BIND"] = "true"
-        log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
     if HAVE_NUMBA:
+        if pins_threads(count, allowed_cpus(), os.environ):
+            os.environ["OMP_PROC_BIND"] = "true"
+            log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
         numba.set_num_threads(count)
     return count
 
