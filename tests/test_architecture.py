@@ -124,7 +124,7 @@ def test_the_rule_catches_an_upward_import(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("statement", [
-    "import colsim.io, colsim.io.trajectory, colsim.io.checkpoint, colsim.io.vtk",
+    "import colsim.io, colsim.io.trajectory, colsim.io.steps, colsim.io.checkpoint, colsim.io.vtk",
     "import colsim.cli; colsim.cli.build_parser().parse_args(['collapse', '--input', 'c.nc', '--output', 'o.nc'])",
     "import colsim.solvers.defaults, colsim.stages.pack_defaults",
 ])

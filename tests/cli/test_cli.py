@@ -57,6 +57,11 @@ def test_all_stages_through_the_cli(tmp_path):
                        ("collapse.nc", io.TRAJECTORY_KIND), ("analysis.nc", io.ANALYSIS_KIND)):
         assert_cf_units(io.open_dataset(tmp_path / name, kind))
     assert "scaled_time" in result.coords
+    # the packing's file holds each step of the pour: the energy that fell to rest, the solver's work
+    packing = io.open_dataset(tmp_path / "pack.nc", io.STATE_KIND)
+    assert len(packing.step) == packing.attrs["steps"] and int(packing.step[-1]) == packing.attrs["steps"]
+    assert packing.step_kinetic_energy.attrs["long_name"] and packing.step_solver_iterations.min() >= 0
+    assert float(packing.step_kinetic_energy[-1]) < float(packing.step_kinetic_energy.max())
     for name in ("h_inf_over_r0", "runout_over_r0", "solid_fraction", "final_to_peak_kinetic_energy"):
         assert np.isfinite(result[name].values), name
         assert "units" in result[name].attrs and "long_name" in result[name].attrs

@@ -7,7 +7,7 @@ import numpy as np
 from colsim.engine.records import Carry, StepDiagnostics
 from colsim.engine.state import ParticleState
 from colsim.engine.warm_start import WarmStart
-from colsim.io.checkpoint import load_checkpoint, save_checkpoint
+from colsim.io.checkpoint import load_checkpoint, load_packing_checkpoint, save_checkpoint, save_packing_checkpoint
 
 
 def _diagnostics(step: int) -> StepDiagnostics:
@@ -78,3 +78,20 @@ def test_a_checkpoint_without_cpu_time_resumes_with_it_unknown(tmp_path):
     saved = load_checkpoint(path, "abc")
     assert saved["elapsed"] == 12.5 and np.isnan(saved["cpu"])
     assert saved["diagnostics"] == diagnostics
+
+
+def test_a_packing_checkpoint_keeps_its_steps_diagnostics(tmp_path):
+    """A packing's checkpoint holds the diagnostics of its steps so far, so that the packing's file
+    has every step of a pour that spanned sittings; one written before it held them resumes with
+    none (the steps from the resumed one on)."""
+    state, _, diagnostics, _ = _run()
+    loop = {"steps": 2, "last": True}
+    path = tmp_path / "pack.npz"
+    save_packing_checkpoint(path, "abc", state, None, None, loop, 3.0, 4.0, diagnostics)
+    saved = load_packing_checkpoint(path, "abc")
+    assert saved["diagnostics"] == diagnostics and int(saved["loop"]["steps"]) == 2
+    with np.load(path) as archive:
+        arrays = {name: archive[name] for name in archive.files if not name.startswith("diagnostic_")}
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays)
+    assert load_packing_checkpoint(path, "abc")["diagnostics"] == []

@@ -104,6 +104,10 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
         np.testing.assert_array_equal(getattr(resumed.state, name), getattr(whole.state, name))
     for name in ("i", "j", "family", "force", "rolling"):
         np.testing.assert_array_equal(getattr(resumed.contact_forces, name), getattr(whole.contact_forces, name))
+    # every step's diagnostics, over both sittings, as the packing never stopped had them (wall times aside)
+    assert [d.step for d in resumed.diagnostics] == list(range(1, whole.steps + 1))
+    for name in ("time", "n_contacts", "kinetic_energy", "solver_iterations", "redone"):
+        assert [getattr(d, name) for d in resumed.diagnostics] == [getattr(d, name) for d in whole.diagnostics]
     other = pack(1.0, 1.2, np.random.default_rng(12), AutoSolver(), **options, checkpoint=checkpoint)
     assert other.state.n != whole.state.n or not np.array_equal(other.state.position, whole.state.position)
 

@@ -12,6 +12,7 @@ from ..stages import analyse as analysis
 from .. import io
 from ..engine.state import FRICTION_LAWS
 from ..engine.threads import use_threads
+from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
 from ..solvers.registry import make_solver
@@ -118,7 +119,8 @@ def pack(args):
                   "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
                   "gravity": args.gravity,
                   "clouds": result.clouds, "most_fixed": result.most_fixed})
-    io.write_state(args.output, result.state, attrs, io.contact_force_variables(result.contact_forces))
+    io.write_state(args.output, result.state, attrs,
+                   {**io.contact_force_variables(result.contact_forces), **step_variables(result.diagnostics)})
     checkpoint.unlink(missing_ok=True)
     log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s (CPU %.1f s)",
              result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time,

@@ -3,8 +3,8 @@ allow_pickle=False: loading one can run no code, and its fingerprint (the run's 
 settings) is compared before anything else in it is used. Written to a temporary name, then renamed.
 
 A collapse's holds the state, the frames so far, the steps' diagnostics, and the warm start and
-margin carried to the next step; a packing's, the state and what its filling loop carries
-(:func:`save_packing_checkpoint`).
+margin carried to the next step; a packing's, the state, the steps' diagnostics and what its filling
+loop carries (:func:`save_packing_checkpoint`).
 """
 from __future__ import annotations
 
@@ -31,9 +31,7 @@ def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapse
     arrays["frame_time"] = np.array([f.time for _, f in frames])
     for name in STATE_FIELDS:
         arrays[f"frame_{name}"] = np.stack([getattr(f, name) for _, f in frames])
-    for name in StepDiagnostics.__dataclass_fields__:
-        values = [getattr(d, name) for d in diagnostics]
-        arrays[f"diagnostic_{name}"] = np.array(values, dtype=str if name in TEXT_DIAGNOSTICS else None)
+    arrays.update(_diagnostic_arrays(diagnostics))
     _write(path, arrays)
 
 
@@ -43,25 +41,31 @@ def load_checkpoint(path, fingerprint):
     return _read(path, fingerprint, _restore)
 
 
-def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed, cpu=float("nan")):
+def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed, cpu=float("nan"),
+                            diagnostics=()):
     """A packing in the middle of a cloud: `state` (all spheres placed), the forces by pair `warm`
     (WarmStart in the numbering of `state`, or None) and the detection `margin` (None: the base
     one) that the next step starts from, and `loop`: the filling loop's arrays and numbers
-    (name -> array, bool, int, float or str); `elapsed` and `cpu`: the wall and CPU seconds spent so far."""
+    (name -> array, bool, int, float or str); `elapsed` and `cpu`: the wall and CPU seconds spent so
+    far; `diagnostics`: the StepDiagnostics of the steps so far."""
     arrays = _common_arrays(fingerprint, state, warm, margin, elapsed, cpu)
+    arrays.update(_diagnostic_arrays(diagnostics))
     for name, value in loop.items():
         arrays[f"loop_{name}"] = np.asarray(value)
     _write(path, arrays)
 
 
 def load_packing_checkpoint(path, fingerprint):
-    """The saved packing ({state, warm, margin, loop, elapsed, cpu}) if `path` holds a packing checkpoint
-    of this fingerprint; None (with a warning) otherwise. loop's values come back as numpy arrays
-    (0-d for numbers and text)."""
+    """The saved packing ({state, warm, margin, loop, diagnostics, elapsed, cpu}) if `path` holds a
+    packing checkpoint of this fingerprint; None (with a warning) otherwise. loop's values come back
+    as numpy arrays (0-d for numbers and text); diagnostics is empty for a checkpoint written before
+    packings kept them."""
     def restore(arrays):
         state, warm, margin = _common_of(arrays)
         loop = {name[len("loop_"):]: value for name, value in arrays.items() if name.startswith("loop_")}
-        return {"state": state, "warm": warm, "margin": margin, "loop": loop, **_spent(arrays)}
+        diagnostics = _diagnostics_of(arrays) if "diagnostic_step" in arrays else []
+        return {"state": state, "warm": warm, "margin": margin, "loop": loop, "diagnostics": diagnostics,
+                **_spent(arrays)}
     return _read(path, fingerprint, restore)
 
 
@@ -92,12 +96,22 @@ def _restore(arrays) -> dict:
     frames = [(int(k), ParticleState(*(arrays[f"frame_{name}"][n] for name in STATE_FIELDS), state.radius,
                                      state.density, float(arrays["frame_time"][n])))
               for n, k in enumerate(arrays["frame_step"])]
+    return {"state": state, "frames": frames, "diagnostics": _diagnostics_of(arrays), "carry": Carry(warm, margin),
+            **_spent(arrays)}
+
+
+def _diagnostic_arrays(diagnostics) -> dict:
+    """diagnostic_<field>: one array a field of StepDiagnostics, over the steps."""
+    return {f"diagnostic_{name}": np.array([getattr(d, name) for d in diagnostics],
+                                           dtype=str if name in TEXT_DIAGNOSTICS else None)
+            for name in StepDiagnostics.__dataclass_fields__}
+
+
+def _diagnostics_of(arrays) -> list:
+    """The StepDiagnostics saved by :func:`_diagnostic_arrays`."""
     fields = StepDiagnostics.__dataclass_fields__
     columns = {name: arrays[f"diagnostic_{name}"].tolist() for name in fields}
-    diagnostics = [StepDiagnostics(**{name: columns[name][k] for name in fields})
-                   for k in range(len(columns["step"]))]
-    return {"state": state, "frames": frames, "diagnostics": diagnostics, "carry": Carry(warm, margin),
-            **_spent(arrays)}
+    return [StepDiagnostics(**{name: columns[name][k] for name in fields}) for k in range(len(columns["step"]))]
 
 
 def _common_arrays(fingerprint, state, warm, margin, elapsed, cpu) -> dict:

@@ -6,18 +6,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..engine.records import TEXT_DIAGNOSTICS, StepDiagnostics
 from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate
-
-DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in TEXT_DIAGNOSTICS]
-
-#: long names of per-step diagnostics: the wall-clock times (s) apart from the simulation's time
-STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
-                   "detection_time": "wall-clock time of the step's contact detection",
-                   "assembly_time": "wall-clock time of the step's assembly",
-                   "setup_time": "wall-clock time of the solver's set-up in the step",
-                   "solve_time": "wall-clock time of the solver in the step",
-                   "wall_time": "wall-clock time of the step"}
+from .steps import step_variables
 
 
 def trajectory_dataset(run, h0: float, r0: float, settings, attrs: dict) -> xr.Dataset:
@@ -42,24 +32,13 @@ def trajectory_dataset(run, h0: float, r0: float, settings, attrs: dict) -> xr.D
         "frame_step": ("time", steps, {"units": "1", "long_name": "step number of the frame"}),
         "at_rest": at_rest_variable((), AT_REST_FLAGS["not_checked"] if run.at_rest is None else int(run.at_rest)),
     }
-    units = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
-             "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
-             "setup_time": "s", "solve_time": "s",
-             "detection_margin": "length", "wall_time": "s"}
-    for name in DIAGNOSTIC_FIELDS:
-        if name == "step":
-            continue
-        values = np.array([getattr(d, name) for d in run.diagnostics])
-        data[f"step_{name}"] = ("step", values, {"units": units.get(name, "1"),
-                                                  "long_name": STEP_LONG_NAMES.get(name, name.replace("_", " ") + " per step")})
-    for name, long_name in TEXT_DIAGNOSTICS.items():
-        data[f"step_{name}"] = ("step", np.array([getattr(d, name) for d in run.diagnostics], dtype=object),
-                                {"long_name": long_name})
+    per_step = step_variables(run.diagnostics)
+    step = per_step.pop("step")
+    data.update(per_step)
     coords = {"time": ("time", np.array([s.time for s in frames]), {"units": "time", "long_name": "time"}),
               "scaled_time": ("time", np.array([s.time for s in frames]) / t_scale,
                               {"units": "1", "long_name": "time over sqrt(h0/g)"}),
-              "step": ("step", np.array([d.step for d in run.diagnostics]),
-                       {"units": "1", "long_name": "step number"}),
+              "step": step,
               **component_coordinate()}
     dataset = xr.Dataset(data, coords=coords, attrs=dict(attrs))
     dataset.attrs.update({"h0": h0, "r0": r0, "aspect_ratio": h0 / r0, "mu": settings.mu,

@@ -23,7 +23,7 @@ import hashlib
 import json
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,9 @@ class PackingResult:
     """The settled packing and what it took. solid_fraction: of the column up to `height`.
     contact_forces: the last step's contact forces (to warm-start what comes next). clouds: how
     many clouds were poured; most_fixed: the most spheres fixed at once while filling.
-    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown)."""
+    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown).
+    diagnostics: the StepDiagnostics of every step taken, over all sittings (from the resumed step on for a
+    checkpoint written before packings kept them)."""
 
     state: ParticleState
     height: float
@@ -65,6 +67,7 @@ class PackingResult:
     clouds: int = 1
     most_fixed: int = 0
     cpu_time: float = float("nan")
+    diagnostics: list = field(default_factory=list)
 
 
 def lattice_layer(r0: float, spacing: float) -> np.ndarray:
@@ -223,12 +226,14 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     fixed = np.zeros(0, dtype=bool)
     clock, steps, warm = Stopwatch(), 0, None
     clouds, most_fixed = 0, 0
+    history = []   # each step's StepDiagnostics
     if saved:
         loop = saved["loop"]
         state, warm, fixed = saved["state"], saved["warm"], loop["fixed"].astype(bool)
         steps, clouds, most_fixed = int(loop["steps"]), int(loop["clouds"]), int(loop["most_fixed"])
         rng.bit_generator.state = json.loads(str(loop["rng"]))
         clock = Stopwatch(saved["elapsed"], saved["cpu"])
+        history = saved["diagnostics"]
         log.info("resuming the packing from its checkpoint at step %d (cloud %d, %d spheres)", steps, clouds, state.n)
     while saved or column_height(state) < height:
         if saved:   # the cloud the checkpoint was written in
@@ -260,10 +265,10 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                         "rng": json.dumps(rng.bit_generator.state), "last": last, "energy": energy,
                         "supports": supports}
                 save_packing_checkpoint(checkpoint, fingerprint, placed, forces, margin, loop,
-                                        clock.wall(), clock.cpu())
+                                        clock.wall(), clock.cpu(), history)
         try:
             state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress,
-                                         resume, save, checkpoint_every, clock)
+                                         resume, save, checkpoint_every, clock, history)
         except SolverError as error:
             if not fixed.any():
                 raise
@@ -272,12 +277,12 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
             log.warning("%s; settling this cloud again with nothing fixed", error)
             fixed[:] = False
             state, warm, steps = _settle(state, fixed, settings, solver, warm, error.step or steps,
-                                         max_steps, energy, progress, None, save, checkpoint_every, clock)
+                                         max_steps, energy, progress, None, save, checkpoint_every, clock, history)
     state.velocity[:] = 0.0
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
-                         steps, clock.wall(), warm, clouds, most_fixed, clock.cpu())
+                         steps, clock.wall(), warm, clouds, most_fixed, clock.cpu(), history)
 
 
 def _fingerprint(rng: np.random.Generator, solver: Solver, **settings) -> str:
@@ -302,7 +307,7 @@ def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarra
 def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
             warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress,
             resume: dict | None = None, save=None, save_every: int = CHECKPOINT_EVERY,
-            clock: Stopwatch | None = None):
+            clock: Stopwatch | None = None, history: list | None = None):
     """Step the spheres not `fixed` ((n,) bool) on the fixed ones until :func:`is_at_rest` with
     rest_energy. warm: forces by pair in the numbering of `state` (None: cold). Returns the new
     state, the forces by pair (numbering of `state`: the last step's, and those of pairs of fixed
@@ -311,7 +316,8 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
     resume: {supports, margin} of a cloud resumed from a checkpoint (the fixed spheres it settles
     on, and the detection margin its next step starts from); save: optional callable(state, warm,
     margin, steps, supports), called every `save_every` steps with the whole packing, and when
-    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of `clock`'s wall time passed since the last."""
+    :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of `clock`'s wall time passed since the last;
+    history: a list to which each step's StepDiagnostics is appended."""
     clock = clock or Stopwatch()
     moving = np.flatnonzero(~fixed)
     if resume is None:
@@ -328,6 +334,8 @@ def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, sol
     logged = time.perf_counter()
     for result in run(sub, local, max_steps - steps, solver, first_step=steps, carry=carry):
         sub, steps = result.state, steps + 1
+        if history is not None:
+            history.append(result.diagnostics)
         if progress is not None:
             progress(result.diagnostics, sub)
         if steps % 50 == 0 or time.perf_counter() - logged >= LOG_INTERVAL_S:
