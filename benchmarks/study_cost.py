@@ -6,8 +6,9 @@
 Issue 30's table, read from the runs a study made rather than from new runs: each job's Snakemake
 benchmark file (results/benchmarks/<the job's folder>/pack.tsv or collapse.tsv: wall `s`,
 `cpu_time` in s, `max_rss` in MB) and the run's own file (packing.nc: spheres, steps, and
-`wall_time` and `cpu_time` over all sittings; collapse.nc: spheres, steps, APGD iterations a step,
-threads from its config). A job resumed from its checkpoint has benchmark figures for its last
+`wall_time` and `cpu_time` over all sittings, and APGD iterations a step where the file keeps its
+steps (packings since 2026-11-26); collapse.nc: spheres, steps, APGD iterations a step, threads from
+its config). A job resumed from its checkpoint has benchmark figures for its last
 sitting only: its row says `resumed`, and its CPU over all sittings is the file's where the file
 has one (runs since CPU time was saved), else unknown.
 
@@ -49,7 +50,9 @@ def packing_rows(results: Path) -> list[dict]:
             row = {"r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "spheres": ds.sizes["particle"],
                    "steps": int(attrs["steps"]), "wall_all": float(attrs["wall_time"]),
                    "cpu_file": float(attrs.get("cpu_time", np.nan)),
-                   "threads": json.loads(attrs["config"]).get("threads", 1), "file": str(path)}
+                   "threads": json.loads(attrs["config"]).get("threads", 1), "file": str(path),
+                   "iterations": (float(ds["step_solver_iterations"].mean()) if "step_solver_iterations" in ds
+                                  else None)}
         rows.append(with_benchmark(row, benchmark_of(results, path, "pack.tsv")))
     return rows
 
@@ -120,7 +123,8 @@ def main(argv=None):
     for row in packings:
         table.row("pack" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"], "",
                   f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
-                  number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]), "", data=row)
+                  number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]),
+                  number(row["iterations"]), data=row)
     for row in collapses:
         table.row("collapse" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"],
                   f"{row['a']:g}", f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
