@@ -62,6 +62,23 @@ def test_a_smaller_margin_leaves_the_far_pair_out_and_predicted_motion_brings_it
     assert np.count_nonzero(found.family == PARTICLE) == 1
 
 
+def test_the_pairs_come_sorted_and_are_every_pair_within_the_margin():
+    """300 spheres at random, at rest: the particle pairs are exactly those whose gap is below the
+    margin (brute force over all pairs), listed in increasing (i, j) (the order the solver's
+    kernels read memory best in)."""
+    rng = np.random.default_rng(4)
+    radius = rng.uniform(0.125, 0.25, 300)
+    state = ParticleState.at_rest(rng.uniform(0.0, 3.0, (300, 3)), radius)
+    found = detect(state, Walls(floor=False), ContactLaw.uniform(0.5, 0.1), np.zeros((300, 3)), margin=0.05,
+                   slack=0.0)
+    i, j = found.i[found.family == PARTICLE], found.j[found.family == PARTICLE]
+    keys = i * 300 + j
+    assert np.all(i < j) and np.all(np.diff(keys) > 0)
+    gap = np.linalg.norm(state.position[:, None] - state.position[None], axis=2) - radius[:, None] - radius[None]
+    want = {(a, b) for a, b in zip(*np.nonzero(gap < 0.05)) if a < b}
+    assert set(zip(i.tolist(), j.tolist())) == want
+
+
 def test_overlaps_measure_each_body_and_touching_pairs_use_the_tolerance():
     position = [[0.0, 0.0, 0.19], [0.39, 0.0, 0.2], [0.0, 0.75, 0.3]]
     state = ParticleState.at_rest(position, [0.2, 0.2, 0.3])

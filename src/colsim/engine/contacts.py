@@ -82,7 +82,9 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
 
     Each particle sweeps a segment from x to x + u; a pair is kept when the relative segment comes
     within margin + slack |u_j - u_i| of contact (length). Candidates come from a k-d tree on the
-    segments' midpoints with the swept spheres' radii R + |u|/2.
+    segments' midpoints with the swept spheres' radii R + |u|/2. The pairs come sorted by (i, j):
+    the solver's kernels then find a contact's bodies near those of the contacts before it in
+    memory (the tree's own order made an APGD iteration 1.4x slower at 70,000 contacts).
     """
     if state.n < 2:
         empty = np.zeros(0, dtype=np.int64)
@@ -97,7 +99,9 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     tau = np.clip(-np.einsum("ij,ij->i", d0, du) / np.maximum(du2, 1e-300), 0.0, 1.0)
     closest = np.linalg.norm(d0 + tau[:, None] * du, axis=1) - state.radius[i] - state.radius[j]
     keep = closest < margin + slack * np.sqrt(du2)
-    return i[keep], j[keep]
+    i, j = i[keep], j[keep]
+    order = np.lexsort((j, i))
+    return i[order], j[order]
 
 
 def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0):

@@ -69,10 +69,12 @@ log = logging.getLogger(__name__)
 # The iterations: fused numba kernels, or the same steps in numpy
 # --------------------------------------------------------------------------------------------
 
-def _project_step(x, y, g, x_new, step, a, b, blocks):
-    """x_new = Proj_K(y - step g); returns (||x_new - y||^2, g . (x_new - x)), each summed over
-    `blocks` fixed ranges of contacts (one thread each) and then in order: one block gives the
-    plain sum, and the result depends on the block count, never on the threads' timing."""
+def _project_step(x, x_prev, beta, g, x_new, step, a, b, blocks):
+    """x_new = Proj_K(y - step g) at the extrapolated point y = x + beta (x - x_prev), formed here
+    rather than stored (one pass less over the contacts' arrays an iteration); returns
+    (||x_new - y||^2, g . (x_new - x)), each summed over `blocks` fixed ranges of contacts (one
+    thread each) and then in order: one block gives the plain sum, and the result depends on the
+    block count, never on the threads' timing."""
     m = len(a)
     dd_part = np.zeros(blocks)
     uphill_part = np.zeros(blocks)
@@ -81,16 +83,21 @@ def _project_step(x, y, g, x_new, step, a, b, blocks):
         uphill = 0.0
         for k in range(block * m // blocks, (block + 1) * m // blocks):
             o = 5 * k
+            y0 = x[o] + beta * (x[o] - x_prev[o])
+            y1 = x[o + 1] + beta * (x[o + 1] - x_prev[o + 1])
+            y2 = x[o + 2] + beta * (x[o + 2] - x_prev[o + 2])
+            y3 = x[o + 3] + beta * (x[o + 3] - x_prev[o + 3])
+            y4 = x[o + 4] + beta * (x[o + 4] - x_prev[o + 4])
             pp, q1, q2, r1, r2 = project_point(
-                y[o] - step * g[o], y[o + 1] - step * g[o + 1], y[o + 2] - step * g[o + 2],
-                y[o + 3] - step * g[o + 3], y[o + 4] - step * g[o + 4], a[k], b[k])
+                y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
+                y3 - step * g[o + 3], y4 - step * g[o + 4], a[k], b[k])
             x_new[o] = pp
             x_new[o + 1] = q1
             x_new[o + 2] = q2
             x_new[o + 3] = r1
             x_new[o + 4] = r2
-            for l in range(5):
-                d = x_new[o + l] - y[o + l]
+            for l, yl in enumerate((y0, y1, y2, y3, y4)):   # in the order of the stored sum
+                d = x_new[o + l] - yl
                 dd += d * d
                 uphill += g[o + l] * (x_new[o + l] - x[o + l])
         dd_part[block] = dd
@@ -119,11 +126,13 @@ def _weighted_change(h_new, hy, inv_mass, blocks):
     return total
 
 
-def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, b, inv_mass, lip_decay,
-             blocks):
-    """n_iter APGD iterations in place; returns (theta, lip, backtracks, restarts).
+def _iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, a, b, inv_mass,
+             lip_decay, blocks):
+    """n_iter APGD iterations; returns (x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks,
+    restarts): the arrays trade places (no copies), hy and g are updated in place.
 
-    x, hx = T x: the iterate; y, hy: the extrapolated point; g = G hy + c: the gradient at y.
+    x, hx = T x: the iterate; the extrapolated point is y = x + beta (x - x_prev), never stored
+    (:func:`_project_step`), hy = T y, and g = G hy + c the gradient at y.
     geometry = (s, i, j, normal, tangent1, tangent2, R_i, R_j, lever, start, entry, work) gives
     T = B' S and G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`,
     :func:`_apply_gradient`). After each iteration lip *= lip_decay. The step 1/lip is accepted
@@ -138,7 +147,7 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
     restarts = 0
     for _ in range(n_iter):
         while True:
-            dd, uphill = _project_step(x, y, g, x_new, 1.0 / lip, a, b, blocks)
+            dd, uphill = _project_step(x, x_prev, beta, g, x_new, 1.0 / lip, a, b, blocks)
             _apply_transpose(x_new, s, nrm, t1, t2, ri, rj, reff, start, entry, work, h_new)
             # dd == 0: the step does not move y (every contact already projected onto itself), and
             # the test would compare two roundings of zero: accept, or lip would double forever
@@ -154,14 +163,12 @@ def _iterate(n_iter, x, hx, y, hy, g, x_new, h_new, theta, lip, geometry, c, a, 
             restarts += 1
         theta = theta_new
         lip *= lip_decay
-        for i in prange(len(x)):
-            y[i] = x_new[i] + beta * (x_new[i] - x[i])
-            x[i] = x_new[i]
+        x_prev, x, x_new = x, x_new, x_prev
         for i in prange(len(hx)):
             hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
-            hx[i] = h_new[i]
+        hx, h_new = h_new, hx
         _apply_gradient(hy, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, g)
-    return theta, lip, backtracks, restarts
+    return x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts
 
 
 if HAVE_NUMBA:
@@ -184,7 +191,7 @@ class _Iteration:
             operator.work)
         hx = self.apply_T(x)
         self.x, self.hx = x.copy(), hx
-        self.y, self.hy = x.copy(), hx.copy()
+        self.x_prev, self.beta, self.hy = x.copy(), 0.0, hx.copy()   # y = x + beta (x - x_prev) = x
         self.g = self.apply_G(self.hy, c)
         self.x_new, self.h_new = np.empty_like(x), np.empty_like(hx)
         self.theta, self.lip = 1.0, self.lipschitz_estimate()
@@ -231,10 +238,10 @@ class _Iteration:
 
     def iterate(self, n: int):
         if self.geometry is not None:
-            theta, lip, bt, rs = _iterate_compiled(
-                n, self.x, self.hx, self.y, self.hy, self.g, self.x_new, self.h_new,
-                self.theta, self.lip, self.geometry, self.c, self.a, self.b, self.inv_mass, self.lip_decay,
-                threads())
+            (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, bt,
+             rs) = _iterate_compiled(n, self.x, self.x_prev, self.beta, self.hx, self.hy, self.g, self.x_new,
+                                     self.h_new, self.theta, self.lip, self.geometry, self.c, self.a, self.b,
+                                     self.inv_mass, self.lip_decay, threads())
         else:
             theta, lip, bt, rs = self._iterate_numpy(n)
         self.theta, self.lip = theta, lip
@@ -244,7 +251,9 @@ class _Iteration:
     def _iterate_numpy(self, n):
         m = len(self.a)
         theta, lip, bt, rs = self.theta, self.lip, 0, 0
-        x, hx, y, hy, g = self.x, self.hx, self.y, self.hy, self.g
+        x, hx, hy, g = self.x, self.hx, self.hy, self.g
+        x_prev, beta = self.x_prev, self.beta
+        y = x + beta * (x - x_prev)
         for _ in range(n):
             while True:
                 x_new = project_coupled_cone((y - g / lip).reshape(m, 5), self.a, self.b).ravel()
@@ -265,9 +274,9 @@ class _Iteration:
             lip *= self.lip_decay
             y = x_new + beta * (x_new - x)
             hy = h_new + beta * (h_new - hx)
-            x, hx = x_new, h_new
+            x_prev, x, hx = x, x_new, h_new
             g = self.G @ hy + self.c
-        self.x, self.hx, self.y, self.hy, self.g = x, hx, y, hy, g
+        self.x, self.x_prev, self.beta, self.hx, self.hy, self.g = x, x_prev, beta, hx, hy, g
         return theta, lip, bt, rs
 
 
