@@ -96,7 +96,7 @@ def _project_step(x, x_prev, beta, g, x_new, step, a, b, blocks):
             x_new[o + 2] = q2
             x_new[o + 3] = r1
             x_new[o + 4] = r2
-            for l, yl in enumerate((y0, y1, y2, y3, y4)):   # in the order of the stored sum
+            for l, yl in enumerate((y0, y1, y2, y3, y4)):   # summed as when y was stored: the same bits
                 d = x_new[o + l] - yl
                 dd += d * d
                 uphill += g[o + l] * (x_new[o + l] - x[o + l])
