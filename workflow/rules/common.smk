@@ -84,6 +84,12 @@ def pack_resource(name):
     return resource
 
 
+def pack_priority(wildcards):
+    """A pour's scheduling priority, from its size (commands.py): the largest first."""
+    packing = packing_of(wildcards)
+    return commands.pack_priority(commands.spheres_of(packing["r0"], packing["height"], DIAMETERS))
+
+
 def collapse_priority(wildcards):
     """A collapse's scheduling priority, from its column's a and its run's steps (commands.py)."""
     run = run_of(wildcards)

@@ -9,6 +9,7 @@
 rule packing_settings:
     output:
         f"{PACKING_DIR}/settings.yaml",
+    priority: commands.SETTINGS_PRIORITY
     params:
         settings=packing_of,
     run:
@@ -18,6 +19,7 @@ rule packing_settings:
 rule run_settings:
     output:
         f"{RUN_DIR}/settings.yaml",
+    priority: commands.SETTINGS_PRIORITY
     params:
         settings=run_of,
     run:
@@ -29,7 +31,7 @@ rule pack:
         f"{PACKING_DIR}/settings.yaml",
     output:
         f"{PACKING_DIR}/packing.nc",
-    priority: 1000
+    priority: pack_priority
     threads: config["pack"]["threads"]
     resources:
         mem_mb=pack_resource("mem_mb"),

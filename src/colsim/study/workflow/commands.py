@@ -83,6 +83,20 @@ def pack_resources(spheres: float) -> dict:
     return {"runtime": runtime, "mem_mb": max(4000, int(np.ceil(PACK_MB_PER_SPHERE * spheres)))}
 
 
+#: Scheduling priorities (Snakemake runs the ready job of highest priority first): a settings file,
+#: written in a moment, before the job it gates; a pour before any collapse, the largest first
+#: (:func:`pack_priority`); then collapses by cost (:func:`collapse_priority`). Without them an
+#: r0 = 6 pour waited for its settings behind every ready collapse, to run alone for hours at the end.
+SETTINGS_PRIORITY = 10_000
+PACK_PRIORITY = 1_000
+
+
+def pack_priority(spheres: float) -> int:
+    """A pour's scheduling priority: PACK_PRIORITY plus its spheres in thousands (the longest job
+    first), below SETTINGS_PRIORITY up to 9 million spheres."""
+    return PACK_PRIORITY + int(spheres // 1_000)
+
+
 def collapse_priority(a: float, run: dict, study_length: tuple[int, float]) -> int:
     """Scheduling priority of the collapse of a column of aspect ratio `a`: 10 a (times its steps
     over the study's), so that the costliest columns run first."""
