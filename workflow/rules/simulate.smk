@@ -73,7 +73,7 @@ rule trim:
         f"{PACKING_DIR}/packing.nc",
     output:
         COLUMN,
-    priority: 1000
+    priority: commands.PACK_PRIORITY
     params:
         a=lambda wildcards: fmt(column_of(wildcards)),
     log:
