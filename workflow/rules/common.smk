@@ -75,19 +75,22 @@ def collapse_runtime(wildcards):
     return commands.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
 
 
+def pack_spheres(wildcards):
+    """About how many spheres a packing's pour holds (commands.py)."""
+    packing = packing_of(wildcards)
+    return commands.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+
+
 def pack_resource(name):
     """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (commands.py)."""
     def resource(wildcards):
-        packing = packing_of(wildcards)
-        spheres = commands.spheres_of(packing["r0"], packing["height"], DIAMETERS)
-        return commands.pack_resources(spheres)[name]
+        return commands.pack_resources(pack_spheres(wildcards))[name]
     return resource
 
 
 def pack_priority(wildcards):
     """A pour's scheduling priority, from its size (commands.py): the largest first."""
-    packing = packing_of(wildcards)
-    return commands.pack_priority(commands.spheres_of(packing["r0"], packing["height"], DIAMETERS))
+    return commands.pack_priority(pack_spheres(wildcards))
 
 
 def collapse_priority(wildcards):
