@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import HAVE_NUMBA, numba
+from .compiled import HAVE_NUMBA, numba, prange
 from .program import ROWS_PER_CONTACT, ConeProgram
+from .threads import threads
 
 
 # --------------------------------------------------------------------------------------------
@@ -206,25 +207,39 @@ def combine_residuals(primal: float, dual: float, total: float, comp: float, m: 
             "complementarity": comp / ((total + m * floor) * scale)}
 
 
-def _residual_parts(g, x, s, mu, mu_r):
+def _residual_parts(g, x, s, mu, mu_r, blocks):
     """(primal, dual, total, comp) of :func:`combine_residuals` for the end-of-step gaps y = g / s
-    and the forces lam = s x ((5m,) each), in one sweep: :func:`relative_residuals` compiled."""
-    primal = dual = total = comp = 0.0
-    for k in range(len(mu)):
-        o = 5 * k
-        y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
-        y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
-        p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
-        r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
-        primal = max(primal, mu[k] * np.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * np.sqrt(y3 * y3 + y4 * y4) - y0)
-        dual = max(dual, np.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, np.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
-        total += max(p, 0.0)
-        comp += abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
+    and the forces lam = s x ((5m,) each), in one sweep over the contacts split into `blocks` fixed
+    ranges (on the kernels' threads; their sums added in block order, so one block is the serial
+    sum and a block count always gives the same bits): :func:`relative_residuals` compiled."""
+    m = len(mu)
+    parts = np.zeros((blocks, 4))
+    for block in prange(blocks):
+        primal = dual = -np.inf
+        total = comp = 0.0
+        for k in range(block * m // blocks, (block + 1) * m // blocks):
+            o = 5 * k
+            y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
+            y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
+            p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
+            r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
+            primal = max(primal, mu[k] * np.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * np.sqrt(y3 * y3 + y4 * y4) - y0)
+            dual = max(dual, np.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, np.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
+            total += max(p, 0.0)
+            comp += abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
+        parts[block, 0], parts[block, 1], parts[block, 2], parts[block, 3] = primal, dual, total, comp
+    primal = dual = 0.0
+    total = comp = 0.0
+    for block in range(blocks):
+        primal = max(primal, parts[block, 0])
+        dual = max(dual, parts[block, 1])
+        total += parts[block, 2]
+        comp += parts[block, 3]
     return primal, dual, total, comp
 
 
 if HAVE_NUMBA:
-    _residual_parts = numba.njit(cache=True)(_residual_parts)
+    _residual_parts = numba.njit(cache=True, parallel=True)(_residual_parts)
 
 
 def scaled_residuals(g: np.ndarray, x: np.ndarray, s: np.ndarray, mu, mu_r, scale: float,
@@ -235,5 +250,5 @@ def scaled_residuals(g: np.ndarray, x: np.ndarray, s: np.ndarray, mu, mu_r, scal
         m = len(g) // ROWS_PER_CONTACT
         return relative_residuals((g / s).reshape(m, 5), (s * x).reshape(m, 5), mu, mu_r, scale, floor)
     return combine_residuals(*_residual_parts(g, x, s, np.ascontiguousarray(mu, dtype=float),
-                                              np.ascontiguousarray(mu_r, dtype=float)),
+                                              np.ascontiguousarray(mu_r, dtype=float), threads()),
                              len(g) // ROWS_PER_CONTACT, scale, floor)
