@@ -231,3 +231,22 @@ def test_a_column_of_less_than_a_layer_is_an_error(tmp_path, capsys):
     assert len(err.splitlines()) == 1
     assert "h0 = 0.05 leaves 0 spheres" in err and "smallest diameter 0.5" in err
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_status_lists_what_is_done_and_what_is_in_progress(tmp_path, capsys):
+    """`colsim status FOLDER`: the finished packings and collapses counted, one row a checkpoint
+    (its run folder, stage and last step), and a clear error for a folder that is not there."""
+    from colsim.engine.records import Carry
+    from colsim.io.checkpoint import save_checkpoint
+
+    run = tmp_path / "r0_2" / "seed_1" / "pack_x" / "a_1" / "mu_r_0.12" / "run_y"
+    run.mkdir(parents=True)
+    (run.parents[2] / "packing.nc").write_bytes(b"")
+    state = ParticleState.at_rest(np.array([[0.0, 0.0, 0.2], [0.5, 0.0, 0.2]]), np.full(2, 0.2))
+    save_checkpoint(run / "collapse.nc.checkpoint", "abc", state, [(0, state)], [], Carry(), 4.0, 3.0)
+    assert main(["status", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 packings and 0 collapses done, 1 in progress" in out
+    assert "| r0_2/seed_1/pack_x/a_1/mu_r_0.12/run_y | collapse | 2 | -1 |" in out
+    assert main(["status", str(tmp_path / "nowhere")]) == 2
+    assert "is not a folder" in capsys.readouterr().err

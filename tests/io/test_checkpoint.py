@@ -7,7 +7,8 @@ import numpy as np
 from colsim.engine.records import Carry, StepDiagnostics
 from colsim.engine.state import ParticleState
 from colsim.engine.warm_start import WarmStart
-from colsim.io.checkpoint import load_checkpoint, load_packing_checkpoint, save_checkpoint, save_packing_checkpoint
+from colsim.io.checkpoint import (checkpoint_summary, load_checkpoint, load_packing_checkpoint, save_checkpoint,
+                                  save_packing_checkpoint)
 
 
 def _diagnostics(step: int) -> StepDiagnostics:
@@ -95,3 +96,19 @@ def test_a_packing_checkpoint_keeps_its_steps_diagnostics(tmp_path):
     with open(path, "wb") as handle:
         np.savez(handle, **arrays)
     assert load_packing_checkpoint(path, "abc")["diagnostics"] == []
+
+
+def test_a_checkpoints_summary_names_its_stage_last_step_and_cost(tmp_path):
+    """The summary a study's status shows: a collapse's or a packing's last step, simulated time,
+    last kinetic energy, mean wall seconds of its last 10 steps and the seconds so far; a packing
+    checkpoint without a step record (written before packings kept one) gives step -1 and NaN."""
+    state, frames, _, carry = _run()
+    steps = [_diagnostics(k) for k in range(1, 13)]
+    save_checkpoint(tmp_path / "c", "abc", state, frames, steps, carry, 12.5, 20.25)
+    found = checkpoint_summary(tmp_path / "c")
+    assert found == {"stage": "collapse", "spheres": 4, "step": 12, "time": 0.3, "kinetic_energy": 12.5,
+                     "seconds_per_step": np.mean([k + 0.5 for k in range(3, 13)]), "elapsed": 12.5, "cpu": 20.25}
+    save_packing_checkpoint(tmp_path / "p", "abc", state, None, None, {"steps": 7}, 3.0, 4.0)
+    found = checkpoint_summary(tmp_path / "p")
+    assert found["stage"] == "packing" and found["step"] == -1 and np.isnan(found["kinetic_energy"])
+    assert (found["spheres"], found["elapsed"], found["cpu"]) == (4, 3.0, 4.0)

@@ -309,6 +309,38 @@ def export_vtk(args):
     log.info("wrote %s (%d frames)", path, trajectory.sizes["time"])
 
 
+
+def status(args):
+    """The runs under a results folder: how many packings and collapses are done, and for each run in
+    progress (a checkpoint left by a running or a killed job) its step, simulated time, last kinetic
+    energy, recent wall seconds a step, CPU and wall so far, and when the checkpoint was written."""
+    import time
+    from ..io.checkpoint import checkpoint_summary
+
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise io.InputError(f"{folder} is not a folder (the runs' folder: results/ by default)")
+    done = Counter(path.name for path in folder.rglob("*.nc") if path.name in ("packing.nc", "collapse.nc"))
+    checkpoints = sorted(folder.rglob("*.checkpoint"))
+    print(f"{folder}: {done['packing.nc']} packings and {done['collapse.nc']} collapses done, "
+          f"{len(checkpoints)} in progress")
+    if not checkpoints:
+        return
+    print("| run | stage | spheres | step | t | kinetic energy | wall s a step (last 10) | CPU s | wall s | written |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    now = time.time()
+    for path in checkpoints:
+        run = path.parent.relative_to(folder)
+        age = f"{(now - path.stat().st_mtime) / 60:.0f} min ago"
+        try:
+            found = checkpoint_summary(path)
+        except Exception as error:   # a damaged or foreign file: say so and go on
+            print(f"| {run} | unreadable checkpoint ({error}) | | | | | | | | {age} |")
+            continue
+        print(f"| {run} | {found['stage']} | {found['spheres']:,} | {found['step']} | {found['time']:.3f} | "
+              f"{found['kinetic_energy']:.3g} | {found['seconds_per_step']:.2f} | {found['cpu']:,.0f} | "
+              f"{found['elapsed']:,.0f} | {age} |")
+
 def mu_r(args):
     from ..study.polygon import polygon_rolling_coefficient
 

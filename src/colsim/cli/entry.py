@@ -9,6 +9,7 @@
     colsim convergence  time step, end time, column size and seed studies in one table and figure
     colsim compare-laws the same runs under both friction laws, against Lube's laws
     colsim export-vtk a ParaView time series of a collapse
+    colsim status     the runs under a results folder: done, and in progress from their checkpoints
     colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
 
 Arguments are parsed before the heavy imports; bad input ends with a one-line error naming the
@@ -238,6 +239,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export-vtk", help="ParaView time series (.vtu per frame + .pvd) of a collapse")
     p.add_argument("--input", required=True, help="trajectory file from `colsim collapse`")
     p.add_argument("--output-dir", required=True, help="directory to write into")
+
+    p = sub.add_parser("status", help="the runs under a results folder: done, and in progress from their checkpoints")
+    p.add_argument("folder", nargs="?", default="results",
+                   help="the folder holding the runs (default: %(default)s, where every study's runs are)")
 
     p = sub.add_parser("mu-r", help="rolling coefficient of a regular polygon (the paper's Eqs. 7-10)")
     p.add_argument("--polygon", type=_integer, required=True, help="number of sides N >= 3")

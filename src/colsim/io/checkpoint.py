@@ -69,6 +69,28 @@ def load_packing_checkpoint(path, fingerprint):
     return _read(path, fingerprint, restore)
 
 
+
+def checkpoint_summary(path) -> dict:
+    """What a checkpoint says of its run, without restoring it or checking whose it is: {stage:
+    "collapse" or "packing", spheres, step (the last one done), time (simulated), kinetic_energy
+    (translational, of the last step), seconds_per_step (wall, mean over the last 10 steps), elapsed
+    and cpu (wall and CPU seconds so far)}; NaN where an older checkpoint lacks the step record.
+    Reads only the small arrays."""
+    with np.load(path, allow_pickle=False) as archive:
+        names = set(archive.files)
+        stage = "collapse" if "frame_step" in names else "packing"
+        spheres = int(archive["radius"].shape[0])
+        time = float(archive["state_time"])
+        spent = _spent(archive)
+        if "diagnostic_step" in names and archive["diagnostic_step"].size:
+            step = int(archive["diagnostic_step"][-1])
+            energy = float(archive["diagnostic_kinetic_energy"][-1])
+            per_step = float(np.mean(archive["diagnostic_wall_time"][-10:]))
+        else:
+            step, energy, per_step = -1, float("nan"), float("nan")
+    return {"stage": stage, "spheres": spheres, "step": step, "time": time, "kinetic_energy": energy,
+            "seconds_per_step": per_step, **spent}
+
 def _write(path, arrays: dict) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as handle:
