@@ -309,7 +309,6 @@ def export_vtk(args):
     log.info("wrote %s (%d frames)", path, trajectory.sizes["time"])
 
 
-
 def status(args):
     """The runs under a results folder: how many packings and collapses are done, and for each run in
     progress (a checkpoint left by a running or a killed job) its step, simulated time, last kinetic
@@ -340,6 +339,7 @@ def status(args):
         print(f"| {run} | {found['stage']} | {found['spheres']:,} | {found['step']} | {found['time']:.3f} | "
               f"{found['kinetic_energy']:.3g} | {found['seconds_per_step']:.2f} | {found['cpu']:,.0f} | "
               f"{found['elapsed']:,.0f} | {age} |")
+
 
 def mu_r(args):
     from ..study.polygon import polygon_rolling_coefficient

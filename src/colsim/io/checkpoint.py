@@ -69,7 +69,6 @@ def load_packing_checkpoint(path, fingerprint):
     return _read(path, fingerprint, restore)
 
 
-
 def checkpoint_summary(path) -> dict:
     """What a checkpoint says of its run, without restoring it or checking whose it is: {stage:
     "collapse" or "packing", spheres, step (the last one done), time (simulated), kinetic_energy
@@ -90,6 +89,7 @@ def checkpoint_summary(path) -> dict:
             step, energy, per_step = -1, float("nan"), float("nan")
     return {"stage": stage, "spheres": spheres, "step": step, "time": time, "kinetic_energy": energy,
             "seconds_per_step": per_step, **spent}
+
 
 def _write(path, arrays: dict) -> None:
     with atomic_path(path) as tmp:
