@@ -319,10 +319,9 @@ def status(args):
     folder = Path(args.folder)
     if not folder.is_dir():
         raise io.InputError(f"{folder} is not a folder (the runs' folder: results/ by default)")
-    done = Counter(path.name for path in folder.rglob("*.nc") if path.name in ("packing.nc", "collapse.nc"))
+    packings, collapses = (sum(1 for _ in folder.rglob(name)) for name in ("packing.nc", "collapse.nc"))
     checkpoints = sorted(folder.rglob("*.checkpoint"))
-    print(f"{folder}: {done['packing.nc']} packings and {done['collapse.nc']} collapses done, "
-          f"{len(checkpoints)} in progress")
+    print(f"{folder}: {packings} packings and {collapses} collapses done, {len(checkpoints)} in progress")
     if not checkpoints:
         return
     print("| run | stage | spheres | step | t | kinetic energy | wall s a step (last 10) | CPU s | wall s | written |")

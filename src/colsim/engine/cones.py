@@ -228,8 +228,7 @@ def _residual_parts(g, x, s, mu, mu_r, blocks):
             total += max(p, 0.0)
             comp += abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
         parts[block, 0], parts[block, 1], parts[block, 2], parts[block, 3] = primal, dual, total, comp
-    primal = dual = 0.0
-    total = comp = 0.0
+    primal = dual = total = comp = 0.0
     for block in range(blocks):
         primal = max(primal, parts[block, 0])
         dual = max(dual, parts[block, 1])
