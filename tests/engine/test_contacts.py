@@ -79,6 +79,31 @@ def test_the_pairs_come_sorted_and_are_every_pair_within_the_margin():
     assert set(zip(i.tolist(), j.tolist())) == want
 
 
+def test_moving_pairs_are_every_pair_whose_swept_segment_comes_within_reach():
+    """300 spheres at random with random predicted motions up to 0.6 (twice the largest radius, as
+    in a pour's impacts): the particle pairs are exactly those whose relative segment d0 + tau du,
+    tau in [0, 1], comes within margin + slack |du| of contact (brute force over all pairs in numpy;
+    the detection tests it in a compiled loop over the k-d tree's candidates)."""
+    rng = np.random.default_rng(5)
+    radius = rng.uniform(0.125, 0.25, 300)
+    state = ParticleState.at_rest(rng.uniform(0.0, 3.0, (300, 3)), radius)
+    predicted = rng.uniform(-0.3, 0.3, (300, 3))
+    margin, slack = 0.05, 0.5
+    found = detect(state, Walls(floor=False), ContactLaw.uniform(0.5, 0.1), predicted, margin=margin,
+                   slack=slack)
+    i, j = found.i[found.family == PARTICLE], found.j[found.family == PARTICLE]
+    assert np.all(np.diff(i * 300 + j) > 0)
+    a, b = np.triu_indices(300, 1)
+    d0 = state.position[b] - state.position[a]
+    du = predicted[b] - predicted[a]
+    du2 = np.sum(du * du, axis=1)
+    tau = np.clip(-np.sum(d0 * du, axis=1) / du2, 0.0, 1.0)
+    closest = np.linalg.norm(d0 + tau[:, None] * du, axis=1) - radius[a] - radius[b]
+    within = closest < margin + slack * np.sqrt(du2)
+    assert 100 < np.count_nonzero(within) < len(a) // 10      # a test with pairs both in and out
+    assert set(zip(i.tolist(), j.tolist())) == set(zip(a[within].tolist(), b[within].tolist()))
+
+
 def test_overlaps_measure_each_body_and_touching_pairs_use_the_tolerance():
     position = [[0.0, 0.0, 0.19], [0.39, 0.0, 0.2], [0.0, 0.75, 0.3]]
     state = ParticleState.at_rest(position, [0.2, 0.2, 0.3])

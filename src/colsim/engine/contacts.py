@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .compiled import HAVE_NUMBA, numba, prange
 from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, rolling_lever
 
 WALL = -1  # index of the other body for a particle-wall contact
@@ -92,16 +93,38 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     half = 0.5 * np.linalg.norm(predicted, axis=1)
     reach = 2.0 * float(np.max(state.radius + half * (1.0 + slack))) + margin
     pairs = cKDTree(state.position + 0.5 * predicted).query_pairs(reach, output_type="ndarray")
-    i, j = pairs[:, 0], pairs[:, 1]
-    d0 = state.position[j] - state.position[i]
-    du = predicted[j] - predicted[i]
-    du2 = np.einsum("ij,ij->i", du, du)
-    tau = np.clip(-np.einsum("ij,ij->i", d0, du) / np.maximum(du2, 1e-300), 0.0, 1.0)
-    closest = np.linalg.norm(d0 + tau[:, None] * du, axis=1) - state.radius[i] - state.radius[j]
-    keep = closest < margin + slack * np.sqrt(du2)
+    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    keep = np.empty(len(i), dtype=np.bool_)
+    _swept_keep(i, j, np.ascontiguousarray(state.position, dtype=float),
+                np.ascontiguousarray(predicted, dtype=float), np.ascontiguousarray(state.radius, dtype=float),
+                float(margin), float(slack), keep)
     i, j = i[keep], j[keep]
     order = np.lexsort((j, i))
     return i[order], j[order]
+
+
+def _swept_keep(i, j, position, predicted, radius, margin, slack, keep):
+    """keep[k] (bool (m,), out) = whether candidate pair (i[k], j[k]) comes within margin + slack
+    |u_j - u_i| of contact (length) as its relative segment d0 + tau (u_j - u_i), tau in [0, 1], is
+    swept. A loop over the candidates (a million a step in a pour's impacts: this test took 85 % of
+    the detection in numpy), on numba's threads where it is installed."""
+    for k in prange(len(i)):
+        a, b = i[k], j[k]
+        d0u = du2 = 0.0
+        for d in range(3):
+            du = predicted[b, d] - predicted[a, d]
+            d0u += (position[b, d] - position[a, d]) * du
+            du2 += du * du
+        tau = min(max(-d0u / max(du2, 1e-300), 0.0), 1.0)
+        c2 = 0.0
+        for d in range(3):
+            c = position[b, d] - position[a, d] + tau * (predicted[b, d] - predicted[a, d])
+            c2 += c * c
+        keep[k] = np.sqrt(c2) - radius[a] - radius[b] < margin + slack * np.sqrt(du2)
+
+
+if HAVE_NUMBA:
+    _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
 
 
 def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0):
