@@ -107,7 +107,7 @@ def test_convergence_figure_is_written(tmp_path):
 def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
     """Runs made on X = X_inf + k d/r0 exactly (r0 = 2, 3, 4, three seeds, d = 0.375, a = 2 and 5)
     give X_inf to 1e-9 (a least-squares fit of noise-free data) with a zero-width interval; the
-    r0 within 5 % solves |k| (d/r0) = 0.05 X_inf; the laws are those of colsim.study.experimental_laws at each a
+    r0 within 5 % solves |k| (d/r0) = 0.05 X_inf, the largest r0's mean is off by k (d/4) / X_inf; the laws are those of colsim.study.experimental_laws at each a
     (no Lajeunesse height above a = 0.74); the table and the figure are written."""
     from colsim.study.convergence import column_size_limit_markdown, column_size_limits
     from colsim.study.experimental_laws import lube_height, lube_runout
@@ -125,11 +125,13 @@ def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
         assert float(r.limit) == pytest.approx(3.5, abs=1e-9)
         assert float(r.limit_high) - float(r.limit_low) == pytest.approx(0.0, abs=1e-9)
         assert float(r.r0_for_5_percent) == pytest.approx(4.0 * d / (0.05 * 3.5))
+        assert float(r.largest_r0_off) == pytest.approx(-4.0 * d / 4.0 / 3.5)   # X(4) / X_inf - 1
         assert float(h.lube) == pytest.approx(float(lube_height(a)))
         assert float(r.lube) == pytest.approx(float(lube_runout(a)))
         assert np.isnan(float(h.lajeunesse))
     text = column_size_limit_markdown(limits)
     assert "| 5 | runout_over_r0 | 3 | 4 | 3.500 [3.500, 3.500] |" in text
+    assert "| -10.7 % | 8.6 | 21 |" in text
     assert column_size_limit_figure(runs_table({"column_size": runs}, 4.0), limits, tmp_path / "f.png").stat().st_size > 0
     one_size = runs_table({"column_size": [analysis(r0=2.0, seed=s) for s in (1, 2)]}, 4.0)
     assert column_size_limits(one_size) is None

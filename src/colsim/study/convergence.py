@@ -246,7 +246,8 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
     """The column-size limit X_inf of h_inf/r0 and the run-out at each aspect ratio of the
     column_size sub-study with at least 2 sizes (:func:`colsim.study.size_limit.size_limit`: X(r0) =
     X_inf + k (d/r0)^p, its interval by bootstrap over seeds and sizes), beside Lube's and
-    Lajeunesse's laws, and the r0 (length) at which the fit is within 5 % and 2 % of X_inf.
+    Lajeunesse's laws, how far the largest r0's mean is from X_inf, and the r0 (length) at which the
+    fit is within 5 % and 2 % of X_inf.
 
     Returns a Dataset over (aspect_ratio, measure); None when no aspect ratio has 2 sizes."""
     import xarray as xr
@@ -272,13 +273,14 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
             laws = {name.split()[0]: value for name, value in final_values(measure, a).items()}
             needed = [diameter * (abs(fit.k) / (accuracy * abs(fit.x_inf))) ** (1.0 / fit.p)
                       if fit.x_inf else np.nan for accuracy in LIMIT_ACCURACIES]
+            largest = float(np.mean(runs[max(runs)]))
             rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, float(fit.p_fitted),
                                          laws["Lube"], laws["Lajeunesse"], len(runs), float(max(runs)),
-                                         diameter, *needed]
+                                         largest / fit.x_inf - 1.0 if fit.x_inf else np.nan, diameter, *needed]
     if not rows:
         return None
     names = ["limit", "limit_low", "limit_high", "slope", "exponent", "exponent_fitted", "lube", "lajeunesse",
-             "n_sizes", "largest_r0", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"]
+             "n_sizes", "largest_r0", "largest_r0_off", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"]
     long_names = {
         "limit": "column-size limit X_inf of the fit X = X_inf + k (d/r0)^p",
         "limit_low": f"lower end of the {level:.0%} bootstrap interval of X_inf",
@@ -288,6 +290,7 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
         "lube": "Lube et al. (2004) at this a",
         "lajeunesse": "Lajeunesse et al. (2004) at this a (no height above a = 0.74: its printed law is none)",
         "n_sizes": "column sizes fitted", "largest_r0": "largest r0 measured",
+        "largest_r0_off": "the seeds' mean at the largest r0, relative to X_inf (X / X_inf - 1)",
         "mean_diameter": "mean particle diameter d",
         "r0_for_5_percent": "r0 at which the fit is within 5 % of X_inf",
         "r0_for_2_percent": "r0 at which the fit is within 2 % of X_inf"}
@@ -314,8 +317,8 @@ def column_size_limit_markdown(limits) -> str:
     level = float(limits.attrs["level"])
     lines = ["### Column-size limits (X = X_inf + k (d/r0)^p over every seed)", "",
              f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | p | Lube | X_inf vs Lube | "
-             "Lajeunesse | X_inf vs Lajeunesse | r0 for 5 % | r0 for 2 % |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "Lajeunesse | X_inf vs Lajeunesse | largest r0 vs X_inf | r0 for 5 % | r0 for 2 % |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for a in limits.aspect_ratio.values:
         for measure in limits.measure.values:
             row = limits.sel(aspect_ratio=a, measure=measure)
@@ -326,6 +329,7 @@ def column_size_limit_markdown(limits) -> str:
             lines.append(f"| {a:g} | {measure} | {int(row.n_sizes)} | {float(row.largest_r0):g} | {x:.3f} "
                          f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | {lube:.3f} | "
                          f"{100 * (x / lube - 1):+.0f} % | {_or_dash(laj, '.3f')} | {_or_dash(100 * (x / laj - 1), '+.0f', ' %')} | "
+                         f"{_or_dash(100 * float(row.largest_r0_off), '+.1f', ' %')} | "
                          f"{float(row.r0_for_5_percent):.2g} | {float(row.r0_for_2_percent):.2g} |")
     return "\n".join(lines) + "\n"
 
