@@ -124,6 +124,11 @@ def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
         assert float(h.limit) == pytest.approx(0.9, abs=1e-9)
         assert float(r.limit) == pytest.approx(3.5, abs=1e-9)
         assert float(r.limit_high) - float(r.limit_low) == pytest.approx(0.0, abs=1e-9)
+        assert float(r.limit_high_p1) - float(r.limit_low_p1) == pytest.approx(0.0, abs=1e-9)
+        assert float(r.exponent_fitted_share) == 0.0   # three sizes: p is never fitted
+        # the band of exact data is the line itself, to the fit's 1e-9
+        line = 3.5 - 4.0 * limits.d_over_r0.values
+        assert np.allclose(r.band_low.values, line, atol=1e-9) and np.allclose(r.band_high.values, line, atol=1e-9)
         assert float(r.r0_for_5_percent) == pytest.approx(4.0 * d / (0.05 * 3.5))
         # X(4) / X_inf - 1, to pytest's default 1e-6 relative (the fit of exact data is good to 1e-9)
         assert float(r.largest_r0_off) == pytest.approx(-4.0 * d / 4.0 / 3.5)
@@ -131,7 +136,7 @@ def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
         assert float(r.lube) == pytest.approx(float(lube_runout(a)))
         assert np.isnan(float(h.lajeunesse))
     text = column_size_limit_markdown(limits)
-    assert "| 5 | runout_over_r0 | 3 | 4 | 3.500 [3.500, 3.500] |" in text
+    assert "| 5 | runout_over_r0 | 3 | 4 | 3.500 [3.500, 3.500] | 1.00 | 0 % | [3.500, 3.500] |" in text
     assert "| -10.7 % | 8.6 | 21 |" in text
     assert column_size_limit_figure(runs_table({"column_size": runs}, 4.0), limits, tmp_path / "f.png").stat().st_size > 0
     one_size = runs_table({"column_size": [analysis(r0=2.0, seed=s) for s in (1, 2)]}, 4.0)

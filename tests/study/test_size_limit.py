@@ -50,6 +50,23 @@ def test_the_bootstrap_interval_holds_the_true_limit_at_its_rate():
     assert quiet.high - quiet.low < np.median(widths) / 2
 
 
+def test_the_band_and_the_p_1_interval_come_from_the_same_replicates():
+    """The band at d/r0 = 0 is the interval of X_inf (percentiles of the same numbers, to rounding);
+    with three sizes p is never fitted, so the interval at p = 1 is the interval; with five sizes
+    and p = 2.5 data the free p is chosen in most replicates, and the p = 1 interval (a straight
+    line through a curve) misses the true limit while the chosen one holds it."""
+    three = size_limit({r0: v for r0, v in synthetic(1.5, -2.0, 1.0, 0.03).items() if r0 <= 4}, D, replicates=300)
+    assert three.free_share == 0.0
+    assert (three.linear_low, three.linear_high) == (three.low, three.high)
+    low, high = three.band(np.array([0.0, 0.1, 0.2]))
+    assert low[0] == pytest.approx(three.low, abs=1e-12) and high[0] == pytest.approx(three.high, abs=1e-12)
+    assert np.all(low <= high) and three.replicate_fits.shape == (300, 3)
+    curved = size_limit(synthetic(1.0, 2.0, 2.5, 1e-4), D, replicates=300)
+    assert curved.free_share > 0.5
+    assert curved.low <= 1.0 <= curved.high
+    assert not curved.linear_low <= 1.0 <= curved.linear_high
+
+
 def test_bad_input_is_refused():
     with pytest.raises(ValueError, match="at least 2 column sizes"):
         fit_limit([0.1, 0.1], [1.0, 1.1])

@@ -240,6 +240,8 @@ def convergence_markdown(table) -> str:
 LIMIT_MEASURES = ("h_inf_over_r0", "runout_over_r0")
 #: Accuracies for which :func:`column_size_limits` states the r0 a study needs.
 LIMIT_ACCURACIES = (0.05, 0.02)
+#: Points of d/r0 at which the fit's bootstrap band is stored.
+BAND_POINTS = 41
 
 
 def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed: int = 0):
@@ -247,9 +249,11 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
     column_size sub-study with at least 2 sizes (:func:`colsim.study.size_limit.size_limit`: X(r0) =
     X_inf + k (d/r0)^p, its interval by bootstrap over seeds and sizes), beside Lube's and
     Lajeunesse's laws, how far the largest r0's mean is from X_inf, and the r0 (length) at which the
-    fit is within 5 % and 2 % of X_inf.
+    fit is within 5 % and 2 % of X_inf; the interval with p kept at 1, the share of replicates that
+    fitted p, and the fit's pointwise band over d/r0 (BAND_POINTS from 0 to 1.05 times the largest).
 
-    Returns a Dataset over (aspect_ratio, measure); None when no aspect ratio has 2 sizes."""
+    Returns a Dataset over (aspect_ratio, measure) (the band also over d_over_r0); None when no
+    aspect ratio has 2 sizes."""
     import xarray as xr
 
     from .experimental_laws import final_values
@@ -258,7 +262,8 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
     study = table.where(table.study == "column_size", drop=True)
     if study.sizes.get("run", 0) == 0:
         return None
-    rows = {}
+    rows, bands = {}, {}
+    d_over_r0 = np.linspace(0.0, 1.05 * float(np.max(1.0 / study.r0_over_mean_diameter.values)), BAND_POINTS)
     for a in np.unique(study.aspect_ratio.values):
         part = study.isel(run=np.flatnonzero(study.aspect_ratio.values == a))
         r0 = part.r0.values
@@ -276,11 +281,14 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
             largest = float(np.mean(runs[max(runs)]))
             rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, float(fit.p_fitted),
                                          laws["Lube"], laws["Lajeunesse"], len(runs), float(max(runs)),
-                                         largest / fit.x_inf - 1.0 if fit.x_inf else np.nan, diameter, *needed]
+                                         largest / fit.x_inf - 1.0 if fit.x_inf else np.nan, diameter, *needed,
+                                         limit.linear_low, limit.linear_high, limit.free_share]
+            bands[(float(a), measure)] = limit.band(d_over_r0)
     if not rows:
         return None
     names = ["limit", "limit_low", "limit_high", "slope", "exponent", "exponent_fitted", "lube", "lajeunesse",
-             "n_sizes", "largest_r0", "largest_r0_off", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"]
+             "n_sizes", "largest_r0", "largest_r0_off", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent",
+             "limit_low_p1", "limit_high_p1", "exponent_fitted_share"]
     long_names = {
         "limit": "column-size limit X_inf of the fit X = X_inf + k (d/r0)^p",
         "limit_low": f"lower end of the {level:.0%} bootstrap interval of X_inf",
@@ -293,7 +301,10 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
         "largest_r0_off": "the seeds' mean at the largest r0, relative to X_inf (X / X_inf - 1)",
         "mean_diameter": "mean particle diameter d",
         "r0_for_5_percent": "r0 at which the fit is within 5 % of X_inf",
-        "r0_for_2_percent": "r0 at which the fit is within 2 % of X_inf"}
+        "r0_for_2_percent": "r0 at which the fit is within 2 % of X_inf",
+        "limit_low_p1": f"lower end of the {level:.0%} bootstrap interval of X_inf with p kept at 1",
+        "limit_high_p1": f"upper end of the {level:.0%} bootstrap interval of X_inf with p kept at 1",
+        "exponent_fitted_share": "share of the bootstrap replicates whose criterion chose the fitted p"}
     lengths = {"largest_r0", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"}
     aspect = sorted({a for a, _ in rows})
     data = {}
@@ -303,9 +314,17 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
             grid[aspect.index(a), LIMIT_MEASURES.index(measure)] = values[k]
         data[name] = (("aspect_ratio", "measure"), grid,
                       {"long_name": long_names[name], "units": "length" if name in lengths else "1"})
+    for end, name in enumerate(("band_low", "band_high")):
+        band = np.full((len(aspect), len(LIMIT_MEASURES), len(d_over_r0)), np.nan)
+        for (a, measure), values in bands.items():
+            band[aspect.index(a), LIMIT_MEASURES.index(measure)] = values[end]
+        data[name] = (("aspect_ratio", "measure", "d_over_r0"), band,
+                      {"long_name": f"{('lower', 'upper')[end]} end of the fit's pointwise {level:.0%} bootstrap band",
+                       "units": "1"})
     limits = xr.Dataset(data, coords={
         "aspect_ratio": ("aspect_ratio", aspect, {"long_name": "aspect ratio h0/r0", "units": "1"}),
-        "measure": ("measure", list(LIMIT_MEASURES), {"long_name": "deposit measure X"})})
+        "measure": ("measure", list(LIMIT_MEASURES), {"long_name": "deposit measure X"}),
+        "d_over_r0": ("d_over_r0", d_over_r0, {"long_name": "mean particle diameter over r0", "units": "1"})})
     limits.attrs.update(replicates=replicates, level=level, bootstrap_seed=seed)
     return limits
 
@@ -316,9 +335,9 @@ def column_size_limit_markdown(limits) -> str:
         return "### Column-size limits\n\nFewer than two column sizes at every aspect ratio: no limit fitted.\n"
     level = float(limits.attrs["level"])
     lines = ["### Column-size limits (X = X_inf + k (d/r0)^p over every seed)", "",
-             f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | p | Lube | X_inf vs Lube | "
-             "Lajeunesse | X_inf vs Lajeunesse | largest r0 vs X_inf | r0 for 5 % | r0 for 2 % |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | p | replicates fitting p | interval at p = 1 | "
+             "Lube | X_inf vs Lube | Lajeunesse | X_inf vs Lajeunesse | largest r0 vs X_inf | r0 for 5 % | r0 for 2 % |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for a in limits.aspect_ratio.values:
         for measure in limits.measure.values:
             row = limits.sel(aspect_ratio=a, measure=measure)
@@ -327,7 +346,9 @@ def column_size_limit_markdown(limits) -> str:
             x, lube, laj = float(row.limit), float(row.lube), float(row.lajeunesse)
             p = f"{float(row.exponent):.2f}" + (" (fitted)" if float(row.exponent_fitted) else "")
             lines.append(f"| {a:g} | {measure} | {int(row.n_sizes)} | {float(row.largest_r0):g} | {x:.3f} "
-                         f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | {lube:.3f} | "
+                         f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | "
+                         f"{100 * float(row.exponent_fitted_share):.0f} % | "
+                         f"[{float(row.limit_low_p1):.3f}, {float(row.limit_high_p1):.3f}] | {lube:.3f} | "
                          f"{100 * (x / lube - 1):+.0f} % | {_or_dash(laj, '.3f')} | {_or_dash(100 * (x / laj - 1), '+.0f', ' %')} | "
                          f"{_or_dash(100 * float(row.largest_r0_off), '+.1f', ' %')} | "
                          f"{float(row.r0_for_5_percent):.2g} | {float(row.r0_for_2_percent):.2g} |")

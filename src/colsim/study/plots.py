@@ -610,8 +610,8 @@ def convergence_figure(table, path: Path) -> Path:
 
 def column_size_limit_figure(table, limits, path: Path) -> Path:
     """h_inf/r0 (top) and the run-out (bottom) against d/r0, one column per aspect ratio of the
-    column_size sub-study: each run (one point per seed), the fit X_inf + k (d/r0)^p, X_inf at
-    d/r0 = 0 with its bootstrap interval, and Lube's and Lajeunesse's values there (the
+    column_size sub-study: each run (one point per seed), the fit X_inf + k (d/r0)^p with its
+    pointwise bootstrap band, X_inf at d/r0 = 0 with its bootstrap interval, and Lube's and Lajeunesse's values there (the
     experiments' columns held thousands of grains across: d/r0 about 0; Lajeunesse's height only
     up to a = 0.74, where its printed law is a height). `limits`: from
     :func:`colsim.study.convergence.column_size_limits` (None: points only)."""
@@ -636,6 +636,9 @@ def column_size_limit_figure(table, limits, path: Path) -> Path:
                 grid = np.linspace(0.0, 1.05 * x.max(), 100)
                 curve = float(fit.limit) + float(fit.slope) * grid ** float(fit.exponent)
                 ax.plot(grid, curve, "-", color="C0", lw=1, label=f"fit, p = {float(fit.exponent):.2f}")
+                if "band_low" in fit:
+                    ax.fill_between(limits.d_over_r0.values, fit.band_low.values, fit.band_high.values,
+                                    color="C0", alpha=0.15, lw=0, label=f"fit's {float(limits.attrs['level']):.0%} band")
                 low, high = float(fit.limit_low), float(fit.limit_high)
                 ax.errorbar([0.0], [float(fit.limit)], yerr=[[float(fit.limit) - low], [high - float(fit.limit)]],
                             fmt="D", color="C0", capsize=3, label=f"X_inf, {float(limits.attrs['level']):.0%} interval")

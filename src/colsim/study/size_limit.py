@@ -13,7 +13,10 @@ The better model is chosen by the small-sample Akaike criterion AICc = n ln(SSE/
 2 q (q + 1)/(n - q - 1) (q parameters, n runs): the free p only when its AICc is lower by more than
 2 (a free exponent must earn its parameter). The uncertainty of X_inf is a percentile bootstrap:
 each replicate resamples the seeds within every size (with replacement) and, when more than 3 sizes
-were measured, leaves one size out at random, then chooses and fits the model again.
+were measured, leaves one size out at random, then chooses and fits the model again. Beside that
+interval, the same replicates give the interval with p kept at 1 in every one (the seeds' and sizes'
+share of the uncertainty, without the model's choice), the share of replicates that chose the free p,
+and a pointwise band of the fitted curve.
 """
 from __future__ import annotations
 
@@ -91,14 +94,31 @@ def choose_fit(d_over_r0, values) -> LimitFit:
     return free if free.aicc < linear.aicc - AICC_MARGIN else linear
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Limit:
-    """The chosen fit and the bootstrap's percentile interval of x_inf (level, e.g. 0.95)."""
+    """The chosen fit and the bootstrap's percentile interval [low, high] of x_inf (level, e.g. 0.95);
+    [linear_low, linear_high] the interval when every replicate keeps p = 1; free_share the share of
+    replicates whose criterion chose the fitted p; replicate_fits the chosen (x_inf, k, p) of every
+    replicate, shape (replicates, 3)."""
     fit: LimitFit
     low: float
     high: float
     level: float
     replicates: int
+    linear_low: float
+    linear_high: float
+    free_share: float
+    replicate_fits: np.ndarray
+
+    def band(self, d_over_r0) -> tuple[np.ndarray, np.ndarray]:
+        """The pointwise percentile band (low, high) of the replicates' fitted X at d_over_r0 (1-D);
+        at d/r0 = 0 it is [low, high] of x_inf."""
+        x = np.asarray(d_over_r0, dtype=float)
+        x_inf, k, p = (column[:, None] for column in self.replicate_fits.T)
+        curves = x_inf + k * x[None, :] ** p
+        tail = 100 * (1 - self.level) / 2
+        low, high = np.percentile(curves, [tail, 100 - tail], axis=0)
+        return low, high
 
 
 def size_limit(runs: dict, diameter: float, replicates: int = 2000, level: float = 0.95,
@@ -114,14 +134,19 @@ def size_limit(runs: dict, diameter: float, replicates: int = 2000, level: float
 
     fit = choose_fit(*flat(values))
     rng = np.random.default_rng(seed)
-    estimates = []
+    fits, linear = [], []
     for _ in range(replicates):
         kept = sizes
         if len(sizes) > 3:
             left_out = sizes[rng.integers(len(sizes))]
             kept = [r0 for r0 in sizes if r0 != left_out]
         sample = {r0: rng.choice(values[r0], size=len(values[r0])) for r0 in kept}
-        estimates.append(choose_fit(*flat(sample)).x_inf)
+        chosen = choose_fit(*flat(sample))
+        fits.append((chosen.x_inf, chosen.k, chosen.p, chosen.p_fitted))
+        linear.append(chosen.x_inf if not chosen.p_fitted else fit_limit(*flat(sample), p=1.0).x_inf)
+    fits = np.array(fits)
     tail = 100 * (1 - level) / 2
-    low, high = np.percentile(estimates, [tail, 100 - tail])
-    return Limit(fit, float(low), float(high), level, replicates)
+    low, high = np.percentile(fits[:, 0], [tail, 100 - tail])
+    linear_low, linear_high = np.percentile(linear, [tail, 100 - tail])
+    return Limit(fit, float(low), float(high), level, replicates, float(linear_low), float(linear_high),
+                 float(fits[:, 3].mean()), fits[:, :3])
