@@ -4,7 +4,6 @@ from them and never parsed from a name."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from types import SimpleNamespace
 
 import pytest

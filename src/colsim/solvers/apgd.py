@@ -96,10 +96,10 @@ def _project_step(x, x_prev, beta, g, x_new, step, a, b, blocks):
             x_new[o + 2] = q2
             x_new[o + 3] = r1
             x_new[o + 4] = r2
-            for l, yl in enumerate((y0, y1, y2, y3, y4)):   # summed as when y was stored: the same bits
-                d = x_new[o + l] - yl
+            for c, yc in enumerate((y0, y1, y2, y3, y4)):   # summed as when y was stored: the same bits
+                d = x_new[o + c] - yc
                 dd += d * d
-                uphill += g[o + l] * (x_new[o + l] - x[o + l])
+                uphill += g[o + c] * (x_new[o + c] - x[o + c])
         dd_part[block] = dd
         uphill_part[block] = uphill
     dd = 0.0

@@ -146,7 +146,9 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
     top_radius = undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
     backends = list(trajectory["step_solver_backend"].values) if "step_solver_backend" in trajectory else []
-    count = (lambda name: float(backends.count(name)) if backends else np.nan)  # NaN: not recorded
+
+    def count(name):
+        return float(backends.count(name)) if backends else np.nan   # NaN: not recorded
     data = {
         "h_inf": _scalar(deposit.h_inf, "length", "final height of the main mass"),
         "r_inf": _scalar(deposit.r_inf, "length", "run-out radius of the main mass"),

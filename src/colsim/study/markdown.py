@@ -9,6 +9,11 @@ from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_flags
 from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 
+def _sd(values) -> float:
+    """The sample standard deviation of the finite values; NaN with fewer than two."""
+    return np.nanstd(values, ddof=1) if np.isfinite(values).sum() > 1 else np.nan
+
+
 def claims_markdown(summary) -> str:
     """Markdown table of the paper's qualitative claims, per mu_r and a (mean over seeds): the final
     height over h0 (1 where the top is undisturbed, below 1 where it was eroded), the radius of the
@@ -150,14 +155,13 @@ def friction_law_markdown(comparison) -> str:
                 seeds = int(np.isfinite(h).sum())
                 if seeds == 0:
                     continue
-                sd = (lambda v: np.nanstd(v, ddof=1) if np.isfinite(v).sum() > 1 else np.nan)
                 h_law, r_law = lube_height(a), lube_runout(a)
                 share = np.nanmean(part.n_main_mass.values / part.n_particles.values)
                 programs = (np.nanmean(part.cone_programs_per_step.values)
                             if "cone_programs_per_step" in part else np.nan)
                 lines.append(
-                    f"| {a:g} | {law} | {seeds} | {np.nanmean(h):.3f} ({sd(h):.3f}) | {h_law:.3f} | "
-                    f"{_error(np.nanmean(h), h_law)} | {np.nanmean(r):.3f} ({sd(r):.3f}) | "
+                    f"| {a:g} | {law} | {seeds} | {np.nanmean(h):.3f} ({_sd(h):.3f}) | {h_law:.3f} | "
+                    f"{_error(np.nanmean(h), h_law)} | {np.nanmean(r):.3f} ({_sd(r):.3f}) | "
                     f"{r_law:.3f} | {_error(np.nanmean(r), r_law)} | {share:.2f} | "
                     f"{programs:.1f} | {np.nanmean(part.wall_time.values):.0f} |")
         lines.append("")
