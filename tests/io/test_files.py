@@ -1,6 +1,9 @@
 """Every stage's file: CF units, versions and long names; the VTK export's frames."""
 from __future__ import annotations
 
+import subprocess
+from pathlib import Path
+
 import numpy as np
 import xarray as xr
 
@@ -19,6 +22,11 @@ def test_files_carry_cf_units_versions_and_long_names(tmp_path):
     for name in ("colsim_version", "clarabel_version", "numpy_version"):
         assert column.attrs[name] and column.attrs[name] != "not installed", name
     assert column.attrs["numpy_version"] == np.__version__
+    # the commit of the checkout the package was imported from, as git itself reports it
+    done = subprocess.run(["git", "-C", str(Path(io.__file__).parent), "rev-parse", "HEAD"],
+                          capture_output=True, text=True)
+    expected = done.stdout.strip() if done.returncode == 0 else "unknown (not a git checkout)"
+    assert column.attrs["colsim_commit"].split(" ")[0] == expected.split(" ")[0]
 
 
 def test_export_vtk_removes_its_own_earlier_frames(tmp_path):

@@ -2,7 +2,9 @@
 
 Every file is CF-style: global `Conventions`, `title`, `source` ("colsim X.Y"), `history`, the
 versions of colsim, Clarabel and numpy, the run's configuration as JSON in `config` and its `seed`;
-every variable has `units` and `long_name`. The simulation's lengths, times and masses are in SI
+every variable has `units` and `long_name`; `colsim_commit` names the git commit of the source
+that wrote the file (" (modified)" when its tracked files differed from it), where colsim runs from
+a git checkout. The simulation's lengths, times and masses are in SI
 units (`unit_system`): gravity 9.81 makes lengths metres and times seconds, and the density (in
 kg m-3) makes masses kilograms; scaled quantities (over r0, t/sqrt(h0/g)) have units "1". Wall-clock
 times are "s" too, and their long names say "wall-clock".
@@ -12,9 +14,11 @@ when complete, so a killed run never leaves a file that looks finished.
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.metadata
 import json
 import os
+import subprocess
 import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
@@ -140,13 +144,33 @@ def global_attributes(kind: str, title: str, config: dict, seed=None) -> dict:
 
 
 def versions() -> dict:
-    """{colsim_version, clarabel_version, numpy_version} of this process (installed distributions)."""
-    found = {"colsim_version": __version__, "numpy_version": np.__version__}
+    """{colsim_version, colsim_commit, clarabel_version, numpy_version} of this process (installed
+    distributions; the commit from :func:`source_commit`)."""
+    found = {"colsim_version": __version__, "colsim_commit": source_commit(), "numpy_version": np.__version__}
     try:
         found["clarabel_version"] = importlib.metadata.version("clarabel")
     except importlib.metadata.PackageNotFoundError:
         found["clarabel_version"] = "not installed"
     return found
+
+
+@functools.lru_cache(maxsize=1)
+def source_commit() -> str:
+    """The git commit of the checkout colsim's source lies in, with " (modified)" when its tracked
+    files differ from it; "unknown (not a git checkout)" for an installed copy or without git.
+    Asked once a process: a run's files all name the code it started with."""
+    def git(*args) -> str | None:
+        try:
+            done = subprocess.run(["git", "-C", str(Path(__file__).parent), *args], capture_output=True,
+                                  text=True, timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        return done.stdout.strip() if done.returncode == 0 else None
+
+    commit = git("rev-parse", "HEAD")
+    if not commit:
+        return "unknown (not a git checkout)"
+    return commit + (" (modified)" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def cf_units(dataset):
