@@ -611,9 +611,9 @@ def convergence_figure(table, path: Path) -> Path:
 def column_size_limit_figure(table, limits, path: Path) -> Path:
     """h_inf/r0 (top) and the run-out (bottom) against d/r0, one column per aspect ratio of the
     column_size sub-study: each run (one point per seed), the fit X_inf + k (d/r0)^p with its
-    pointwise bootstrap band, X_inf at d/r0 = 0 with its bootstrap interval, and Lube's and Lajeunesse's values there (the
-    experiments' columns held thousands of grains across: d/r0 about 0; Lajeunesse's height only
-    up to a = 0.74, where its printed law is a height). `limits`: from
+    pointwise bootstrap band, X_inf at d/r0 = 0 with its bootstrap interval, and Lube's and
+    Lajeunesse's values there (the experiments' columns held thousands of grains across: d/r0 about
+    0; Lajeunesse's height only up to a = 0.74, where its printed law is a height). `limits`: from
     :func:`colsim.study.convergence.column_size_limits` (None: points only)."""
     plt = _pyplot()
     study = table.where(table.study == "column_size", drop=True)
