@@ -26,7 +26,6 @@ import datetime as _dt
 import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 from importlib import metadata
@@ -89,18 +88,9 @@ def versions() -> dict:
 
 def git_state(folder: Path = REPOSITORY) -> dict:
     """The commit checked out in `folder`, whether its tracked files differ from it, the branch."""
-    def git(*args) -> str | None:
-        try:
-            done = subprocess.run(["git", "-C", str(folder), *args], capture_output=True, text=True,
-                                  timeout=20)
-        except (OSError, subprocess.TimeoutExpired):
-            return None
-        return done.stdout.strip() if done.returncode == 0 else None
+    from colsim.io.git import git_state as state
 
-    commit = git("rev-parse", "HEAD")
-    status = git("status", "--porcelain", "--untracked-files=no")
-    return {"commit": commit, "dirty": None if status is None else bool(status),
-            "branch": git("rev-parse", "--abbrev-ref", "HEAD")}
+    return state(folder)
 
 
 def write_json(path: Path, content: dict) -> Path:

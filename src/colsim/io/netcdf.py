@@ -18,7 +18,6 @@ import functools
 import importlib.metadata
 import json
 import os
-import subprocess
 import tempfile
 from datetime import datetime, timezone
 from pathlib import Path
@@ -29,6 +28,7 @@ import xarray as xr
 from .. import __version__
 from ..engine.state import ParticleState
 from ..engine.warm_start import WarmStart
+from .git import git_state
 
 STATE_KIND = "particle-state"
 TRAJECTORY_KIND = "collapse-trajectory"
@@ -159,18 +159,10 @@ def source_commit() -> str:
     """The git commit of the checkout colsim's source lies in, with " (modified)" when its tracked
     files differ from it; "unknown (not a git checkout)" for an installed copy or without git.
     Asked once a process: a run's files all name the code it started with."""
-    def git(*args) -> str | None:
-        try:
-            done = subprocess.run(["git", "-C", str(Path(__file__).parent), *args], capture_output=True,
-                                  text=True, timeout=20)
-        except (OSError, subprocess.TimeoutExpired):
-            return None
-        return done.stdout.strip() if done.returncode == 0 else None
-
-    commit = git("rev-parse", "HEAD")
-    if not commit:
+    state = git_state(Path(__file__).parent)
+    if not state["commit"]:
         return "unknown (not a git checkout)"
-    return commit + (" (modified)" if git("status", "--porcelain", "--untracked-files=no") else "")
+    return state["commit"] + (" (modified)" if state["dirty"] else "")
 
 
 def cf_units(dataset):
