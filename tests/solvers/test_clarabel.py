@@ -9,9 +9,11 @@ from colsim.solvers import ClarabelSolver, SolverError, defaults
 from solver_cases import collapse_program
 
 #: the agreement asked of two exact solutions of one program, both solved to 1e-10: the step's
-#: increments are unique (the objective is strictly convex in them), so they differ by the solver
-#: tolerance times the program's conditioning; 1e-6 relative leaves four decades for that
-AGREEMENT = 1e-6
+#: increments are unique (the objective is strictly convex in them), but where contacts are
+#: degenerate (active with zero force) an interior point's primal error goes as the square root of
+#: its gap tolerance, sqrt(1e-10) = 1e-5 (measured: 2e-6 on the pile poured with the bounded overlap
+#: recovery of 2026-11-26, 1e-7 or less before)
+AGREEMENT = 1e-5
 
 
 def test_defaults_come_from_the_defaults_module():

@@ -127,20 +127,35 @@ if HAVE_NUMBA:
     _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
 
 
-def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0):
+def recovery_relaxation(true_gap: np.ndarray, most_recovered: float) -> np.ndarray:
+    """(m,) length added to each constraint's gap so that a step removes at most `most_recovered`
+    (length) of an overlap that is already there: max(0, -true_gap - most_recovered).
+
+    An overlap g < 0 at the start of a step is otherwise removed within the step, as a velocity
+    -g/dt: a kinetic energy that grows like 1/dt^2 as the step shrinks. With the relaxation the
+    constraint asks for g_eff + du_n >= ..., g_eff = max(g, -most_recovered): an overlap never grows
+    and shrinks by at least most_recovered a step, at a speed that does not depend on dt."""
+    return np.maximum(0.0, -np.asarray(true_gap) - most_recovered)
+
+
+def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0,
+                   most_recovered: float = np.inf):
     """(i, family, normal (m,3), gap) for particle-wall contacts with gap below reach (n,) (length).
 
     cylinder_margin: (n,) or scalar length subtracted from the cylinder gaps (see :func:`detect`).
+    most_recovered: the most of an existing overlap that a step removes (:func:`recovery_relaxation`).
     """
     parts = []
     if walls.floor:
         gap = state.position[:, 2] - state.radius
         idx = np.flatnonzero(gap < reach)
         normal = np.tile([0.0, 0.0, -1.0], (len(idx), 1))
+        gap = gap + recovery_relaxation(gap, most_recovered)
         parts.append((idx, np.full(len(idx), FLOOR), normal, gap[idx]))
     if walls.cylinder_radius is not None:
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
-        gap = walls.cylinder_radius - rho - state.radius - cylinder_margin
+        true_gap = walls.cylinder_radius - rho - state.radius
+        gap = true_gap + recovery_relaxation(true_gap, most_recovered) - cylinder_margin
         idx = np.flatnonzero(gap < reach)
         normal = np.zeros((len(idx), 3))
         on_axis = rho[idx] < 1e-12
@@ -169,7 +184,8 @@ def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndar
 
 
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
-           margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None) -> Contacts:
+           margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
+           most_recovered: float = np.inf) -> Contacts:
     """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
 
     margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
@@ -180,6 +196,9 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     renormal: optional (i, j, normal (k, 3)) particle pairs to include with a given normal. Any unit
     normal n gives a conservative linear constraint n.(x_j - x_i) - R_i - R_j + n.du >= 0, since
     |d| >= n.d; the stepper passes the end-of-attempt normals of pairs that a first attempt missed.
+    most_recovered (length): the most of an overlap present at the start that the step removes; the
+    gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
+    linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     """
     pi, pj = swept_pairs(state, predicted, margin, slack)
     d = state.position[pj] - state.position[pi]
@@ -194,10 +213,13 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
         pair_normal = np.concatenate([pair_normal[~drop], rnormal])
         d = state.position[pj] - state.position[pi]
     pair_gap = np.einsum("ij,ij->i", pair_normal, d) - state.radius[pi] - state.radius[pj]
+    true_pair_gap = np.linalg.norm(d, axis=1) - state.radius[pi] - state.radius[pj]
+    pair_gap += recovery_relaxation(true_pair_gap, most_recovered)
     speed = np.linalg.norm(predicted, axis=1)
     reach = margin + (1.0 + slack) * speed
-    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin)
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
     fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
+    fgap = fgap + recovery_relaxation(fgap, most_recovered)
 
     i = np.concatenate([pi, wi, fi]).astype(np.int64)
     j = np.concatenate([pj, np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64)

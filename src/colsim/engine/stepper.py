@@ -1,5 +1,9 @@
 """Time stepping: detect, assemble, solve, update (x += dx, v = dx/dt, w = dth/dt), check.
 
+An overlap present at the start of a step is removed at a bounded speed, not within the step
+(:func:`colsim.engine.contacts.recovery_relaxation`, :func:`colsim.engine.state.recovery_speed`), so
+a smaller step does not turn the same overlap into a larger velocity.
+
 Potential contacts come from the free-flight prediction u = v dt + g dt^2 of every particle
 (:func:`colsim.engine.contacts.detect`): a pair is listed when its relative segment comes within a margin
 (default 5 % of the smallest diameter, plus half the pair's relative displacement, for the velocity
@@ -28,7 +32,7 @@ from . import friction
 from .program import assemble
 from .records import Carry, StepDiagnostics
 from .solver_contract import ConeSolution, Solver
-from .state import ParticleState, StepSettings
+from .state import ParticleState, StepSettings, recovery_speed
 from .warm_start import WarmStart
 
 log = logging.getLogger(__name__)
@@ -85,6 +89,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
+    most_recovered = recovery_speed(settings, mean_diameter) * settings.dt
     margin = base_margin(state, settings) if margin is None else margin
     started = time.perf_counter()
     predicted = predicted_displacement(state, settings)
@@ -94,7 +99,8 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     for attempt in range(settings.max_redo + 1):
         t0 = time.perf_counter()
         found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
-                                         settings.detection_slack, cylinder_margin, renormal)
+                                         settings.detection_slack, cylinder_margin, renormal,
+                                         most_recovered)
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()

@@ -315,7 +315,7 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
     """InputError naming the first offending sphere unless the spheres are a possible column: at
     least one; finite positions, velocities and radii; diameters within the file's stated range;
     nothing below the floor or (r0 given) outside the cylinder, and no two spheres overlapping, by
-    more than 1 % of the smallest diameter (the stepper's own tolerance)."""
+    more than 1 % of the smallest diameter (the stepper's own tolerance; the deepest pair is named)."""
     from ..engine.contacts import overlaps
     from ..engine.state import Walls
 
@@ -346,8 +346,10 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
             raise InputError(f"input file {path}: sphere {int(np.argmax(outside))} reaches outside the cylinder r0 = {r0:g}")
     pairs = overlaps(state, Walls(floor=False), tolerance).pairs
     if len(pairs[0]):
-        i, j = int(pairs[0][0]), int(pairs[1][0])
-        gap = np.linalg.norm(state.position[j] - state.position[i]) - state.radius[i] - state.radius[j]
+        gaps = (np.linalg.norm(state.position[pairs[1]] - state.position[pairs[0]], axis=1)
+                - state.radius[pairs[0]] - state.radius[pairs[1]])
+        k = int(np.argmin(gaps))
+        i, j, gap = int(pairs[0][k]), int(pairs[1][k]), float(gaps[k])
         raise InputError(f"input file {path}: spheres {i} and {j} overlap by {-gap:g} (length), more than"
                          f" 1 % of the smallest diameter")
 

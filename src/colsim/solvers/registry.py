@@ -80,9 +80,17 @@ class AutoSolver(Solver):
         self.apgd_below = float(apgd_below)
         self.max_iter = int(max_iter)
         self.clarabel = ClarabelSolver(**(clarabel or {}))
+        lengths = self.length_scale()
         self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE,
-                                  "length_floor": self.APGD_LENGTH_FLOOR,
-                                  "overlap_tolerance": self.APGD_OVERLAP_TOLERANCE, **(apgd or {})})
+                                  "length_floor": lengths * self.APGD_LENGTH_FLOOR,
+                                  "overlap_tolerance": lengths * self.APGD_OVERLAP_TOLERANCE, **(apgd or {})})
+
+    def length_scale(self) -> float:
+        """The factor on APGD's length floor and overlap tolerance: 1 at steps of at least
+        defaults.AUTO_APGD_LENGTHS_AT, the step over it below (so they bound a velocity error)."""
+        if self.scaled_time_step is None:
+            return 1.0
+        return min(1.0, self.scaled_time_step / defaults.AUTO_APGD_LENGTHS_AT)
 
     def describe(self) -> dict:
         # which back-end solved each step is the trajectory's step_solver_backend, not a setting:
