@@ -13,6 +13,7 @@ include: "workflow/rules/simulate.smk"
 include: "workflow/rules/summarise.smk"
 include: "workflow/rules/convergence.smk"
 include: "workflow/rules/friction_law.smk"
+include: "workflow/rules/calibration.smk"
 
 
 # the study's own description (written with its summary), so a report describes the files it shows

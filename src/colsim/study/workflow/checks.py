@@ -94,6 +94,8 @@ def cross_field_problem(config):
     columns += [(a, r0) for a in study.get("time_step", {}).get("aspect_ratios", [])]
     columns += [(a, r0) for a in study.get("end_time", {}).get("aspect_ratios", [])]
     columns += [(study["seeds"]["aspect_ratio"], r0)] if "seeds" in study else []
+    calibration = config.get("calibration") or {}
+    columns += [(a, r) for r in calibration.get("r0", []) for a in config["aspect_ratios"]]
     for a, radius in columns:
         if radius < d_max:
             return f"config: convergence r0 {radius} is below diameter_max {d_max}"

@@ -174,6 +174,15 @@ class StudyPlan:
                 for seed in seeds or self.seeds for a in self.aspect_ratios
                 for m in (self.mu_r if mu_r is None else [mu_r])]
 
+    def calibration_runs(self, name: str) -> list[str]:
+        """Paths of file `name` of every run of the mu_r calibration (config key calibration; none
+        without one): each r0 and seed of it, each of the study's aspect ratios and mu_r."""
+        study = self.config.get("calibration")
+        if not study:
+            return []
+        return [self.run_path(name, r0, seed, a, m) for r0 in study["r0"]
+                for seed in study.get("seeds") or self.seeds for a in self.aspect_ratios for m in self.mu_r]
+
     def side_view_mu_r(self) -> float:
         """The swept mu_r nearest to figures.side_view_mu_r."""
         target = self.config["figures"]["side_view_mu_r"]
