@@ -3,10 +3,11 @@ row per run, and its tables against Lube's laws."""
 import json
 
 import numpy as np
+import pytest
 import xarray as xr
 
 from colsim.study.experimental_laws import lube_height, lube_runout
-from colsim.study.collect import one_row_per_run, run_flags
+from colsim.study.collect import collect_analyses, one_row_per_run, run_flags
 from colsim.study.markdown import lube_markdown, lube_rst
 
 
@@ -153,3 +154,28 @@ def test_lube_table_flags_runs_and_says_why():
     settled = flag_summary().assign(at_rest=lambda s: xr.ones_like(s.at_rest), n_main_mass=lambda s: s.n_particles)
     text = lube_markdown(settled)
     assert "Flags:" not in text and text.splitlines()[4].endswith("|  |")
+
+
+def _analysis(**attrs) -> xr.Dataset:
+    """A minimal analysis of one run with these attributes over sane defaults."""
+    base = {"aspect_ratio": 2.0, "mu_r": 0.12, "seed": 1, "r0": 3.0, "mu": 0.577,
+            "friction_law": "associated", "rolling_lever": "paper", "solver_backends": '{"apgd": 10}'}
+    return xr.Dataset({"h_inf_over_r0": ((), 1.0, {"units": "1", "long_name": "h"})}, attrs={**base, **attrs})
+
+
+@pytest.mark.parametrize("attrs, words", [
+    ({"rolling_lever": "{{ 7 * 7 }}"}, ["rolling_lever", "paper, effective"]),
+    ({"friction_law": ".. include:: /etc/passwd"}, ["friction_law", "associated, coulomb"]),
+    ({"solver_backends": '{"<script>": 3}'}, ["solver_backends"]),
+    ({"seed": 1.7}, ["seed 1.7", "integer"]),
+    ({"seed": 10**30}, ["integer in 0..2^32-1"]),
+    ({"aspect_ratio": float("nan")}, ["aspect_ratio", "finite"]),
+    ({"mu_r": np.array([0.1, 0.2])}, ["mu_r", "finite number"]),
+])
+def test_collect_refuses_attributes_outside_their_vocabulary_or_range(attrs, words):
+    """Issues 45.1 and 45.6: a run's attributes reach the summary, its tables and the report, so a
+    value outside its vocabulary, a non-integer seed or a non-finite coordinate is refused, naming it."""
+    with pytest.raises(ValueError) as refused:
+        collect_analyses([_analysis(**attrs)])
+    assert all(word in str(refused.value) for word in words), str(refused.value)
+    assert collect_analyses([_analysis()]).attrs["rolling_lever"] == "paper"

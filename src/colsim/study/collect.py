@@ -10,7 +10,8 @@ from collections import Counter
 import numpy as np
 import xarray as xr
 
-from ..engine.state import LEVER_OF_OLDER_FILES
+from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
+from ..solvers.defaults import SOLVERS
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
@@ -85,13 +86,49 @@ def one_row_per_run(summary) -> xr.Dataset:
     return flat.drop_dims([dim for dim in CHECK_VARIABLES.values() if dim in flat.dims])
 
 
+#: what a run's attributes of a fixed vocabulary may say (they reach the tables and the report)
+VOCABULARY = {"friction_law": FRICTION_LAWS, "rolling_lever": ROLLING_LEVERS}
+#: the back-ends a step may name (colsim.solvers.AutoSolver adds clarabel-fallback)
+BACKENDS = set(SOLVERS) | {"clarabel-fallback"}
+
+
+def run_key(analysis) -> tuple[float, float, int]:
+    """(aspect_ratio, mu_r, seed) of one analysis, checked: finite numbers and an integer seed in
+    0..2^32-1, and its fixed-vocabulary attributes from their vocabularies (else ValueError naming
+    the run)."""
+    def number(name, default=None):
+        value = analysis.attrs.get(name, default)
+        try:
+            value = float(np.asarray(value).item())
+        except (TypeError, ValueError):
+            value = float("nan")
+        if not np.isfinite(value):
+            raise ValueError(f"{_run_name(analysis)}: attribute {name} is {analysis.attrs.get(name)!r}, not a finite number")
+        return value
+
+    a, mu_r, seed = number("aspect_ratio"), number("mu_r"), number("seed", 0)
+    if seed != int(seed) or not 0 <= seed < 2**32:
+        raise ValueError(f"{_run_name(analysis)}: seed {analysis.attrs.get('seed')!r} is not an integer in 0..2^32-1")
+    for name, allowed in VOCABULARY.items():
+        if name in analysis.attrs and analysis.attrs[name] not in allowed:
+            raise ValueError(f"{_run_name(analysis)}: {name} {str(analysis.attrs[name])[:80]!r} is not one of {', '.join(allowed)}")
+    try:
+        backends = json.loads(analysis.attrs.get("solver_backends", "{}"))
+    except (TypeError, ValueError):
+        backends = None
+    if not isinstance(backends, dict) or not set(backends) <= BACKENDS or not all(
+            isinstance(v, int) and v >= 0 for v in backends.values()):
+        raise ValueError(f"{_run_name(analysis)}: solver_backends is not a count of steps by back-end "
+                         f"({', '.join(sorted(BACKENDS))})")
+    return a, mu_r, int(seed)
+
+
 def collect_analyses(analyses) -> xr.Dataset:
     """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
     if not analyses:
         raise ValueError("no analysis files to collect")
+    keys = [run_key(a) for a in analyses]
     check_same_settings(analyses)
-    keys = [(float(a.attrs["aspect_ratio"]), float(a.attrs["mu_r"]), int(a.attrs.get("seed", 0)))
-            for a in analyses]
     if len(set(keys)) != len(keys):
         raise ValueError("two analyses share the same (aspect_ratio, mu_r, seed)")
     ratios, mu_rs, seeds = (sorted(set(values)) for values in zip(*keys))

@@ -3,6 +3,7 @@ rendered from the configuration and the summary it describes."""
 from __future__ import annotations
 
 import os
+import re
 
 import yaml
 
@@ -12,21 +13,46 @@ from ...io import atomic_path
 NOT_RUN = "workflow/report/not_run.rst"
 
 
+class Markup(str):
+    """Text the study itself wrote as reStructuredText (its table against Lube): rendered as it is.
+    Every other value reaching the report's description is data and goes through :func:`rst_text`."""
+
+
+def rst_text(value) -> str:
+    """`value` as plain text for reStructuredText that Snakemake also renders as a Jinja template:
+    one line (no line of it can start a directive such as `.. include::` or `.. raw::`), and every
+    character other than a letter, digit or space escaped with a backslash, which docutils shows as
+    the character itself; so no `{{`, `{%` or `{#` reaches Jinja and no role, link or markup reaches
+    docutils."""
+    if isinstance(value, Markup):
+        return value
+    text = " ".join(str(value).split())
+    return re.sub(r"([^A-Za-z0-9 ])", r"\\\1", text)
+
+
+def render_description(template_text: str, **values) -> str:
+    """The report's description from its template, each substituted value through :func:`rst_text`."""
+    import jinja2
+
+    environment = jinja2.Environment(undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
+                                     finalize=rst_text)
+    return environment.from_string(template_text).render(**values)
+
+
 def write_study_files(study, summary_path, template, config_path, description_path, study_dir) -> None:
     """Write the study's configuration (YAML) and the report's description rendered from it and from
     the summary (its attributes, and the table against Lube at figures.side_view_mu_r), each to a
     temporary name and then renamed."""
-    import jinja2
     import xarray
 
     from ..markdown import lube_rst
 
     with xarray.open_dataset(summary_path) as summary:
         attrs = dict(summary.attrs)
-        table = lube_rst(summary, study["figures"]["side_view_mu_r"])
+        table = Markup(lube_rst(summary, study["figures"]["side_view_mu_r"]))
     with open(template) as stream:
-        text = jinja2.Template(stream.read(), undefined=jinja2.StrictUndefined, keep_trailing_newline=True).render(
-            study=study, summary=attrs, study_dir=study_dir, lube_table=table)
+        text = render_description(stream.read(), study=study, summary=attrs, study_dir=study_dir,
+                                  lube_table=table)
     for path, write in ((config_path, lambda s: yaml.safe_dump(study, s, sort_keys=False)),
                         (description_path, lambda s: s.write(text))):
         with atomic_path(path) as tmp, open(tmp, "w") as stream:
