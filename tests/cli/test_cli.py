@@ -248,5 +248,11 @@ def test_status_lists_what_is_done_and_what_is_in_progress(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "1 packings and 0 collapses done, 1 in progress" in out
     assert "| r0_2/seed_1/pack_x/a_1/mu_r_0.12/run_y | collapse | 2 | -1 |" in out
+    # issue 45.6: a FIFO named *.checkpoint is skipped (opening it would block), a junk file is named
+    os.mkfifo(run.parent / "fifo.checkpoint")
+    (run.parent / "junk.checkpoint").write_bytes(b"not an archive")
+    assert main(["status", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 in progress" in out and "not a colsim checkpoint" in out and "pickle" not in out
     assert main(["status", str(tmp_path / "nowhere")]) == 2
     assert "is not a folder" in capsys.readouterr().err

@@ -10,6 +10,7 @@ import pickle
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -60,12 +61,33 @@ class Planted:
 
 def test_a_planted_pickle_checkpoint_runs_no_code(work):
     """The checkpoint is an .npz of plain arrays read with allow_pickle=False; a pickle in its place
-    is ignored with a warning and the collapse starts over."""
-    (work / "out.nc.checkpoint").write_bytes(pickle.dumps({"fingerprint": Planted()}))
+    is refused in one line (issue 45.2: it is not colsim's to replace), runs nothing and stays."""
+    planted = pickle.dumps({"fingerprint": Planted()})
+    (work / "out.nc.checkpoint").write_bytes(planted)
     done = colsim("collapse", "--input", "column.nc", "--steps", "5", "--output", "out.nc", cwd=work)
-    assert done.returncode == 0, done.stderr[-2000:]
-    assert not (work / "planted_code_ran").exists()
-    assert "ignoring unreadable checkpoint" in done.stderr and (work / "out.nc").exists()
+    one_line_error(done, 2, "out.nc.checkpoint", "not a colsim checkpoint")
+    assert not (work / "planted_code_ran").exists() and not (work / "out.nc").exists()
+    assert (work / "out.nc.checkpoint").read_bytes() == planted
+
+
+@pytest.mark.parametrize("command", [["collapse", "--input", "column.nc", "--steps", "2"],
+                                     ["pack", "--r0", "1", "--height", "1", "--max-steps", "3"]])
+def test_a_checkpoint_path_naming_another_file_leaves_it_alone(work, command):
+    """Issue 45.2: `--checkpoint notes.txt` (or another run's analysis) is refused before any step;
+    the file is as it was."""
+    (work / "notes.txt").write_text("my notes\n")
+    done = colsim(*command, "--checkpoint", "notes.txt", "--output", "x.nc", cwd=work)
+    one_line_error(done, 2, "notes.txt", "not a colsim checkpoint")
+    assert (work / "notes.txt").read_text() == "my notes\n" and not (work / "x.nc").exists()
+
+
+def test_an_output_onto_a_device_or_a_fifo_is_refused(work):
+    """Issue 45.2: colsim replaces only regular files (or links, by rename): /dev/null and a FIFO stay."""
+    os.mkfifo(work / "fifo")
+    for target in ("/dev/null", "fifo"):
+        done = colsim("trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", target, cwd=work)
+        one_line_error(done, 2, target, "not a regular file")
+    assert (work / "fifo").is_fifo() and Path("/dev/null").is_char_device()
 
 
 @pytest.mark.parametrize("args, words", [

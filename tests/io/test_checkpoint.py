@@ -1,14 +1,18 @@
-"""A collapse's checkpoint (colsim.io.checkpoint): what is saved comes back exactly, and a checkpoint
-of other inputs or a damaged file is ignored with a warning, never taken for this run's."""
+"""A collapse's checkpoint (colsim.io.checkpoint): what is saved comes back exactly; a checkpoint of
+other inputs, a damaged or foreign file, or an impossible saved state is refused, never taken for this
+run's nor replaced; the commits of every sitting are kept."""
 import logging
+import os
 
 import numpy as np
+import pytest
 
 from colsim.engine.records import Carry, StepDiagnostics
 from colsim.engine.state import ParticleState
 from colsim.engine.warm_start import WarmStart
-from colsim.io.checkpoint import (checkpoint_summary, load_checkpoint, load_packing_checkpoint, save_checkpoint,
-                                  save_packing_checkpoint)
+from colsim.io.checkpoint import (CheckpointError, check_checkpoint_path, checkpoint_summary, load_checkpoint,
+                                  load_packing_checkpoint, save_checkpoint, save_packing_checkpoint)
+from colsim.io.netcdf import source_commit
 
 
 def _diagnostics(step: int) -> StepDiagnostics:
@@ -21,9 +25,10 @@ def _diagnostics(step: int) -> StepDiagnostics:
 
 def _run():
     rng = np.random.default_rng(5)
-    state = ParticleState(rng.normal(size=(4, 3)), rng.normal(size=(4, 3)), rng.normal(size=(4, 3)),
+    apart = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0], [1.0, 1.0, 1.0]])  # no overlap, above the floor
+    state = ParticleState(apart + rng.uniform(-0.1, 0.1, (4, 3)), rng.normal(size=(4, 3)), rng.normal(size=(4, 3)),
                           rng.uniform(0.1, 0.2, 4), 2.5, 0.3)
-    frames = [(0, ParticleState.at_rest(rng.normal(size=(4, 3)), state.radius, 2.5)), (10, state)]
+    frames = [(0, ParticleState.at_rest(apart, state.radius, 2.5)), (10, state)]
     warm = WarmStart(np.array([0, 1]), np.array([1, -1]), np.array([0, 1]), rng.normal(size=(2, 3)),
                      rng.normal(size=(2, 3)))
     return state, frames, [_diagnostics(1), _diagnostics(2)], Carry(warm, 0.01)
@@ -52,18 +57,54 @@ def test_no_warm_start_and_no_margin_come_back_as_none(tmp_path):
     assert carry.warm_start is None and carry.margin is None
 
 
-def test_another_run_s_or_a_damaged_checkpoint_is_ignored(tmp_path, caplog):
+def test_another_run_s_a_damaged_or_a_foreign_file_is_refused(tmp_path):
+    """Issue 45.2: colsim reads past or replaces nothing it did not write for this run: another run's
+    checkpoint, a damaged one, a file that is no checkpoint (notes.txt) and a FIFO are refused with a
+    line saying what to do; an absent path is simply no checkpoint."""
     state, frames, diagnostics, carry = _run()
     path = tmp_path / "c.npz"
     save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
-    caplog.set_level(logging.WARNING, logger="colsim")
-    assert load_checkpoint(path, "other settings") is None
-    assert "belongs to other inputs or settings" in caplog.text
+    with pytest.raises(CheckpointError, match="belongs to another run"):
+        load_checkpoint(path, "other settings")
     path.write_bytes(path.read_bytes()[:100])
-    assert load_checkpoint(path, "abc") is None
-    assert "unreadable checkpoint" in caplog.text
+    with pytest.raises(CheckpointError, match="not a colsim checkpoint"):
+        load_checkpoint(path, "abc")
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    with pytest.raises(CheckpointError, match="not a colsim checkpoint"):
+        check_checkpoint_path(notes)
+    assert notes.read_text() == "my notes\n"
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(CheckpointError, match="not a regular file"):
+        check_checkpoint_path(fifo)     # refused without opening it (which would block)
     assert load_checkpoint(tmp_path / "absent.npz", "abc") is None
     assert load_checkpoint(None, "abc") is None
+
+
+def test_an_edited_state_is_refused_like_a_bad_column(tmp_path):
+    """Issue 45.4: a checkpoint edited to put two spheres on one spot (or a NaN) passes the same
+    checks as a fresh column before it is resumed."""
+    state, frames, diagnostics, carry = _run()
+    for spoil, words in ((lambda s: s.position.__setitem__(1, s.position[0]), "overlap"),
+                         (lambda s: s.position.__setitem__((2, 0), np.nan), "non-finite")):
+        bad = state.copy()
+        spoil(bad)
+        save_checkpoint(tmp_path / "e.npz", "abc", bad, frames, diagnostics, carry, 1.0)
+        with pytest.raises(CheckpointError, match=words):
+            load_checkpoint(tmp_path / "e.npz", "abc")
+
+
+def test_every_sittings_commit_is_kept(tmp_path, caplog):
+    """Issue 45.4: a run resumed by other code is resumed (the fingerprint holds the inputs and
+    settings, which decide the steps), with a warning, and lists the commit of every sitting."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "c.npz"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0, commits=["0123abc (an earlier sitting)"])
+    caplog.set_level(logging.WARNING, logger="colsim")
+    saved = load_checkpoint(path, "abc")
+    assert saved["commits"] == ["0123abc (an earlier sitting)", source_commit()]
+    assert "written by other code (0123abc" in caplog.text
 
 
 def test_a_checkpoint_without_cpu_time_resumes_with_it_unknown(tmp_path):

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from colsim import io
+from colsim.io.checkpoint import CheckpointError
 from colsim.solvers import AutoSolver, ClarabelSolver
 from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.stages.trim import trim
@@ -69,14 +70,16 @@ def test_collapse_resumes_from_checkpoint_to_the_same_result(packing, tmp_path):
     checkpoint = tmp_path / "run.checkpoint"
     first = collapse(column, h0, settings, CLARABEL, checkpoint=checkpoint, stop_after=7)   # "killed" at step 7
     assert len(first.diagnostics) == 7 and checkpoint.exists()
-    resumed = collapse(column, h0, settings, CLARABEL, checkpoint=checkpoint)
+    # run again with another checkpoint interval and end (issue 45.4: neither changes a step)
+    again = CollapseSettings(n_steps=12, frame_every=4, checkpoint_every=3, max_duration=None)
+    resumed = collapse(column, h0, again, CLARABEL, checkpoint=checkpoint)
     assert resumed.resumed_from == 5                       # the last checkpoint before the kill
     assert [k for k, _ in resumed.frames] == [k for k, _ in whole.frames]
     np.testing.assert_allclose(resumed.frames[-1][1].position, whole.frames[-1][1].position, rtol=0, atol=1e-12)
-    # a checkpoint of other settings is ignored, not resumed
-    other = collapse(column, h0, CollapseSettings(n_steps=12, mu_r=0.0, checkpoint_every=5), CLARABEL,
-                     checkpoint=checkpoint)
-    assert other.resumed_from == 0
+    # a checkpoint of other settings is refused (issue 45.2), neither resumed nor replaced
+    with pytest.raises(CheckpointError, match="another run"):
+        collapse(column, h0, CollapseSettings(n_steps=12, mu_r=0.0, checkpoint_every=5), CLARABEL,
+                 checkpoint=checkpoint)
 
 
 def test_rest_criterion_needs_the_whole_window_steady():

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import math
 
-from colsim.study.workflow.checks import (before_validation, cross_field_problem, load_schema, non_finite_number,
+from colsim.study.workflow.checks import (before_validation, cross_field_problem, link_out_of, load_schema,
+                                          non_finite_number,
                                           schema_problem, size_problem)
 from helpers import ROOT
 from test_study_plan import study_config
@@ -41,3 +42,25 @@ def test_settings_that_contradict_each_other():
     assert cross_field_problem(study_config({"friction_law": "coulomb", "friction_law_comparison": True})
                                ).startswith("config: friction_law_comparison needs friction_law: associated")
     assert cross_field_problem(study_config({"r0": 1000})).startswith("config: a packing of r0 1000 for a = 1")
+
+
+def test_a_link_in_results_to_a_file_elsewhere_is_refused(tmp_path):
+    """Issue 45.2: Snakemake writes a job's log and benchmark through a link planted in results/
+    (results/STUDY/benchmarks/collect.tsv -> a file elsewhere); the study refuses to start, naming
+    it. A link within results/, and results/ itself being a link, are fine."""
+    results = tmp_path / "results"
+    (results / "tiny" / "benchmarks").mkdir(parents=True)
+    outside = tmp_path / "precious.txt"
+    outside.write_text("keep me\n")
+    assert link_out_of(str(results)) is None and link_out_of(str(tmp_path / "absent")) is None
+    (results / "tiny" / "inside").symlink_to(results / "tiny" / "benchmarks")
+    assert link_out_of(str(results)) is None
+    planted = results / "tiny" / "benchmarks" / "collect.tsv"
+    planted.symlink_to(outside)
+    problem = link_out_of(str(results))
+    assert str(planted) in problem and "outside" in problem and outside.read_text() == "keep me\n"
+    planted.unlink()
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    (tmp_path / "linked").symlink_to(scratch)
+    assert link_out_of(str(tmp_path / "linked")) is None

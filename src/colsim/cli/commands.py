@@ -12,6 +12,7 @@ from ..stages import analyse as analysis
 from .. import io
 from ..engine.state import FRICTION_LAWS
 from ..engine.threads import use_threads
+from ..io.checkpoint import check_checkpoint_path
 from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
@@ -46,13 +47,18 @@ def _paths(args, names) -> list[Path]:
 
 def check_outputs(args) -> None:
     """Before any work: InputError (one line) unless every output of the command can be written
-    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder), no two
-    outputs are one file (a collapse's checkpoint included) and no output is one of its inputs."""
+    (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder) and is
+    absent, a regular file or a link (which the atomic rename replaces, never follows), no two
+    outputs are one file (a collapse's checkpoint included), no output is one of its inputs, and a
+    checkpoint path holds nothing but a colsim checkpoint."""
     outputs = _paths(args, OUTPUT_ARGUMENTS)
     if args.command in ("collapse", "pack") and not args.checkpoint:
         outputs.append(Path(f"{args.output}.checkpoint"))
     for path in outputs:
         io.check_writable(path)
+        if path.exists() and not path.is_symlink() and not path.is_file() and not path.is_dir():
+            raise io.InputError(f"cannot write {path}: it exists and is not a regular file (a device, a FIFO or"
+                                " a socket), which colsim will not replace")
     if getattr(args, "output_dir", None):
         io.check_writable(args.output_dir, directory=True)
     seen = {}
@@ -64,6 +70,8 @@ def check_outputs(args) -> None:
     for path in _paths(args, INPUT_ARGUMENTS):
         if path.resolve() in seen:
             raise io.InputError(f"{path} is both an input and an output: the command would write over its input")
+    if args.command in ("collapse", "pack"):
+        check_checkpoint_path(args.checkpoint or f"{args.output}.checkpoint")
 
 
 def _apgd_options(args, tolerance=None) -> dict:
@@ -118,7 +126,8 @@ def pack(args):
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
                   "gravity": args.gravity,
-                  "clouds": result.clouds, "most_fixed": result.most_fixed})
+                  "clouds": result.clouds, "most_fixed": result.most_fixed,
+                  "colsim_commits": "; ".join(result.commits)})
     io.write_state(args.output, result.state, attrs,
                    {**io.contact_force_variables(result.contact_forces), **step_variables(result.diagnostics)})
     checkpoint.unlink(missing_ok=True)
@@ -177,7 +186,8 @@ def collapse(args):
                                   "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
     attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
-                  "n_particles": column.n, "resumed_from_step": run.resumed_from})
+                  "n_particles": column.n, "resumed_from_step": run.resumed_from,
+                  "colsim_commits": "; ".join(run.commits)})
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)
     backends = Counter(d.solver_backend for d in run.diagnostics)
@@ -320,7 +330,8 @@ def status(args):
     if not folder.is_dir():
         raise io.InputError(f"{folder} is not a folder (the runs' folder: results/ by default)")
     packings, collapses = (sum(1 for _ in folder.rglob(name)) for name in ("packing.nc", "collapse.nc"))
-    checkpoints = sorted(folder.rglob("*.checkpoint"))
+    # regular files only: opening a FIFO named *.checkpoint would block
+    checkpoints = sorted(path for path in folder.rglob("*.checkpoint") if path.is_file() and not path.is_symlink())
     print(f"{folder}: {packings} packings and {collapses} collapses done, {len(checkpoints)} in progress")
     if not checkpoints:
         return
@@ -333,7 +344,7 @@ def status(args):
         try:
             found = checkpoint_summary(path)
         except Exception as error:   # a damaged or foreign file: say so and go on
-            print(f"| {run} | unreadable checkpoint ({error}) | | | | | | | | {age} |")
+            print(f"| {run} | not a colsim checkpoint ({type(error).__name__}) | | | | | | | | {age} |")
             continue
         print(f"| {run} | {found['stage']} | {found['spheres']:,} | {found['step']} | {found['time']:.3f} | "
               f"{found['kinetic_energy']:.3g} | {found['seconds_per_step']:.2f} | {found['cpu']:,.0f} | "

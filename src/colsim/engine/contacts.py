@@ -266,7 +266,7 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Over
     dist = np.linalg.norm(d, axis=1)
     overlap = state.radius[pi] + state.radius[pj] - dist
     bad = overlap > tolerance
-    pairs = (pi[bad], pj[bad], d[bad] / dist[bad, None])
+    pairs = (pi[bad], pj[bad], d[bad] / np.maximum(dist[bad, None], 1e-300))   # two centres on one spot: a zero normal
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))

@@ -2,6 +2,12 @@
 allow_pickle=False: loading one can run no code, and its fingerprint (the run's inputs and
 settings) is compared before anything else in it is used. Written to a temporary name, then renamed.
 
+A checkpoint path holds this run's checkpoint or nothing: a file there that is not a colsim
+checkpoint, or that is another run's, is refused (:class:`CheckpointError`), never read past or
+replaced. A resumed state passes the same checks as a fresh column (finite, no overlap beyond the
+stepper's tolerance). Each checkpoint lists the commits of the code of every sitting so far
+(`commits`), so that a run resumed by other code says so in its output.
+
 A collapse's holds the state, the frames so far, the steps' diagnostics, and the warm start and
 margin carried to the next step; a packing's, the state, the steps' diagnostics and what its filling
 loop carries (:func:`save_packing_checkpoint`).
@@ -16,7 +22,7 @@ import numpy as np
 from ..engine.records import TEXT_DIAGNOSTICS, Carry, StepDiagnostics
 from ..engine.state import ParticleState
 from ..engine.warm_start import WarmStart
-from .netcdf import atomic_path
+from .netcdf import InputError, atomic_path, check_geometry, source_commit
 
 log = logging.getLogger(__name__)
 
@@ -24,9 +30,14 @@ STATE_FIELDS = ("position", "velocity", "angular_velocity")
 WARM_FIELDS = ("i", "j", "family", "force", "rolling")
 
 
-def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed, cpu=float("nan")):
-    """A collapse after its last step: `elapsed` and `cpu`, the wall and CPU seconds spent so far."""
-    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed, cpu)
+class CheckpointError(InputError):
+    """A checkpoint path that holds something colsim must not read past or replace."""
+
+
+def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed, cpu=float("nan"), commits=()):
+    """A collapse after its last step: `elapsed` and `cpu`, the wall and CPU seconds spent so far;
+    `commits`, those of the earlier sittings (this one's is added)."""
+    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed, cpu, commits)
     arrays["frame_step"] = np.array([k for k, _ in frames], dtype=np.int64)
     arrays["frame_time"] = np.array([f.time for _, f in frames])
     for name in STATE_FIELDS:
@@ -42,13 +53,13 @@ def load_checkpoint(path, fingerprint):
 
 
 def save_packing_checkpoint(path, fingerprint, state, warm, margin, loop: dict, elapsed, cpu=float("nan"),
-                            diagnostics=()):
+                            diagnostics=(), commits=()):
     """A packing in the middle of a cloud: `state` (all spheres placed), the forces by pair `warm`
     (WarmStart in the numbering of `state`, or None) and the detection `margin` (None: the base
     one) that the next step starts from, and `loop`: the filling loop's arrays and numbers
     (name -> array, bool, int, float or str); `elapsed` and `cpu`: the wall and CPU seconds spent so
-    far; `diagnostics`: the StepDiagnostics of the steps so far."""
-    arrays = _common_arrays(fingerprint, state, warm, margin, elapsed, cpu)
+    far; `diagnostics`: the StepDiagnostics of the steps so far; `commits`: as :func:`save_checkpoint`'s."""
+    arrays = _common_arrays(fingerprint, state, warm, margin, elapsed, cpu, commits)
     arrays.update(_diagnostic_arrays(diagnostics))
     for name, value in loop.items():
         arrays[f"loop_{name}"] = np.asarray(value)
@@ -97,19 +108,57 @@ def _write(path, arrays: dict) -> None:
             np.savez(handle, **arrays)
 
 
+def check_checkpoint_path(path) -> None:
+    """CheckpointError unless `path` is absent or a regular file holding a colsim checkpoint (of any
+    run; :func:`load_checkpoint` checks whose): what is there may be read and, at the end, removed."""
+    path = Path(path)
+    if not path.exists() and not path.is_symlink():
+        return
+    if path.is_symlink() or not path.is_file():
+        raise CheckpointError(f"checkpoint {path} exists and is not a regular file: colsim will not replace it;"
+                              " give --checkpoint a new path")
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            if "fingerprint" not in archive.files:
+                raise ValueError("no fingerprint")
+    except Exception:
+        raise CheckpointError(f"{path} exists and is not a colsim checkpoint: colsim will not read or replace it;"
+                              " give --checkpoint a new path, or remove the file") from None
+
+
 def _read(path, fingerprint, restore):
-    """restore(arrays) of the checkpoint at `path` if its fingerprint is `fingerprint`, else None."""
-    if path is None or not Path(path).is_file():
+    """restore(arrays) of the checkpoint at `path` if it is this run's (fingerprint), None if there is
+    none; a CheckpointError for anything else at the path, or for a saved state that fails the
+    input checks."""
+    if path is None:
+        return None
+    check_checkpoint_path(path)
+    if not Path(path).exists():
         return None
     try:
         with np.load(path, allow_pickle=False) as archive:
-            if str(archive["fingerprint"]) != fingerprint:
-                log.warning("ignoring checkpoint %s: it belongs to other inputs or settings", path)
-                return None
-            return restore(dict(archive))
-    except Exception as error:  # a checkpoint from another version, a damaged or foreign file
-        log.warning("ignoring unreadable checkpoint %s (%s)", path, error)
-        return None
+            found = str(archive["fingerprint"])
+            arrays = dict(archive) if found == fingerprint else None
+    except Exception as error:
+        raise CheckpointError(f"checkpoint {path} cannot be read ({error}); remove it to start the run over") from None
+    if arrays is None:
+        raise CheckpointError(f"checkpoint {path} belongs to another run (other inputs or settings): colsim will"
+                              " not replace it; remove it to start this run over, or give --checkpoint another path")
+    try:
+        restored = restore(arrays)
+    except Exception as error:   # a checkpoint written by an older colsim, or edited
+        raise CheckpointError(f"checkpoint {path} is not one this colsim can resume ({type(error).__name__}:"
+                              f" {error}); remove it to start the run over") from None
+    import xarray
+    try:
+        check_geometry(restored["state"], xarray.Dataset(), path)
+    except InputError as error:
+        raise CheckpointError(f"{error}; remove the checkpoint to start the run over") from None
+    restored["commits"] = [str(c) for c in arrays.get("commits", np.array(["unknown (before commits were kept)"]))]
+    earlier = [c for c in restored["commits"] if c != source_commit()]
+    if earlier:
+        log.warning("resuming %s, written by other code (%s); the output lists every commit", path, "; ".join(earlier))
+    return restored
 
 
 def _restore(arrays) -> dict:
@@ -136,10 +185,18 @@ def _diagnostics_of(arrays) -> list:
     return [StepDiagnostics(**{name: columns[name][k] for name in fields}) for k in range(len(columns["step"]))]
 
 
-def _common_arrays(fingerprint, state, warm, margin, elapsed, cpu) -> dict:
+def sittings_commits(earlier) -> list[str]:
+    """The commits of a run's sittings: the earlier ones, then this process's unless it is the last."""
+    commits = [str(c) for c in earlier]
+    return commits if commits and commits[-1] == source_commit() else commits + [source_commit()]
+
+
+def _common_arrays(fingerprint, state, warm, margin, elapsed, cpu, commits=()) -> dict:
     """What both checkpoints hold: the fingerprint, the state, the forces by pair (if any) and the
-    detection margin (NaN for None) the next step starts from, the wall and CPU seconds spent."""
+    detection margin (NaN for None) the next step starts from, the wall and CPU seconds spent, and the
+    commits of the sittings (the earlier ones given, this one's added)."""
     arrays = {"fingerprint": np.array(fingerprint), "elapsed": np.array(elapsed), "cpu": np.array(cpu),
+              "commits": np.array(sittings_commits(commits), dtype=str),
               "radius": state.radius,
               "density": np.array(state.density), "state_time": np.array(state.time),
               "margin": np.array(np.nan if margin is None else margin)}

@@ -28,7 +28,7 @@ from ..engine.solver_contract import Solver
 from ..engine.state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
-from ..io.checkpoint import load_checkpoint, save_checkpoint
+from ..io.checkpoint import load_checkpoint, save_checkpoint, sittings_commits
 from .analyse import measure_deposit
 from .stopwatch import Stopwatch
 
@@ -109,7 +109,8 @@ class CollapseSettings:
 class CollapseRun:
     """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step);
     at_rest: whether the deposit was found at rest (None: not checked, no max_duration);
-    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown)."""
+    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown);
+    commits: the git commits of the code of every sitting, the first first."""
 
     initial: ParticleState
     frames: list
@@ -118,6 +119,11 @@ class CollapseRun:
     resumed_from: int = 0
     at_rest: bool | None = None
     cpu_time: float = float("nan")
+    commits: tuple = ()
+
+
+#: settings that change when a run stops or checkpoints, never a step: a checkpoint resumes across them
+NOT_IN_FINGERPRINT = ("checkpoint_every", "max_duration")
 
 
 def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> bool:
@@ -144,7 +150,8 @@ def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, s
         arrays += [warm_start.i, warm_start.j, warm_start.family, warm_start.force, warm_start.rolling]
     for array in arrays:
         digest.update(np.ascontiguousarray(array).tobytes())
-    digest.update(json.dumps([asdict(settings), h0, solver.describe()], sort_keys=True, default=str).encode())
+    described = {k: v for k, v in asdict(settings).items() if k not in NOT_IN_FINGERPRINT}
+    digest.update(json.dumps([described, h0, solver.describe()], sort_keys=True, default=str).encode())
     return digest.hexdigest()
 
 
@@ -162,10 +169,10 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     saved = load_checkpoint(checkpoint, fingerprint)
     if saved:
         state, frames, diagnostics, carry = (saved[k] for k in ("state", "frames", "diagnostics", "carry"))
-        clock = Stopwatch(saved["elapsed"], saved["cpu"])
+        clock, earlier = Stopwatch(saved["elapsed"], saved["cpu"]), saved["commits"]
         log.info("resuming from the checkpoint at step %d", len(diagnostics))
     else:
-        state, frames, diagnostics, clock = column.copy(), [(0, column.copy())], [], Stopwatch()
+        state, frames, diagnostics, clock, earlier = column.copy(), [(0, column.copy())], [], Stopwatch(), []
         carry = Carry(warm_start if solver.uses_warm_start else None)
     resumed_from = len(diagnostics)
     rest_check = settings.max_duration is not None
@@ -188,10 +195,11 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
                 break
         if checkpoint is not None and k < last and clock.checkpoint_due(k % settings.checkpoint_every == 0):
             save_checkpoint(checkpoint, fingerprint, state, frames, diagnostics, result.carry,
-                             clock.wall(), clock.cpu())
+                            clock.wall(), clock.cpu(), earlier)
         if stop_after is not None and k - resumed_from >= stop_after:
             break
-    return CollapseRun(column, frames, diagnostics, clock.wall(), resumed_from, at_rest, clock.cpu())
+    return CollapseRun(column, frames, diagnostics, clock.wall(), resumed_from, at_rest, clock.cpu(),
+                       tuple(sittings_commits(earlier)))
 
 
 def _at_rest(history, diagnostics, column, settings) -> bool:

@@ -35,7 +35,7 @@ from ..engine.solver_contract import Solver
 from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, fixed_code
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
-from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint
+from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, sittings_commits
 from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 from .stopwatch import Stopwatch
 
@@ -56,7 +56,7 @@ class PackingResult:
     many clouds were poured; most_fixed: the most spheres fixed at once while filling.
     wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown).
     diagnostics: the StepDiagnostics of every step taken, over all sittings (from the resumed step on for a
-    checkpoint written before packings kept them)."""
+    checkpoint written before packings kept them). commits: the git commits of the code of every sitting."""
 
     state: ParticleState
     height: float
@@ -68,6 +68,7 @@ class PackingResult:
     most_fixed: int = 0
     cpu_time: float = float("nan")
     diagnostics: list = field(default_factory=list)
+    commits: tuple = ()
 
 
 def lattice_layer(r0: float, spacing: float) -> np.ndarray:
@@ -220,20 +221,21 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                          "(raise it with --max-spheres, or pack.max_spheres in a study)")
     fingerprint = _fingerprint(rng, solver, r0=r0, height=height, diameter_range=diameter_range,
                                density=density, gravity=gravity, dt=dt, rest_energy=rest_energy,
-                               max_steps=max_steps, mu=mu, layer_height=layer_height, freeze_depth=freeze_depth)
+                               mu=mu, layer_height=layer_height, freeze_depth=freeze_depth)
     saved = load_packing_checkpoint(checkpoint, fingerprint)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), density)
     fixed = np.zeros(0, dtype=bool)
     clock, steps, warm = Stopwatch(), 0, None
     clouds, most_fixed = 0, 0
     history = []   # each step's StepDiagnostics
+    earlier = []   # the commits of the earlier sittings
     if saved:
         loop = saved["loop"]
         state, warm, fixed = saved["state"], saved["warm"], loop["fixed"].astype(bool)
         steps, clouds, most_fixed = int(loop["steps"]), int(loop["clouds"]), int(loop["most_fixed"])
         rng.bit_generator.state = json.loads(str(loop["rng"]))
         clock = Stopwatch(saved["elapsed"], saved["cpu"])
-        history = saved["diagnostics"]
+        history, earlier = saved["diagnostics"], saved["commits"]
         log.info("resuming the packing from its checkpoint at step %d (cloud %d, %d spheres)", steps, clouds, state.n)
     while saved or column_height(state) < height:
         if saved:   # the cloud the checkpoint was written in
@@ -265,7 +267,7 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
                         "rng": json.dumps(rng.bit_generator.state), "last": last, "energy": energy,
                         "supports": supports}
                 save_packing_checkpoint(checkpoint, fingerprint, placed, forces, margin, loop,
-                                        clock.wall(), clock.cpu(), history)
+                                        clock.wall(), clock.cpu(), history, earlier)
         try:
             state, warm, steps = _settle(state, fixed, settings, solver, warm, steps, max_steps, energy, progress,
                                          resume, save, checkpoint_every, clock, history)
@@ -282,12 +284,14 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
     state.angular_velocity[:] = 0.0
     state.time = 0.0
     return PackingResult(state, column_height(state), solid_fraction(state, r0, height),
-                         steps, clock.wall(), warm, clouds, most_fixed, clock.cpu(), history)
+                         steps, clock.wall(), warm, clouds, most_fixed, clock.cpu(), history,
+                         tuple(sittings_commits(earlier)))
 
 
 def _fingerprint(rng: np.random.Generator, solver: Solver, **settings) -> str:
     """What a packing checkpoint must match: the generator's state at the start, the solver and
-    every setting of :func:`pack`."""
+    every setting of :func:`pack` that changes a step (not max_steps nor checkpoint_every: a pour
+    stopped at max_steps resumes when given more)."""
     described = [rng.bit_generator.state, solver.describe(), settings]
     return hashlib.sha256(json.dumps(described, sort_keys=True, default=str).encode()).hexdigest()
 

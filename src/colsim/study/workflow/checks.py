@@ -4,6 +4,7 @@ Each returns that line, or None when the configuration passes."""
 from __future__ import annotations
 
 import math
+import os
 import re
 
 import jsonschema
@@ -115,4 +116,23 @@ def cross_field_problem(config):
         if spheres > limit:
             return (f"config: a packing of r0 {radius:g} for a = {a:g} would hold about {spheres:,.0f} spheres,"
                     f" above pack.max_spheres {limit:,} (raise it if the machine has the memory)")
+    return None
+
+
+def link_out_of(folder):
+    """One line naming the first symbolic link below `folder` (results/) whose target lies outside
+    it, or None: Snakemake writes logs and benchmarks through such a link into the file it points
+    to, so a link planted there would have a study overwrite a file elsewhere (issue 45.2). The
+    folder itself may be a link (to scratch storage, say)."""
+    if not os.path.isdir(folder):
+        return None
+    root = os.path.realpath(folder)
+    for here, folders, files in os.walk(folder):
+        for name in folders + files:
+            path = os.path.join(here, name)
+            if os.path.islink(path):
+                target = os.path.realpath(path)
+                if os.path.commonpath([root, target]) != root:
+                    return (f"{path} is a link to {target}, outside {folder}/: the study would write through it;"
+                            " remove the link")
     return None
