@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import math
 
-from colsim.study.workflow.checks import (before_validation, cross_field_problem, link_out_of, load_schema,
-                                          non_finite_number,
-                                          schema_problem, size_problem)
+import pytest
+
+from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
+                                          load_schema, non_finite_number, schema_problem, size_problem)
 from helpers import ROOT
 from test_study_plan import study_config
 
@@ -64,3 +65,45 @@ def test_a_link_in_results_to_a_file_elsewhere_is_refused(tmp_path):
     scratch.mkdir()
     (tmp_path / "linked").symlink_to(scratch)
     assert link_out_of(str(tmp_path / "linked")) is None
+
+
+@pytest.mark.parametrize("extra, words", [
+    ({"collapse": {"duration": 5.0, "max_duration": 4.0}}, ["collapse.duration 5 exceeds collapse.max_duration 4"]),
+    ({"collapse": {"steps": 100, "duration": 4.0}, "convergence": {"end_time": {"duration": 0.01}}},
+     ["convergence.end_time.duration 0.01", "rounds to no step"]),
+    ({"collapse": {"steps": 100, "duration": 4.0},
+      "convergence": {"column_size": [{"aspect_ratio": 1, "r0": [2], "duration": 0.001}]}},
+     ["convergence.column_size.0.duration", "rounds to no step"]),
+    ({"pack": {"dt": 10**400}}, ["pack.dt", "finite number"]),
+    ({"r0": 10**400}, ["r0", "finite number"]),
+    ({"density": 10**400}, ["density", "finite number"]),
+    ({"gravity": 1e-300}, ["pack.dt", "sqrt(diameter_min / gravity)"]),
+])
+def test_settings_that_would_fail_mid_study_are_refused_first(extra, words):
+    """Issue 45.5: each of these passed the study's first check and failed 6 jobs later (or ran to a
+    nonsense result); now the first check names it."""
+    problem = cross_field_problem(study_config(extra))
+    assert problem is not None and all(word in problem for word in words), problem
+
+
+@pytest.mark.parametrize("config, words", [
+    ({"seeds": [10**30]}, ["seeds.0", "maximum"]),
+    ({"root_seed": 2**32}, ["root_seed", "maximum"]),
+    ({"study": "x" * 300}, ["study", "too long"]),
+])
+def test_seeds_and_names_out_of_range_are_refused_by_the_schema(config, words):
+    problem = schema_problem(config, SCHEMA)
+    assert problem is not None and all(word in problem for word in words), problem
+
+
+def test_a_key_given_twice_in_one_file_is_refused(tmp_path):
+    """Issue 45.5: YAML keeps the later of two equal keys silently; the study refuses, naming the
+    file, the line and the key. A nested mapping is checked as well."""
+    good, top, nested = tmp_path / "good.yaml", tmp_path / "top.yaml", tmp_path / "nested.yaml"
+    good.write_text("r0: 2\ncollapse: {steps: 10}\n")
+    top.write_text("r0: 2\nmu: 0.5\nr0: 3\n")
+    nested.write_text("collapse:\n  steps: 10\n  steps: 20\n")
+    assert duplicate_key([good, ROOT / "config.yaml"]) is None
+    assert duplicate_key([good, top]) == (f"config: {top}, line 3: the key 'r0' is given twice; the later value"
+                                          " would win silently")
+    assert "line 3: the key 'steps' is given twice" in duplicate_key([nested])

@@ -11,14 +11,15 @@ from snakemake.utils import validate
 from colsim.study.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 from colsim.study.workflow import commands
 from colsim.study.workflow import report as study_report
-from colsim.study.workflow.checks import before_validation, cross_field_problem, link_out_of, load_schema
+from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
+                                          load_schema)
 from colsim.study.workflow.commands import collapse_options, numbers
 from colsim.study.workflow.plan import (COLUMN, PACKING_DIR, RESULTS, RUN_DIR, StudyPlan, UnknownFolder, benchmarked,
                                         fmt, logged, write_settings)
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
-problem = before_validation(config, load_schema(SCHEMA))
+problem = duplicate_key(workflow.configfiles) or before_validation(config, load_schema(SCHEMA))
 if problem is None:
     validate(config, SCHEMA)   # fills in the defaults
     problem = cross_field_problem(config) or link_out_of(RESULTS)

@@ -52,15 +52,26 @@ def size_problem(tree, limit=CONFIG_MAX_ITEMS):
     return None
 
 
+#: the largest magnitude a setting may have: far beyond any study, far within a float's range, so
+#: that products of settings (a step count, a volume) stay finite
+LARGEST_SETTING = 1e12
+
+
 def non_finite_number(tree, where=""):
-    """The dotted key of the first number in the configuration that is NaN or infinite (the schema's
-    minimum and maximum let NaN through), or None."""
+    """The dotted key of the first number in the configuration that is NaN, infinite or beyond
+    LARGEST_SETTING in magnitude (a 400-digit integer overflows a float), or None (the schema's
+    minimum and maximum let NaN through). Seeds have their own bound (0..2^32-1, the schema's)."""
     if isinstance(tree, dict):
         items = tree.items()
     elif isinstance(tree, list):
         items = enumerate(tree)
+    elif isinstance(tree, bool) or not isinstance(tree, (int, float)) or "seed" in where:
+        return None
     else:
-        return where if isinstance(tree, float) and not math.isfinite(tree) else None
+        try:
+            return None if math.isfinite(float(tree)) and abs(float(tree)) <= LARGEST_SETTING else where
+        except OverflowError:
+            return where
     for key, value in items:
         found = non_finite_number(value, f"{where}.{key}" if where else str(key))
         if found is not None:
@@ -81,7 +92,7 @@ def cross_field_problem(config):
 
     bad = non_finite_number(config)
     if bad is not None:
-        return f"config: {bad}: must be a finite number"
+        return f"config: {bad}: must be a finite number of magnitude at most {LARGEST_SETTING:g}"
     if not re.fullmatch(r"[A-Za-z0-9_-]*", config["study"]):
         return f"config: study: {config['study']!r} may hold only letters, digits, _ and -"
     d_min, d_max, r0 = config["diameter_min"], config["diameter_max"], config["r0"]
@@ -103,6 +114,9 @@ def cross_field_problem(config):
         if a * radius < d_max:
             return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
                     f" the column would hold less than one layer of particles (diameters {d_min}-{d_max})")
+    problem = time_problem(config)
+    if problem:
+        return problem
     if config["friction_law"] != "associated" and config["friction_law_comparison"]:
         return "config: friction_law_comparison needs friction_law: associated (it adds the coulomb runs itself)"
     if config["friction_law"] != "associated" and config.get("convergence"):
@@ -135,4 +149,72 @@ def link_out_of(folder):
                 if os.path.commonpath([root, target]) != root:
                     return (f"{path} is a link to {target}, outside {folder}/: the study would write through it;"
                             " remove the link")
+    return None
+
+
+#: the pour's step over sqrt(d_min / g), the time to fall about a diameter, must lie in this range:
+#: the default is 0.125; far above, spheres cross each other within a step, far below, the pour
+#: takes millions of steps (gravity 1e-300 made spheres fly off while the study reported a deposit)
+POUR_STEP_RANGE = (1e-4, 2.0)
+
+
+def time_problem(config):
+    """One line if the study's times contradict each other or the physics, or None: the collapse's
+    end time beyond its max_duration, a convergence run that rounds to no step, a pour step out of
+    POUR_STEP_RANGE of the fall time across a diameter."""
+    collapse = config["collapse"]
+    if collapse["max_duration"] is not None and collapse["duration"] > collapse["max_duration"]:
+        return (f"config: collapse.duration {collapse['duration']:g} exceeds collapse.max_duration"
+                f" {collapse['max_duration']:g}: the run would stop before its end time")
+    steps, end = collapse["steps"], collapse["duration"]
+    study = config.get("convergence") or {}
+    durations = [("convergence.end_time.duration", study.get("end_time", {}).get("duration"))]
+    durations += [(f"convergence.column_size.{k}.duration", entry.get("duration"))
+                  for k, entry in enumerate(study.get("column_size", []))]
+    for key, duration in durations:
+        if duration is not None and round(steps * duration / end) < 1:
+            return (f"config: {key} {duration:g} at the study's step (collapse.duration / collapse.steps ="
+                    f" {end / steps:g}) rounds to no step")
+    for n in study.get("time_step", {}).get("steps", []):
+        if n < 1:
+            return f"config: convergence.time_step.steps {n}: a run needs at least one step"
+    scaled = config["pack"]["dt"] * math.sqrt(config["gravity"] / config["diameter_min"])
+    low, high = POUR_STEP_RANGE
+    if not low <= scaled <= high:
+        return (f"config: pack.dt {config['pack']['dt']:g} is {scaled:.3g} times sqrt(diameter_min / gravity),"
+                f" the time to fall about a diameter; it must lie within {low:g}-{high:g} (the default is 0.125)")
+    return None
+
+
+class _NoDuplicateKeys(yaml.SafeLoader):
+    """A YAML loader that refuses a key given twice in one mapping (PyYAML keeps the later silently)."""
+
+
+def _mapping(loader, node, deep=False):
+    keys = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in keys:
+            raise yaml.constructor.ConstructorError(None, None, f"the key {key!r} is given twice",
+                                                    key_node.start_mark)
+        keys.add(key)
+    return loader.construct_mapping(node, deep)
+
+
+_NoDuplicateKeys.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
+
+
+def duplicate_key(paths):
+    """One line naming the first configuration file (of `paths`) that gives a key twice in one
+    mapping, with the line, or None."""
+    for path in paths:
+        try:
+            with open(path) as stream:
+                yaml.load(stream, Loader=_NoDuplicateKeys)
+        except yaml.constructor.ConstructorError as error:
+            if "given twice" in str(error.problem):
+                mark = error.problem_mark
+                return f"config: {path}, line {mark.line + 1}: {error.problem}; the later value would win silently"
+        except (OSError, yaml.YAMLError):
+            continue    # Snakemake has read it already and says what is wrong with it
     return None
