@@ -138,3 +138,52 @@ def test_two_threads_on_two_cpus_are_pinned_one_to_each():
     bound, pinned = done.stdout.split()[-2:]
     assert bound == "true"
     assert sorted(int(cpu) for cpu in pinned.split(",")) == cpus
+
+
+def _environment_with_tbb() -> dict:
+    """os.environ with the lock's tbb wheel (its libtbb in the interpreter's lib/) on the loader's path
+    and no layer chosen by the user; a skip naming why when numba still cannot load TBB."""
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")}
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(filter(None, [str(Path(sys.prefix) / "lib"), env.get("LD_LIBRARY_PATH")]))
+    env["NUMBA_NUM_THREADS"] = "2"
+    probe = subprocess.run([sys.executable, "-c", "import numba.np.ufunc.tbbpool"], env=env, capture_output=True,
+                           text=True, timeout=120)
+    if probe.returncode != 0:
+        pytest.skip("numba cannot load Intel TBB here (install the lock's tbb wheel, environment.txt): "
+                    + probe.stderr.strip().splitlines()[-1])
+    return env
+
+
+def test_an_installed_tbb_does_not_take_the_threads(tmp_path):
+    """Issue 50: with Intel TBB loadable, numba's own order would run the kernels on it (two threads
+    on two cores then took turns, 10-30x slower); colsim chooses OpenMP (or numba's workqueue where
+    there is no OpenMP), logs the layer and records it, and the 2-thread collapse equals the 1-thread
+    one to the solver's tolerance."""
+    import numpy as np
+    import xarray as xr
+
+    from colsim.engine.compiled import LAYER_PRIORITY
+
+    env = _environment_with_tbb()
+
+    def cli(*args):
+        done = subprocess.run([sys.executable, "-m", "colsim.cli", *args], cwd=tmp_path, env=env,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done.stderr
+
+    cli("pack", "--r0", "1", "--height", "1", "--seed", "3", "--output", "pack.nc")
+    cli("trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc")
+    logs, finals = {}, {}
+    for count in (1, 2):
+        logs[count] = cli("collapse", "--input", "column.nc", "--steps", "10", "--duration", "0.1",
+                          "--threads", str(count), "--output", f"collapse{count}.nc")
+        result = xr.load_dataset(tmp_path / f"collapse{count}.nc")
+        layer = result.attrs["threading_layer"]
+        assert layer in LAYER_PRIORITY[:2], layer            # never TBB unless asked
+        assert f"--threads {count} on numba's {layer} threading layer" in logs[count]
+        finals[count] = result.position.values[-1]
+        diameter = 2 * float(result.radius.mean())
+    # auto's APGD stops each step with its gaps right to 1e-6 d (tolerance 1e-5 x length floor 0.1 d);
+    # the thread count changes only the order of its sums: ten steps, at most 1e-5 d apart
+    np.testing.assert_allclose(finals[2], finals[1], rtol=0, atol=1e-5 * diameter)

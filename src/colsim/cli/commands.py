@@ -11,7 +11,7 @@ from ..stages import analyse as analysis
 
 from .. import io
 from ..engine.state import FRICTION_LAWS
-from ..engine.threads import use_threads
+from ..engine.threads import threading_layer, use_threads
 from ..io.checkpoint import check_checkpoint_path
 from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
@@ -126,7 +126,7 @@ def pack(args):
     attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
                   "gravity": args.gravity,
-                  "clouds": result.clouds, "most_fixed": result.most_fixed,
+                  "clouds": result.clouds, "most_fixed": result.most_fixed, "threading_layer": threading_layer(),
                   "colsim_commits": "; ".join(result.commits)})
     io.write_state(args.output, result.state, attrs,
                    {**io.contact_force_variables(result.contact_forces), **step_variables(result.diagnostics)})
@@ -186,7 +186,7 @@ def collapse(args):
                                   "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
     attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
-                  "n_particles": column.n, "resumed_from_step": run.resumed_from,
+                  "n_particles": column.n, "resumed_from_step": run.resumed_from, "threading_layer": threading_layer(),
                   "colsim_commits": "; ".join(run.commits)})
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
     checkpoint.unlink(missing_ok=True)

@@ -10,6 +10,9 @@ A job whose threads are as many as the CPUs it may run on (a whole machine, or a
 allocation) has them pinned one to a CPU (OpenMP's OMP_PROC_BIND=true), unless the user set
 OpenMP's binding: on the project's 2-core machine that took 2-thread collapses from 27.5-52.6 s of
 wall to 27.6-34.2 s (r0 = 2, a = 5, docs/performance.md, "Threads").
+
+The threads run on numba's OpenMP layer where it has one (:mod:`colsim.engine.compiled` chooses it,
+not numba's TBB-first default); :func:`threading_layer` says which, once they have started.
 """
 from __future__ import annotations
 
@@ -57,8 +60,20 @@ def use_threads(count: int) -> int:
         if pins_threads(count, allowed_cpus(), os.environ):
             os.environ["OMP_PROC_BIND"] = "true"
             log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
-        numba.set_num_threads(count)
+        numba.set_num_threads(count)    # starts numba's threads, on the layer compiled.py chose
+        log.info("--threads %d on numba's %s threading layer", count, threading_layer())
     return count
+
+
+def threading_layer() -> str:
+    """The threading layer numba's threads run on ('omp', 'workqueue' or 'tbb'), 'not started'
+    before :func:`use_threads` (or a kernel) has started them, 'none' without numba."""
+    if not HAVE_NUMBA:
+        return "none"
+    try:
+        return str(numba.threading_layer())
+    except ValueError:   # no thread started yet
+        return "not started"
 
 
 def threads() -> int:
