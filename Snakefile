@@ -29,3 +29,4 @@ rule all:
         figures(),
         convergence_outputs(),
         friction_law_outputs(),
+        calibration_outputs(),

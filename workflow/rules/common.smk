@@ -64,6 +64,7 @@ side_view_mu_r = PLAN.side_view_mu_r
 convergence_runs = PLAN.convergence_runs
 convergence_outputs = PLAN.convergence_outputs
 friction_law_outputs = PLAN.friction_law_outputs
+calibration_outputs = PLAN.calibration_outputs
 
 
 DIAMETERS = (config["diameter_min"], config["diameter_max"])

@@ -276,6 +276,24 @@ def convergence(args):
     io.write_all(writers)
 
 
+def calibrate(args):
+    from ..study.calibration import calibrate as run_calibration, calibration_markdown, runs_from_analyses
+
+    runs = runs_from_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
+    result = run_calibration(runs, replicates=args.replicates, tolerance=args.fit_tolerance)
+    result.attrs.update(io.global_attributes("mu-r-calibration", "colsim mu_r calibration", _settings(args)))
+    text = calibration_markdown(result)
+    log.info("calibration:\n%s", text)
+    writers = {args.output: lambda tmp: io.write_netcdf(result, tmp)}
+    if args.markdown:
+        writers[args.markdown] = _text_writer(text)
+    if args.figure:
+        from ..study.calibration_plot import calibration_figure
+
+        writers[args.figure] = lambda tmp: calibration_figure(result, tmp)
+    io.write_all(writers)
+
+
 def compare_laws(args):
     from ..study.collect import collect_analyses, friction_law_comparison
     from ..study.markdown import friction_law_markdown

@@ -8,6 +8,7 @@
     colsim plot       the study's figures from the collected dataset and the analyses
     colsim convergence  time step, end time, column size and seed studies in one table and figure
     colsim compare-laws the same runs under both friction laws, against Lube's laws
+    colsim calibrate  which mu_r gives Lube's (and Lajeunesse's) laws in the large-column limit
     colsim export-vtk a ParaView time series of a collapse
     colsim status     the runs under a results folder: done, and in progress from their checkpoints
     colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
@@ -229,6 +230,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", required=True, help="both summaries over friction_law (netCDF)")
     p.add_argument("--markdown", default=None, help="also write the table as Markdown here")
     p.add_argument("--figure", default=None, help="also draw the figure (PNG) here")
+
+    p = sub.add_parser("calibrate", help="the mu_r calibration: limits per mu_r and a, the misfit to Lube's and "
+                                         "Lajeunesse's laws and the mu_r minimising it, with intervals")
+    p.add_argument("inputs", nargs="+", help="analysis files of the runs over mu_r, a, r0 (two or more) and seeds")
+    p.add_argument("--output", required=True, help="the calibration to write (netCDF)")
+    p.add_argument("--markdown", default=None, help="also write its tables as Markdown here")
+    p.add_argument("--figure", default=None, help="also draw its figure (PNG) here")
+    p.add_argument("--replicates", type=_positive_int, default=1000, help="bootstrap replicates (default: %(default)s)")
+    p.add_argument("--fit-tolerance", type=_positive, default=0.1,
+                   help="a limit fits a law within this relative error (default: %(default)s)")
 
     p = sub.add_parser("plot", help="the study's figures")
     p.add_argument("--summary", required=True, help="summary file from `colsim collect`")

@@ -224,6 +224,13 @@ class StudyPlan:
         return [f"{where}/convergence.nc", f"{where}/convergence.md", f"{where}/figures/convergence.png",
                 f"{where}/column_size_limits.nc", f"{where}/figures/column_size_limits.png"]
 
+    def calibration_outputs(self) -> list[str]:
+        """The mu_r calibration's products (config key calibration), or none."""
+        if not self.config.get("calibration"):
+            return []
+        where = self.study_dir
+        return [f"{where}/calibration.nc", f"{where}/calibration.md", f"{where}/figures/calibration.png"]
+
     def friction_law_outputs(self) -> list[str]:
         """The friction-law comparison's products (friction_law_comparison: true), or none."""
         if not self.config["friction_law_comparison"]:

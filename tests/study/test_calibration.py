@@ -1,0 +1,144 @@
+"""The mu_r calibration (colsim.study.calibration) on synthetic runs generated from a known
+mu_r-dependence: the limits are Lube's laws at mu_r = MU_TRUE, heights growing and run-outs
+shrinking with mu_r, plus a finite-size term k d/r0 and seed noise."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from colsim.study.calibration import (MEASURES, Runs, best_mu_r, calibrate, calibration_markdown, fitting_range,
+                                      misfits, relative_errors)
+from colsim.study.experimental_laws import lube_height, lube_runout
+
+MU_R = np.array([0.06, 0.12, 0.2, 0.3])
+RATIOS = np.array([0.5, 1, 2, 3, 4, 5])
+RADII = np.array([2.0, 3.0, 4.0])
+DIAMETER = 0.375
+MU_TRUE = 0.15
+
+
+def true_limits(mu_r, ratios, height_slope=1.5, runout_slope=2.0):
+    """(2, n_mu, n_a): Lube's laws at MU_TRUE, heights up and run-outs down with mu_r, linearly."""
+    shift = (np.asarray(mu_r) - MU_TRUE)[:, None]
+    return np.stack([lube_height(ratios)[None, :] * (1 + height_slope * shift),
+                     lube_runout(ratios)[None, :] * (1 - runout_slope * shift)])
+
+
+def synthetic_runs(rng, noise=0.03, seeds=3) -> Runs:
+    """Runs at every (mu_r, a, r0, seed): the true limit, minus 0.8 x limit x d/r0 (columns fall short
+    of their limit, as measured), times (1 + noise N(0, 1)) per run."""
+    rows = []
+    limits = true_limits(MU_R, RATIOS)
+    for i, m in enumerate(MU_R):
+        for j, a in enumerate(RATIOS):
+            for r0 in RADII:
+                for s in range(1, seeds + 1):
+                    x = DIAMETER / r0
+                    h, r = (limits[q, i, j] * (1 - 0.8 * x) * (1 + noise * rng.standard_normal()) for q in (0, 1))
+                    rows.append((m, a, r0, s, x, h, r))
+    return Runs(*(np.array(c) for c in zip(*rows)))
+
+
+def test_exact_runs_give_the_true_limits_and_mu_r():
+    """Without noise the fit recovers every limit to 1e-9 and the best mu_r to the grid's spacing
+    (0.24/400 = 6e-4); the misfit vanishes there and every a fits at MU_TRUE."""
+    result = calibrate(synthetic_runs(np.random.default_rng(0), noise=0.0), replicates=20)
+    limits = true_limits(MU_R, RATIOS)
+    np.testing.assert_allclose(result.height_limit.values, limits[0], rtol=1e-9)
+    np.testing.assert_allclose(result.runout_limit.values, limits[1], rtol=1e-9)
+    spacing = (MU_R[-1] - MU_R[0]) / 400
+    for measure in MEASURES:
+        assert abs(float(result.best_mu_r.sel(law="lube", measure=measure)) - MU_TRUE) <= spacing
+    low, high = float(result.fitting_mu_r_low.sel(law="lube")), float(result.fitting_mu_r_high.sel(law="lube"))
+    assert low < MU_TRUE < high
+    # the true errors are linear in mu_r, 1.5 (mu_r - 0.15) in height and -2 (mu_r - 0.15) in run-out:
+    # within 10 % while |mu_r - 0.15| <= 0.05 (the run-outs bind)
+    assert low == pytest.approx(MU_TRUE - 0.1 / 2.0, abs=2 * spacing)
+    assert high == pytest.approx(MU_TRUE + 0.1 / 2.0, abs=2 * spacing)
+    assert int(result.best_at_edge.sel(law="lube", measure="both")) == 0
+    assert "| lube | both | 0.150" in calibration_markdown(result)
+
+
+def test_a_best_value_beyond_the_sweep_is_flagged():
+    """Heights scaled down so that even mu_r = 0.3 leaves them short of the law: the best height
+    mu_r is the sweep's end, 0.3, and flagged."""
+    runs = synthetic_runs(np.random.default_rng(0), noise=0.0)
+    shifted = Runs(runs.mu_r, runs.aspect_ratio, runs.r0, runs.seed, runs.d_over_r0,
+                   runs.height * (1 - 1.5 * 0.35), runs.runout)
+    result = calibrate(shifted, replicates=10)
+    assert float(result.best_mu_r.sel(law="lube", measure="height")) == pytest.approx(0.3)
+    assert int(result.best_at_edge.sel(law="lube", measure="height")) == 1
+
+
+def test_the_misfit_is_the_rms_relative_error_over_a():
+    errors = np.array([[0.1, -0.1, 0.1], [0.2, 0.0, 0.0]])[:, None, :]    # (2, 1, n_a)
+    height, runout, both = misfits(errors)[:, 0]
+    assert height == pytest.approx(0.1) and runout == pytest.approx(np.sqrt(0.04 / 3))
+    assert both == pytest.approx(np.sqrt((0.01 + 0.04 / 3) / 2))
+    limits = true_limits(np.array([MU_TRUE]), RATIOS)
+    np.testing.assert_allclose(relative_errors(limits, RATIOS, "lube"), 0.0, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_interval_holds_the_true_mu_r_as_often_as_it_says():
+    """Coverage: over 40 synthetic studies with 3 % seed noise (3 seeds a size, as the calibration
+    config), the 95 % interval of the best mu_r (both measures) holds MU_TRUE in at least 80 % of
+    them (measured: 34 of 40, median width 0.017; the plain percentile interval, before widening
+    by sqrt(3/2), held it in 31). A spread estimated from three seeds undercovers whatever is done,
+    so the bound is below the nominal 95 %; the draws are fixed (seed 2026), so the test is exact."""
+    rng = np.random.default_rng(2026)
+    held, widths = 0, []
+    for k in range(40):
+        result = calibrate(synthetic_runs(rng), replicates=200, seed=k)
+        part = result.sel(law="lube", measure="both")
+        low, high = float(part.best_mu_r_low), float(part.best_mu_r_high)
+        held += low <= MU_TRUE <= high
+        widths.append(high - low)
+    assert held >= 32, (held, np.median(widths))
+    assert np.median(widths) < 0.1     # informative: narrower than the spacing of the sweep around 0.15
+
+
+def test_grid_helpers_agree_with_the_exact_curve():
+    grid = np.linspace(MU_R[0], MU_R[-1], 401)
+    limits = true_limits(MU_R, RATIOS)
+    best, value = best_mu_r(limits, MU_R, RATIOS, "lube", grid)
+    assert np.all(np.abs(best - MU_TRUE) < 1e-3) and np.all(value < 1e-3)
+    low, high = fitting_range(limits, MU_R, RATIOS, "lube", grid, tolerance=1e-9)
+    assert np.isnan(low) or high - low < 2e-3
+
+
+def test_the_calibrate_command_writes_its_table_dataset_and_figure(tmp_path):
+    """`colsim calibrate ANALYSES`: from analysis files of synthetic runs (2 mu_r, 2 a, 2 r0, 2 seeds,
+    exact values at MU_TRUE), the dataset with units and long names, the table naming the best mu_r,
+    and the figure; a single mu_r is refused in one line."""
+    import xarray as xr
+
+    from colsim.cli import main
+
+    mu_rs, ratios, radii = np.array([0.1, 0.2]), np.array([1.0, 3.0]), np.array([2.0, 4.0])
+    limits = true_limits(mu_rs, ratios)
+    paths = []
+    for i, m in enumerate(mu_rs):
+        for j, a in enumerate(ratios):
+            for r0 in radii:
+                for seed in (1, 2):
+                    shrink = 1 - 0.8 * DIAMETER / r0
+                    analysis = xr.Dataset(
+                        {"h_inf_over_r0": ((), limits[0, i, j] * shrink), "runout_over_r0": ((), limits[1, i, j] * shrink),
+                         "mean_diameter": ((), DIAMETER)},
+                        attrs={"colsim_kind": "collapse-analysis", "aspect_ratio": a, "mu_r": m, "seed": seed,
+                               "r0": r0, "mu": 0.577, "rolling_lever": "paper", "friction_law": "associated"})
+                    paths.append(tmp_path / f"analysis_{i}{j}_{r0:g}_{seed}.nc")
+                    analysis.to_netcdf(paths[-1])
+    out = tmp_path / "calibration.nc"
+    assert main(["calibrate", *map(str, paths), "--output", str(out), "--markdown", str(tmp_path / "c.md"),
+                 "--figure", str(tmp_path / "c.png"), "--replicates", "20"]) == 0
+    result = xr.load_dataset(out)
+    assert float(result.best_mu_r.sel(law="lube", measure="both")) == pytest.approx(MU_TRUE, abs=1e-3)
+    for name, variable in result.data_vars.items():
+        assert "long_name" in variable.attrs, name
+    assert "| lube | both | 0.150" in (tmp_path / "c.md").read_text()
+    assert (tmp_path / "c.png").stat().st_size > 10_000
+    one = [p for p in paths if "_0" in p.name.split("analysis")[1][:2]]
+    assert main(["calibrate", *map(str, one), "--output", str(tmp_path / "x.nc")]) == 2
+    assert not (tmp_path / "x.nc").exists()
