@@ -158,6 +158,22 @@ def test_nothing_left_to_do_and_new_values_run_only_new_jobs(tiny_study):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("setting", ["contact_tolerance: 0.05", "check_tolerances: [0.2, 0.5, 1.0]",
+                                     "mass_shares: [0.8, 0.95]"])
+def test_changed_analysis_settings_rerun_the_analyses_and_nothing_upstream(tiny_study, setting):
+    """Issue 48.1: every analysis has its settings' key file as an input, so a changed analysis
+    setting plans the 4 analyses and what follows them (the summary, figures, study files), and no
+    packing, column or collapse."""
+    (tiny_study / "analysis.yaml").write_text(f"analysis: {{{setting}}}\n")
+    result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml", "analysis.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = planned_outputs(result)
+    assert sum(p.endswith("/analysis.nc") for p in planned) == 4, planned
+    assert f"{TINY}/summary.nc" in planned and f"{TINY}/study_config.yaml" in planned
+    assert not any(p.endswith(("collapse.nc", "packing.nc", "column.nc")) for p in planned), planned
+
+
+@pytest.mark.slow
 def test_a_rewritten_rule_does_not_redo_its_results(tiny_study):
     """profiles/default: a rule whose command or parameters were edited (here the pack rule gains
     a parameter and an option, as when pack.layer_height came) redoes nothing: a result's settings

@@ -14,8 +14,8 @@ from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
                                           load_schema)
 from colsim.study.workflow.commands import collapse_options, numbers
-from colsim.study.workflow.plan import (COLUMN, PACKING_DIR, RESULTS, RUN_DIR, StudyPlan, UnknownFolder, benchmarked,
-                                        fmt, logged, write_settings)
+from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
+                                        StudyPlan, UnknownFolder, benchmarked, fmt, logged, write_settings)
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
@@ -41,6 +41,7 @@ wildcard_constraints:
     seed=r"[0-9]+",
     packing=r"[0-9a-f]{10}",
     run=r"[0-9a-f]{10}",
+    analysis=r"[0-9a-f]{10}",
 
 
 def _settings_lookup(lookup):
@@ -58,6 +59,7 @@ def _settings_lookup(lookup):
 packing_of = _settings_lookup(PLAN.packing_of)
 column_of = _settings_lookup(PLAN.column_of)
 run_of = _settings_lookup(PLAN.run_of)
+analysis_settings_of = _settings_lookup(PLAN.analysis_settings_of)
 # the study's files (naming one registers its packing, column and run)
 runs = PLAN.study_runs
 side_view_mu_r = PLAN.side_view_mu_r
@@ -122,3 +124,4 @@ localrules:
     study_config,
     packing_settings,
     run_settings,
+    analysis_settings,

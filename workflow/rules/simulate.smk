@@ -112,9 +112,19 @@ rule collapse:
         " --checkpoint-every {params.checkpoint_every} --threads {threads} --output {output:q} > {log:q} 2>&1"
 
 
+rule analysis_settings:
+    output:
+        ANALYSIS_SETTINGS,
+    params:
+        settings=analysis_settings_of,
+    run:
+        write_settings(params.settings, output[0])
+
+
 rule analyse:
     input:
-        f"{RUN_DIR}/collapse.nc",
+        collapse=f"{RUN_DIR}/collapse.nc",
+        settings=PLAN.analysis_settings_path(),   # changed analysis settings: a new input, and a rerun
     output:
         f"{RUN_DIR}/analysis.nc",
     params:
@@ -126,7 +136,7 @@ rule analyse:
     benchmark:
         benchmarked(f"{RUN_DIR}/analyse.tsv")
     shell:
-        "colsim analyse --input {input:q} --contact-tolerance {params.contact_tolerance}"
+        "colsim analyse --input {input.collapse:q} --contact-tolerance {params.contact_tolerance}"
         " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
         " --output {output:q} > {log:q} 2>&1"
 

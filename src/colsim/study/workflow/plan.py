@@ -23,6 +23,9 @@ RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
 COLUMN = PACKING_DIR + "/a_{a}/column.nc"
 RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
+#: the analysis settings a run's analysis.nc was made with, by key: an input of every analysis, so
+#: that changed settings (a new key, a new input) rerun the analyses and what follows them
+ANALYSIS_SETTINGS = RESULTS + "/analysis_settings/{analysis}.yaml"
 
 #: pack.* settings that do not change a packing
 NOT_IDENTITY = ("max_spheres", "threads")
@@ -237,6 +240,26 @@ class StudyPlan:
             return []
         where = self.study_dir
         return [f"{where}/friction_law.nc", f"{where}/friction_law.md", f"{where}/figures/friction_law.png"]
+
+    # -- the analyses' settings
+
+    def analysis_settings(self) -> dict:
+        """Everything `colsim analyse` is given besides its run: the study's analysis settings."""
+        analysis = self.config["analysis"]
+        return {"contact_tolerance": float(analysis["contact_tolerance"]),
+                "check_tolerances": [float(t) for t in analysis["check_tolerances"]],
+                "mass_shares": [float(m) for m in analysis["mass_shares"]]}
+
+    def analysis_settings_path(self) -> str:
+        """The file that names this study's analysis settings by key (an input of every analysis)."""
+        return ANALYSIS_SETTINGS.format(analysis=settings_key(self.analysis_settings()))
+
+    def analysis_settings_of(self, wildcards) -> dict:
+        """This study's analysis settings, if {analysis} is their key; an UnknownFolder otherwise."""
+        settings = self.analysis_settings()
+        if wildcards.analysis != settings_key(settings):
+            raise UnknownFolder(f"analysis settings {wildcards.analysis} are not this study's")
+        return settings
 
     # -- a folder's settings, from its key
 
