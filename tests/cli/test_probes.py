@@ -148,7 +148,7 @@ def test_an_impossible_column_is_refused_before_any_step(work, how, words):
 @pytest.mark.parametrize("args, status, words", [
     (["pack", "--height", "inf", "--output", "x.nc"], 2, ["--height", "finite"]),
     (["pack", "--height", "nan", "--output", "x.nc"], 2, ["--height", "finite"]),
-    (["pack", "--height", "1", "--dt", "1e300", "--output", "x.nc"], 2, ["too large"]),
+    (["pack", "--height", "1", "--dt", "1e300", "--output", "x.nc"], 2, ["dt = 1e+300", "time to fall"]),
     (["collapse", "--input", "column.nc", "--max-duration", "inf", "--output", "x.nc"], 2, ["--max-duration", "finite"]),
     (["pack", "--r0", "1e6", "--height", "1", "--output", "x.nc"], 2, ["spheres", "--max-spheres"]),
     (["pack", "--r0", "20", "--height", "100", "--output", "x.nc"], 2, ["spheres", "--max-spheres"]),
@@ -202,3 +202,84 @@ def test_a_full_disk_is_one_line(work):
     (work / "blocked").write_text("")
     one_line_error(colsim("trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "blocked/c.nc", cwd=work),
                    2, "blocked")
+
+
+def _rewrite(path, change):
+    """Load the netCDF file at `path`, apply change(dataset) (which returns the new dataset), write it back."""
+    dataset = xr.load_dataset(path)
+    dataset = change(dataset)
+    for variable in dataset.variables.values():
+        variable.encoding = {}
+    path.unlink()
+    dataset.to_netcdf(path)
+
+
+def _set_attr(name, value):
+    def change(dataset):
+        dataset.attrs[name] = value
+        return dataset
+    return change
+
+
+def _set_values(name, spoil):
+    def change(dataset):
+        values = dataset[name].values.copy()
+        spoil(values)
+        dataset[name] = (dataset[name].dims, values, dataset[name].attrs)
+        return dataset
+    return change
+
+
+@pytest.mark.parametrize("file, change, command, words", [
+    ("column.nc", _set_attr("r0", np.array([1.0, 2.0])), "collapse", ["attribute r0", "not one number"]),
+    ("analysis.nc", _set_attr("config", "[1, 2, 3]"), "collect", ["attribute config is not a JSON object"]),
+    ("collapse.nc", _set_attr("r0", 0.0), "analyse", ["attribute r0 is 0", "positive"]),
+    ("collapse.nc", lambda d: d.isel(time=[]), "analyse", ["holds no frame"]),
+    ("column.nc", _set_values("contact_first", lambda v: v.__setitem__(0, 10**6)), "collapse",
+     ["contact names a sphere outside"]),
+    ("column.nc", _set_values("contact_force", lambda v: v.__setitem__((0, 0), np.nan)), "collapse",
+     ["contact force is not finite"]),
+    ("column.nc", lambda d: d.assign(position=d.position.assign_attrs(units="mm")), "collapse", ["'mm'", "'m'"]),
+    ("analysis.nc", _set_attr("seed", 1.7), "collect", ["seed", "integer"]),
+    ("collapse.nc", _set_values("position", lambda v: v.__setitem__((0, 0, 0), np.nan)), "export-vtk",
+     ["position is not finite"]),
+    ("collapse.nc", _set_values("radius", lambda v: v.__setitem__(0, -0.1)), "export-vtk", ["radius"]),
+])
+def test_a_damaged_file_is_refused_in_one_line(work, file, change, command, words):
+    """Issue 45.6: each of these gave a traceback or was used silently; now the command names the file
+    and what is wrong with it, before any work, and writes nothing."""
+    _rewrite(work / file, change)
+    arguments = {"collapse": ["collapse", "--input", "column.nc", "--steps", "2", "--output", "out.nc"],
+                 "collect": ["collect", "analysis.nc", "--output", "out.nc"],
+                 "analyse": ["analyse", "--input", "collapse.nc", "--output", "out.nc"],
+                 "export-vtk": ["export-vtk", "--input", "collapse.nc", "--output-dir", "vtk"]}[command]
+    one_line_error(colsim(*arguments, cwd=work), 2, file, *words)
+    assert not (work / "out.nc").exists() and not (work / "vtk").exists()
+
+
+def test_a_small_file_declaring_a_huge_dimension_is_refused_before_it_is_read(work):
+    """Issue 45.6: an analysis of a few kB whose variable spans 10^8 values (compressed, never
+    written) made `collect` allocate GiBs; its size is checked before anything is read."""
+    import netCDF4
+
+    path = work / "analysis.nc"
+    with netCDF4.Dataset(path, "a") as dataset:
+        dataset.createDimension("huge", 10**8)
+        dataset.createVariable("mass_front_over_r0_huge", "f8", ("huge",), zlib=True)
+    assert path.stat().st_size < 1_000_000
+    one_line_error(colsim("collect", "analysis.nc", "--output", "out.nc", cwd=work), 2, "analysis.nc", "GiB once read")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["collapse", "--input", "column.nc", "--duration", "1e-300", "--steps", "3", "--output", "x.nc"],
+     ["dt/sqrt(h0/g)", "below 1e-09"]),
+    (["collapse", "--input", "column.nc", "--solver", "clarabel", "--solver-overlap-tolerance", "1e-3",
+      "--output", "x.nc"], ["--solver-overlap-tolerance is APGD's", "ignore"]),
+    (["pack", "--r0", "1", "--height", "1", "--gravity", "1e-300", "--output", "x.nc"],
+     ["sqrt(d_min/g)", "gravity 1e-300"]),
+])
+def test_settings_a_run_cannot_honour_are_refused(work, args, words):
+    """Issue 45.6: a step too small for its arithmetic, APGD's options given to Clarabel (ignored, yet
+    recorded) and a gravity at which the spheres fly off."""
+    one_line_error(colsim(*args, cwd=work), 2, *words)
+    assert not (work / "x.nc").exists()

@@ -88,10 +88,18 @@ def _apgd_options(args, tolerance=None) -> dict:
 
 
 def _solver(args, scaled_time_step: float):
-    """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'."""
+    """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'.
+    APGD's own options given to another back-end are refused: it would ignore them, yet the file
+    would record them."""
     if args.solver in ("auto", "apgd"):
         options = _apgd_options(args)
     else:
+        ignored = [flag for flag, value in (("--solver-length-floor", args.solver_length_floor),
+                                            ("--solver-overlap-tolerance", args.solver_overlap_tolerance))
+                   if value is not None]
+        if ignored:
+            raise io.InputError(f"{' and '.join(ignored)} {'are' if len(ignored) > 1 else 'is'} APGD's"
+                                f" (--solver auto or apgd); --solver {args.solver} would ignore it")
         options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
     if args.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
         options = {"scaled_time_step": scaled_time_step, "apgd": options}

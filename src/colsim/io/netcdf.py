@@ -28,6 +28,7 @@ import xarray as xr
 from .. import __version__
 from ..engine.state import ParticleState
 from ..engine.warm_start import WarmStart
+from . import checks
 from .git import git_state
 
 STATE_KIND = "particle-state"
@@ -228,18 +229,35 @@ def cf_encoding(dataset) -> dict:
     return encoding
 
 
+#: the units colsim stores the particle variables in (an input in others is refused, not converted)
+PARTICLE_UNITS = {**{name: SI_UNITS[units] for name, (units, _) in PARTICLE_VARIABLES.items()},
+                  "radius": SI_UNITS["length"]}
+
+
 def open_dataset(path, kind: str):
-    """Open a colsim netCDF file and check that it holds `kind`; InputError otherwise."""
+    """Open a colsim netCDF file and check that it holds `kind`, within the bounds of
+    :mod:`colsim.io.checks` (its size before reading it, its attributes, units, a trajectory's
+    frames); InputError (one line) otherwise."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"input file {path} does not exist")
     try:
-        dataset = xr.load_dataset(path, engine="netcdf4")
+        lazy = xr.open_dataset(path, engine="netcdf4")
     except Exception as error:  # netCDF4 raises OSError, ValueError, ... for foreign files
         raise InputError(f"input file {path} is not a readable netCDF file ({error})") from None
-    found = dataset.attrs.get("colsim_kind")
-    if found != kind:
-        raise InputError(f"input file {path} holds {found or 'no colsim data'!r}, expected {kind!r}")
+    with lazy:
+        found = lazy.attrs.get("colsim_kind")
+        if found != kind:
+            raise InputError(f"input file {path} holds {found or 'no colsim data'!r}, expected {kind!r}")
+        try:
+            checks.check_size(lazy, kind)          # before anything is read into memory
+            checks.check_attributes(lazy.attrs)
+            checks.check_units(lazy, PARTICLE_UNITS)
+            dataset = lazy.load()
+            if kind == TRAJECTORY_KIND:
+                checks.check_trajectory(dataset)
+        except checks.FileProblem as problem:
+            raise InputError(f"input file {path}: {problem}") from None
     return dataset
 
 
@@ -374,10 +392,17 @@ def contact_force_variables(forces: WarmStart) -> dict:
 
 
 def contact_forces_of(dataset) -> WarmStart | None:
-    """The contact forces stored by :func:`contact_force_variables`, or None (older files)."""
+    """The contact forces stored by :func:`contact_force_variables`, or None (older files);
+    InputError if they name spheres the file does not hold or are not finite."""
     if "contact_force" not in dataset:
         return None
-    return WarmStart(dataset["contact_first"].values.astype(np.int64),
-                     dataset["contact_second"].values.astype(np.int64),
-                     dataset["contact_family"].values.astype(np.int64),
-                     dataset["contact_force"].values, dataset["contact_rolling_force"].values)
+    arrays = [dataset[name].values for name in ("contact_first", "contact_second", "contact_family",
+                                                 "contact_force", "contact_rolling_force")]
+    n = dataset.sizes.get("particle", 0)
+    try:
+        checks.check_contacts(*arrays, n=n, fixed=n)
+    except checks.FileProblem as problem:
+        source = dataset.encoding.get("source", "the input file")
+        raise InputError(f"input file {source}: {problem}") from None
+    first, second, family, force, rolling = arrays
+    return WarmStart(first.astype(np.int64), second.astype(np.int64), family.astype(np.int64), force, rolling)

@@ -36,7 +36,7 @@ from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, sittings_commits
-from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
+from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT, POUR_STEP_RANGE
 from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
@@ -208,6 +208,10 @@ def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, dia
         raise ValueError(f"cylinder radius r0 = {r0} is smaller than the largest particle (diameter {d_max})")
     if height <= 0:
         raise ValueError(f"packing height must be positive, got {height}")
+    scaled = dt * np.sqrt(gravity / d_min)
+    if not POUR_STEP_RANGE[0] <= scaled <= POUR_STEP_RANGE[1]:
+        raise ValueError(f"the pour's step dt = {dt:g} is {scaled:.3g} times sqrt(d_min/g), the time to fall about a"
+                         f" diameter; it must lie within {POUR_STEP_RANGE[0]:g}-{POUR_STEP_RANGE[1]:g} (gravity {gravity:g})")
     if layer_height is not None and not layer_height > 0:
         raise ValueError(f"layer height must be positive (or None: one cloud), got {layer_height}")
     if not freeze_depth >= 0:

@@ -15,3 +15,9 @@ FREEZE_DEPTH = 3.5
 #: so at most about 100 s of work is lost to a killed job), and after 10 minutes without one
 #: (colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S: an r0 = 6 pour's steps take up to a minute)
 CHECKPOINT_EVERY = 25
+
+#: the pour's step over sqrt(d_min / g), the time to fall about a diameter, must lie in this range:
+#: the default (dt 0.02, d_min 0.25, g 9.81) is 0.125; far above, spheres cross each other within a
+#: step, far below, the pour takes millions of steps (gravity 1e-300 had the spheres fly off while a
+#: study reported a deposit)
+POUR_STEP_RANGE = (1e-4, 2.0)

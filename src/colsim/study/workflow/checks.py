@@ -10,6 +10,8 @@ import re
 import jsonschema
 import yaml
 
+from ...stages.pack_defaults import POUR_STEP_RANGE
+
 #: far above any study's configuration (the default has about 100)
 CONFIG_MAX_ITEMS = 100_000
 
@@ -150,12 +152,6 @@ def link_out_of(folder):
                     return (f"{path} is a link to {target}, outside {folder}/: the study would write through it;"
                             " remove the link")
     return None
-
-
-#: the pour's step over sqrt(d_min / g), the time to fall about a diameter, must lie in this range:
-#: the default is 0.125; far above, spheres cross each other within a step, far below, the pour
-#: takes millions of steps (gravity 1e-300 made spheres fly off while the study reported a deposit)
-POUR_STEP_RANGE = (1e-4, 2.0)
 
 
 def time_problem(config):
