@@ -324,6 +324,16 @@ def test_front_figure_draws_the_mass_share_front_above_the_main_mass_edge(tmp_pa
         assert "farthest reach" in ax.get_ylabel() and ax.get_xlabel() == "t / sqrt(h0/g)"
 
 
+def test_front_panels_share_one_y_scale_across_mu_r(tmp_path):
+    """Issue 48.6: the front reaches 3 at mu_r = 0 and 1 at mu_r = 0.12; both panels span the same
+    y range, so the figure compares mu_r at a glance."""
+    runs = [analysis(1.0, m, 1) for m in (0.0, 0.12)]
+    for run, reach in zip(runs, (3.0, 1.0)):
+        run["front_position"] = ("time", np.linspace(0.0, reach, 5))
+    axes = _drawn_figures(tmp_path, settled(), runs, [])["front_position"].axes
+    assert axes[0].get_ylim() == axes[1].get_ylim() and axes[1].get_ylim()[1] > 3.0
+
+
 def test_deposit_profile_starts_with_the_bin_at_the_axis(tmp_path):
     run = analysis(1.0, 0.12, 1)                                        # bins of 0.5 centred at 0.25, 0.75, ...
     figure = _drawn_figures(tmp_path, settled(), [run], [])["deposit_profiles"]

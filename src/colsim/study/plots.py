@@ -481,8 +481,8 @@ FRONT_ROWS = {
 
 
 def front_figure(analyses, path: Path) -> Path:
-    """The front against t/sqrt(h0/g): one column of panels per mu_r, one colour per a, one line per
-    seed. Top row (when the analyses have it): the radius holding 95 % of the mass, frame by frame
+    """The front against t/sqrt(h0/g): one column of panels per mu_r (one y scale along a row), one
+    colour per a, one line per seed. Top row (when the analyses have it): the radius holding 95 % of the mass, frame by frame
     (FRONT_MASS_VARIABLE: every grain counts, no contact graph); it moves outward as the grains
     spread. Bottom row: :func:`outward_front` of the main mass's edge (front_position), the run-out's
     own measure, with an open circle at the end where the final main mass is behind that front."""
@@ -492,8 +492,9 @@ def front_figure(analyses, path: Path) -> Path:
     ratios = sorted({a for a, _, _ in runs})
     colours = dict(zip(ratios, _colours(len(ratios))))
     rows = [name for name in FRONT_ROWS if name == "front_position" or any(name in run for run in runs.values())]
+    # one y scale along each row, so that the mu_r panels compare at a glance (issue 48.6)
     fig, axes = plt.subplots(len(rows), len(mu_rs), figsize=(4.2 * len(mu_rs), 3.2 * len(rows)), squeeze=False,
-                             layout="constrained", sharex="col")
+                             layout="constrained", sharex="col", sharey="row")
     for row, name in zip(axes, rows):
         label, outward = FRONT_ROWS[name]
         for ax, m in zip(row, mu_rs):
