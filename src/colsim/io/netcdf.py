@@ -65,6 +65,15 @@ def at_rest_variable(dims, values) -> tuple:
              "flag_meanings": " ".join(AT_REST_FLAGS)})
 
 
+def run_coordinates(attrs) -> dict:
+    """The run's swept values as scalar coordinates (aspect_ratio, mu_r, seed, r0), so that xarray
+    combines many runs' files along a new dimension by them (:func:`colsim.study.runs.open_runs`)."""
+    found = {"aspect_ratio": ("1", "aspect ratio h0/r0"), "mu_r": ("1", "rolling resistance coefficient"),
+             "seed": ("1", "packing seed"), "r0": ("length", "cylinder radius")}
+    return {name: ((), int(attrs[name]) if name == "seed" else float(attrs[name]), {"units": units, "long_name": long})
+            for name, (units, long) in found.items() if name in attrs}
+
+
 def at_rest_flag(dataset) -> int:
     """The at_rest flag (:data:`AT_REST_FLAGS`) of a trajectory or analysis: its `at_rest` variable,
     or in files written before the variable existed the attribute (0 or 1, absent when not checked)."""

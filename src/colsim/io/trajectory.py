@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate
+from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate, run_coordinates
 from .steps import step_variables
 
 
@@ -54,4 +54,4 @@ def trajectory_dataset(run, h0: float, r0: float, settings, attrs: dict) -> xr.D
     if settings.max_duration is not None:   # the run went on towards rest: how far (whether: at_rest)
         dataset.attrs.update({"max_duration": settings.max_duration, "rest_window": settings.rest_window,
                               "rest_tolerance": settings.rest_tolerance, "rest_energy": settings.rest_energy})
-    return dataset
+    return dataset.assign_coords(run_coordinates(dataset.attrs))

@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..engine.contacts import touching_pairs
 from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
-from ..io.netcdf import at_rest_flag, at_rest_variable, state_from_dataset
+from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates, state_from_dataset
 
 DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
 #: the front followed frame by frame: the radius holding this share of the mass (:func:`mass_front`),
@@ -192,8 +192,10 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
               "step": trajectory["step"],
               "contact_tolerance": ("contact_tolerance", fractions,
                                     {"units": "1", "long_name": "contact tolerance over the smallest diameter"}),
-              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"})}
+              "mass_share": ("mass_share", shares, {"units": "1", "long_name": "share of the mass"}),
+              **run_coordinates(trajectory.attrs)}
     return xr.Dataset(data, coords=coords, attrs={**attrs, **_run_attributes(trajectory)})
+
 
 
 def _run_attributes(trajectory) -> dict:
