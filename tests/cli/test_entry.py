@@ -42,3 +42,28 @@ def test_a_bad_value_exits_2_naming_the_option(args, option, capsys):
         build_parser().parse_args(args)
     assert stop.value.code == 2
     assert option in capsys.readouterr().err
+
+
+def test_version_names_the_commit_and_verbosity_goes_anywhere(capsys):
+    """Issue 48.8: --version prints the version and the source's commit; -v and -q are accepted
+    before or after the subcommand, together refused; each subcommand's help starts with its line."""
+    import subprocess
+    import sys
+
+    from colsim import __version__
+    from colsim.cli.entry import build_parser
+
+    done = subprocess.run([sys.executable, "-m", "colsim.cli", "--version"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.startswith(f"colsim {__version__}, commit ")
+    parser = build_parser()
+    for argv in (["-v", "mu-r", "--polygon", "6"], ["mu-r", "--polygon", "6", "-v"]):
+        args = parser.parse_args(argv)
+        assert args.verbose and not args.quiet
+    assert parser.parse_args(["mu-r", "--polygon", "6", "-q"]).quiet
+    assert not parser.parse_args(["mu-r", "--polygon", "6"]).verbose
+    from colsim.cli import main
+    assert main(["mu-r", "--polygon", "6", "-q"]) == 0
+    with pytest.raises(SystemExit):
+        main(["-v", "mu-r", "--polygon", "6", "-q"])
+    assert "contradict" in capsys.readouterr().err
+    assert parser._subparsers._group_actions[0].choices["pack"].description.startswith("fill a cylinder")

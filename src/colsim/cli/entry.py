@@ -108,9 +108,35 @@ def _overlap_tolerance_argument(parser):
                              f"{defaults.AUTO_APGD_OVERLAP_TOLERANCE:g}, apgd 0: the relative tolerance alone)")
 
 
+class _Version(argparse.Action):
+    """--version: colsim's version and the git commit of its source, asked only when given."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from .. import __version__
+        from ..io.git import git_state
+
+        state = git_state(Path(__file__).resolve().parent)
+        commit = "not a git checkout" if state["commit"] is None else (
+            state["commit"][:12] + (" (modified)" if state["dirty"] else ""))
+        print(f"colsim {__version__}, commit {commit}")
+        parser.exit()
+
+
+def _verbosity_arguments(parser, default) -> None:
+    """-v and -q, on the main parser (default False) and on each subcommand (default: leave the main
+    parser's value), so that `colsim -v pack` and `colsim pack -v` are the same."""
+    parser.add_argument("-v", "--verbose", action="store_true", default=default, help="log every detail")
+    parser.add_argument("-q", "--quiet", action="store_true", default=default,
+                        help="log warnings and errors only (no progress)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="colsim", description=__doc__.split("\n\n")[0])
-    parser.add_argument("-v", "--verbose", action="store_true", help="log every detail")
+    _verbosity_arguments(parser, False)
+    parser.add_argument("--version", action=_Version, help="show colsim's version and commit, and exit")
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("pack", help="fill a cylinder by free fall (mu = mu_r = 0) and let it settle")
@@ -259,13 +285,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--polygon", type=_integer, required=True, help="number of sides N >= 3")
     p.add_argument("--method", choices=["paper", "exact"], default="paper",
                    help="paper: linear fall of the resisting moment (pi/(4N)); exact: true lever arm (default: %(default)s)")
+    for subparser in sub.choices.values():
+        _verbosity_arguments(subparser, argparse.SUPPRESS)
+        if subparser.description is None:   # each subcommand's help line heads its own --help
+            subparser.description = next(a.help for a in sub._choices_actions if a.dest == subparser.prog.split()[-1])
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+    if args.verbose and args.quiet:
+        parser.error("-v and -q contradict each other")
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     from . import commands
     from ..io.netcdf import InputError

@@ -8,12 +8,13 @@ log = logging.getLogger("colsim")
 
 
 def progress_bar(total: int, description: str, interval_s: float = 60.0, clock=time.monotonic):
-    """A tqdm bar on a terminal (off otherwise) and a log line every 10 % of the steps, or sooner
+    """A tqdm bar on a terminal (off otherwise, and under -q) and a log line every 10 % of the steps, or sooner
     once interval_s seconds have passed since the last line (a long step or run to rest would
     otherwise leave the log silent for many minutes)."""
     from tqdm import tqdm
 
-    bar = tqdm(total=total, desc=description, disable=None, unit="step")
+    quiet = not log.isEnabledFor(logging.INFO)    # colsim -q: no bar either
+    bar = tqdm(total=total, desc=description, disable=True if quiet else None, unit="step")
     every = max(1, total // 10)
     started = clock()
     counter = {"n": 0, "last": started}
