@@ -67,6 +67,18 @@ def test_the_reports_landing_table_is_valid_rst_at_the_nearest_mu_r():
     html = docutils.core.publish_string(text, writer="html", settings_overrides=settings).decode()
     assert html.count("<tr>") == 3 and "+0 %" in html and "+10 %" in html and "0.620" in html
 
+    # issue 48.2: the column size said above the table, the runs' flags in it
+    summary.attrs["r0"] = 1.0
+    summary["at_rest"] = (dims, np.ones(summary.h_inf_over_r0.shape, dtype=np.int8))
+    summary["at_rest"][1, 1, 0] = 0                           # a = 2, mu_r = 0.12, seed 1 still moving
+    text = lube_rst(summary, 0.12)
+    html = docutils.core.publish_string(text, writer="html", settings_overrides=settings).decode()
+    assert "A smoke test, not a result" in html and "still moving (seed 1)" in html and "Flags:" in html
+    summary.attrs["r0"] = 3.0
+    assert "Not converged in the column size" in lube_rst(summary, 0.12)
+    summary.attrs["r0"] = 13.0
+    assert "converged" not in lube_rst(summary, 0.12).lower() and "smoke" not in lube_rst(summary, 0.12)
+
 
 def test_other_runout_measures_are_tabled_against_lube():
     ratios = np.array([2.0])

@@ -109,23 +109,53 @@ def lube_markdown(summary) -> str:
     return "\n".join(lines)
 
 
+#: the column sizes the column-size study measured against its limit (docs/validation/column-size.md):
+#: below SMOKE_TEST_R0 a study only checks that the pipeline runs; below CONVERGED_R0 its run-outs are
+#: short of the large-column limit (r0 = 3: 21-27 %, r0 = 6: 10-11 %; 5 % needs r0 of about 13)
+SMOKE_TEST_R0 = 2.0
+CONVERGED_R0 = 13.0
+
+
+def size_caveat(r0: float) -> str:
+    """One sentence saying how far a study of cylinder radius r0 (the paper's diameters) is from the
+    large-column limit, or "" at or above CONVERGED_R0."""
+    if r0 < SMOKE_TEST_R0:
+        return (f"**A smoke test, not a result:** r0 = {r0:g} holds a few dozen grains, far below any converged size; "
+                "its numbers only show that the pipeline runs (the errors below are expected to be large).")
+    if r0 < CONVERGED_R0:
+        return (f"**Not converged in the column size:** at r0 = {r0:g} the run-outs fall short of the model's "
+                f"large-column limit (by 21-27 % at r0 = 3 and 10-11 % at r0 = 6; 5 % needs r0 of about "
+                f"{CONVERGED_R0:g}; docs/validation/column-size.md): read them for trends in a and mu_r.")
+    return ""
+
+
 def lube_rst(summary, mu_r: float) -> str:
-    """reStructuredText list-table of the report's landing page: at the swept mu_r nearest `mu_r`,
-    per a, the mean over seeds of h_inf/r0 and the run-out with Lube's values and the errors."""
+    """reStructuredText of the report's landing page: a sentence on the column size
+    (:func:`size_caveat`), then a list-table at the swept mu_r nearest `mu_r`, per a, of the mean over
+    seeds of h_inf/r0 and the run-out with Lube's values, the errors and the flags of the runs that
+    are still moving or a fragment (:func:`colsim.study.collect.run_flags`)."""
     m = summary.mu_r.values[np.argmin(np.abs(summary.mu_r.values - mu_r))]
     part = summary.sel(mu_r=m)
-    rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error"]]
+    flags = run_flags(summary)
+    seed_values = summary.seed.values if "seed" in summary.coords else [0]
+    rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error", "flags"]]
     for a in part.aspect_ratio.values:
         if not _has_runs(part.sel(aspect_ratio=a)):
             continue
         h = float(np.nanmean(part.h_inf_over_r0.sel(aspect_ratio=a).values))
         r = float(np.nanmean(part.runout_over_r0.sel(aspect_ratio=a).values))
+        flag = _flag_cell({name: f.sel(mu_r=m, aspect_ratio=a).values for name, f in flags.items()}, seed_values)
         rows.append([f"{a:g}", f"{h:.3f}", f"{lube_height(a):.3f}", _error(h, lube_height(a)),
-                     f"{r:.3f}", f"{lube_runout(a):.3f}", _error(r, lube_runout(a))])
-    lines = [f".. list-table:: mu_r = {float(m):g}, mean over seeds, against Lube et al. (2004)",
-             "   :header-rows: 1", ""]
+                     f"{r:.3f}", f"{lube_runout(a):.3f}", _error(r, lube_runout(a)), flag or "-"])
+    caveat = size_caveat(float(summary.attrs["r0"])) if "r0" in summary.attrs else ""
+    lines = ([caveat, ""] if caveat else []) + [
+        f".. list-table:: mu_r = {float(m):g}, mean over seeds, against Lube et al. (2004)",
+        "   :header-rows: 1", ""]
     for row in rows:
         lines += [f"   * - {row[0]}"] + [f"     - {cell}" for cell in row[1:]]
+    if any(bool(f.sel(mu_r=m).any()) for f in flags.values()):
+        lines += ["", f"Flags: *{FLAGS['moving']}*: not at rest at the end, so not a final deposit; "
+                      f"*{FLAGS['fragment']}*: the main mass holds under {100 * MAIN_MASS_SHARE:g} % of the grains."]
     return "\n".join(lines) + "\n"
 
 
