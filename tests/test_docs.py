@@ -106,3 +106,13 @@ def test_the_strict_build_fails_on_a_broken_link(tmp_path, link, warning):
     done = _mkdocs_build(tmp_path, tmp_path / "site")
     assert done.returncode != 0 and warning in done.stderr, done.stderr[-3000:]
 
+
+
+def test_every_configuration_file_is_listed_with_its_commands():
+    """Issue 48.4: docs/study-config.md lists every file in config/, in the workflow's files and in
+    the table of runs and reports."""
+    text = (ROOT / "docs" / "study-config.md").read_text()
+    for path in sorted((ROOT / "config").glob("*.yaml")):
+        name = f"config/{path.name}"
+        assert f"\n{name} " in text, f"{name} missing from the workflow's files"
+        assert f"| `{name}` | `snakemake -j2 all --configfile {name}` |" in text, f"{name} missing from the table"
