@@ -8,7 +8,7 @@ import functools
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
-from colsim.study.plots import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
+from colsim.study.figure_names import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 from colsim.study.workflow import commands
 from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,

@@ -39,14 +39,12 @@ import numpy as np
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag
 from ..stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
 from .collect import FLAGS, means_per_size, run_flags
+from .figure_names import FIGURES  # noqa: F401 - the figures all_figures writes
 from .experimental_laws import (LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, final_values, lube_height,
                    lube_runout)
 
 log = logging.getLogger(__name__)
 
-FIGURES = {"final_height": "Final height", "runout": "Run-out", "mu_r_effect": "Effect of rolling resistance",
-           "deposit_profiles": "Deposit profiles", "side_views": "Side views", "front_position": "Front position"}
-"""The figures :func:`all_figures` writes, in order: NAME.png -> its title (the workflow's report labels)."""
 
 MARKERS = "osD^vP*X<>"
 QUANTITY_LABELS = {"h_inf_over_r0": "$h_\\infty/r_0$", "runout_over_r0": "$(r_\\infty - r_0)/r_0$"}

@@ -11,6 +11,7 @@ import jsonschema
 import yaml
 
 from ...stages.pack_defaults import POUR_STEP_RANGE
+from ...stages.pour_geometry import expected_spheres
 
 #: far above any study's configuration (the default has about 100)
 CONFIG_MAX_ITEMS = 100_000
@@ -90,7 +91,6 @@ def before_validation(config, schema):
 def cross_field_problem(config):
     """One line naming the first pair of settings that contradict each other, or None (on a
     configuration whose defaults the schema has filled in)."""
-    from ...stages.pack import expected_spheres   # the packing's size estimate (the engine loads once)
 
     bad = non_finite_number(config)
     if bad is not None:

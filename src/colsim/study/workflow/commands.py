@@ -68,14 +68,14 @@ def collapse_runtime(run: dict, study_length: tuple[int, float], spheres: float 
 def spheres_of(r0: float, height: float, diameter_range) -> float:
     """About how many spheres a pour of radius r0 to `height` (lengths) holds: the pack stage's
     own count of its cloud (imported here, when a job's resources are asked for)."""
-    from colsim.stages.pack import expected_spheres
+    from colsim.stages.pour_geometry import expected_spheres
 
     return float(expected_spheres(float(r0), float(height), diameter_range))
 
 
 def pack_resources(spheres: float) -> dict:
     """A packing's time limit (minutes) and memory (MB) on a cluster for a pour of about `spheres`
-    (colsim.stages.pack.expected_spheres): twice the r0 = 4 pour's 2,190 s grown as N^2, at least
+    (colsim.stages.pour_geometry.expected_spheres): twice the r0 = 4 pour's 2,190 s grown as N^2, at least
     120 minutes and at most 48 hours; twice its 70 kB a sphere, at least 4,000 MB. r0 = 6, a = 5
     (about 73,000 spheres): 807 minutes, 10,226 MB."""
     seconds = SLOWER_CORES * PACK_REFERENCE_S * (spheres / PACK_REFERENCE_SPHERES) ** PACK_GROWTH
