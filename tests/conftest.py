@@ -13,6 +13,11 @@ r.n = 0), so a few spheres keep spinning slowly; the criteria are on translation
 from __future__ import annotations
 
 import math
+import os
+
+# the CUDA kernels' tests run on numba's CUDA simulator unless told otherwise (NUMBA_ENABLE_CUDASIM=0
+# on a machine with a GPU); set before numba is imported, which reads it then
+os.environ.setdefault("NUMBA_ENABLE_CUDASIM", "1")
 from dataclasses import dataclass, replace
 
 import numpy as np

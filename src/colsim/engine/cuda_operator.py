@@ -1,0 +1,207 @@
+"""The contact operator on one GPU (issue 46, its first part): B u, B' S z and diag(B Mbar^-1 B') as
+numba.cuda kernels, the arithmetic of :mod:`colsim.engine.operator` line for line, and dot products
+summed in a fixed order.
+
+- B u: one thread a contact (:func:`_gradient_kernel`).
+- B' S z: one thread a contact for its wrench (force on the second body, moments on both), then one
+  thread a body that sums its contacts' wrenches in contact order (:func:`_transpose_kernel`, from
+  the same start/entry lists as the CPU kernel). No atomic add: the sums are the CPU's, bit for bit,
+  and the same every run.
+- diag(B Mbar^-1 B'): one thread a contact.
+- a . b: each block sums its slice in shared memory by a fixed tree, then the host adds the blocks'
+  sums in block order (:func:`dot`): the same bits every run on one device, for one block size.
+
+Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set by the tests),
+which is how CI checks them against the CPU kernels. Nothing in a step uses them yet: the APGD
+iteration, detection and the warm start follow (docs/performance.md, "One GPU").
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import cuda
+
+from .operator import body_contacts
+
+#: threads a block; a power of two (the dot product's tree halves it)
+THREADS = 128
+
+
+def _blocks(count: int) -> int:
+    return max(1, math.ceil(count / THREADS))
+
+
+@cuda.jit
+def _gradient_kernel(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
+    """out (5m,) = S B Mbar^-1 h + c: contact k's relative motion (colsim.engine.operator.apply_gradient)."""
+    k = cuda.grid(1)
+    if k >= ci.shape[0]:
+        return
+    rot = h.shape[0] // 2
+    first, second = ci[k], cj[k]
+    un = ut1 = ut2 = ur1 = ur2 = 0.0
+    for d in range(3):
+        dx = -h[3 * first + d] * inv_mass[3 * first + d]
+        w = h[rot + 3 * first + d] * inv_mass[rot + 3 * first + d]
+        un += nrm[k, d] * dx
+        ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
+        ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
+        ur1 -= lever[k] * t1[k, d] * w
+        ur2 -= lever[k] * t2[k, d] * w
+        if second >= 0:
+            dx = h[3 * second + d] * inv_mass[3 * second + d]
+            w = h[rot + 3 * second + d] * inv_mass[rot + 3 * second + d]
+            un += nrm[k, d] * dx
+            ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
+            ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
+            ur1 += lever[k] * t1[k, d] * w
+            ur2 += lever[k] * t2[k, d] * w
+    o = 5 * k
+    out[o] = s[o] * un + c[o]
+    out[o + 1] = s[o + 1] * ut1 + c[o + 1]
+    out[o + 2] = s[o + 2] * ut2 + c[o + 2]
+    out[o + 3] = s[o + 3] * ur1 + c[o + 3]
+    out[o + 4] = s[o + 4] * ur2 + c[o + 4]
+
+
+@cuda.jit
+def _wrench_kernel(z, s, nrm, t1, t2, ri, rj, lever, work):
+    """work (m, 9): contact k's force on its second body, its moment on the first and on the second."""
+    k = cuda.grid(1)
+    if k >= ri.shape[0]:
+        return
+    o = 5 * k
+    p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
+    r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
+    for d in range(3):
+        sliding = q2 * t1[k, d] - q1 * t2[k, d]
+        rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
+        work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
+        work[k, 3 + d] = ri[k] * sliding - rolling
+        work[k, 6 + d] = rj[k] * sliding + rolling
+
+
+@cuda.jit
+def _transpose_kernel(work, start, entry, out):
+    """out (6n,) = B' S z from the contacts' wrenches: body b sums its contacts in contact order."""
+    body = cuda.grid(1)
+    n = start.shape[0] - 1
+    if body >= n:
+        return
+    for d in range(3):
+        force = 0.0
+        moment = 0.0
+        for e in range(start[body], start[body + 1]):
+            k = entry[e] // 2
+            if entry[e] % 2 == 1:
+                force += work[k, d]
+                moment += work[k, 6 + d]
+            else:
+                force -= work[k, d]
+                moment += work[k, 3 + d]
+        out[3 * body + d] = force
+        out[3 * n + 3 * body + d] = moment
+
+
+@cuda.jit
+def _diagonal_kernel(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
+    """out (m, 5) = the diagonal of B Mbar^-1 B' (colsim.engine.operator.jacobian_diagonal)."""
+    k = cuda.grid(1)
+    if k >= ci.shape[0]:
+        return
+    rot = inv_mass.shape[0] // 2
+    for row in range(5):
+        out[k, row] = 0.0
+    for side in range(2):
+        body = ci[k] if side == 0 else cj[k]
+        if body < 0:
+            continue
+        radius = ri[k] if side == 0 else rj[k]
+        for d in range(3):
+            lin = inv_mass[3 * body + d]
+            ang = inv_mass[rot + 3 * body + d]
+            out[k, 0] += nrm[k, d] ** 2 * lin
+            out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
+            out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
+            out[k, 3] += (lever[k] * t1[k, d]) ** 2 * ang
+            out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
+
+
+@cuda.jit
+def _block_dot_kernel(a, b, partial):
+    """partial[block] = sum of a[i] b[i] over the block's slice, by a fixed tree in shared memory."""
+    cache = cuda.shared.array(THREADS, dtype=np.float64)
+    i = cuda.grid(1)
+    t = cuda.threadIdx.x
+    cache[t] = a[i] * b[i] if i < a.shape[0] else 0.0
+    cuda.syncthreads()
+    half = THREADS // 2
+    while half > 0:
+        if t < half:
+            cache[t] += cache[t + half]
+        cuda.syncthreads()
+        half //= 2
+    if t == 0:
+        partial[cuda.blockIdx.x] = cache[0]
+
+
+def dot(a, b) -> float:
+    """a . b of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
+    block order, so the result is the same every run."""
+    blocks = _blocks(a.shape[0])
+    partial = cuda.device_array(blocks, dtype=np.float64)
+    _block_dot_kernel[blocks, THREADS](a, b, partial)
+    return float(np.sum(partial.copy_to_host()))
+
+
+class CudaContactOperator:
+    """B of m contacts among n bodies on the GPU, its frames copied there once (the contacts of
+    :class:`colsim.engine.operator.ContactOperator`: i, j, frames, radii, lever)."""
+
+    def __init__(self, contacts, n_bodies: int):
+        self.n = int(n_bodies)
+        i = np.ascontiguousarray(contacts.i, dtype=np.int64)
+        j = np.ascontiguousarray(contacts.j, dtype=np.int64)
+        start, entry = body_contacts(i, j, self.n)
+        self.m = len(i)
+        host = {"i": i, "j": j, "start": start, "entry": entry,
+                **{name: np.ascontiguousarray(getattr(contacts, attribute), dtype=float) for name, attribute in (
+                    ("normal", "normal"), ("tangent1", "tangent1"), ("tangent2", "tangent2"),
+                    ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "rolling_radius"))}}
+        self.device = {name: cuda.to_device(array) for name, array in host.items()}
+        self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
+
+    def _frames(self):
+        d = self.device
+        return (d["i"], d["j"], d["normal"], d["tangent1"], d["tangent2"], d["radius_i"], d["radius_j"], d["lever"])
+
+    def apply(self, u) -> np.ndarray:
+        """(5m,) B u for u (6n,)."""
+        out = cuda.device_array(5 * self.m, dtype=np.float64)
+        ones = cuda.to_device(np.ones(6 * self.n))
+        if self.m:
+            _gradient_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(u, dtype=float)), ones,
+                                                      cuda.to_device(np.ones(5 * self.m)), *self._frames(),
+                                                      cuda.to_device(np.zeros(5 * self.m)), out)
+        return out.copy_to_host()
+
+    def transpose(self, z, scaling=None) -> np.ndarray:
+        """(6n,) B' S z for z (5m,) (S = diag(scaling), identity if None)."""
+        d = self.device
+        s = np.ones(5 * self.m) if scaling is None else np.ascontiguousarray(scaling, dtype=float)
+        out = cuda.device_array(6 * self.n, dtype=np.float64)
+        if self.m:
+            _wrench_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(z, dtype=float)),
+                                                    cuda.to_device(s), d["normal"], d["tangent1"], d["tangent2"],
+                                                    d["radius_i"], d["radius_j"], d["lever"], self.work)
+        _transpose_kernel[_blocks(self.n), THREADS](self.work, d["start"], d["entry"], out)
+        return out.copy_to_host()
+
+    def diagonal(self, inv_mass) -> np.ndarray:
+        """(m, 5) the diagonal of B Mbar^-1 B' (inv_mass: (6n,) the diagonal of Mbar^-1)."""
+        out = cuda.device_array((max(self.m, 1), 5), dtype=np.float64)
+        if self.m:
+            _diagonal_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(inv_mass, dtype=float)),
+                                                      *self._frames(), out)
+        return out.copy_to_host()[: self.m]

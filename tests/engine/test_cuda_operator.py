@@ -1,0 +1,57 @@
+"""The contact operator's CUDA kernels (colsim.engine.cuda_operator, issue 46): B u, B' S z,
+diag(B Mbar^-1 B') and the dot product equal the CPU kernels' (colsim.engine.operator) on a pile with
+particle, floor, cylinder and fixed-sphere contacts. They run on numba's CUDA simulator here
+(conftest sets NUMBA_ENABLE_CUDASIM=1 unless told otherwise), on a GPU where there is one.
+
+Bound 1e-14 relative: the same arithmetic in the same order, each body's sums in contact order on
+both; only a fused multiply-add that one compiler makes and the other does not can change a last bit."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from colsim.engine.operator import ContactOperator
+from colsim.engine.state import FixedSpheres, Walls
+from solver_cases import COLLAPSE, collapse_program
+
+cuda_operator = pytest.importorskip("colsim.engine.cuda_operator", reason="numba.cuda is not importable")
+
+
+@pytest.fixture(scope="module")
+def contacts(solver_pile):
+    fixed = FixedSpheres(np.array([[0.0, 0.0, -0.05], [0.5, 0.0, -0.05]]), np.array([0.2, 0.2]))
+    settings = replace(COLLAPSE, walls=Walls(floor=True, cylinder_radius=1.2, fixed=fixed))
+    program, found = collapse_program(solver_pile, settings)
+    assert {0, 1, 2} <= set(found.family.tolist()) and np.any(found.j <= -2)
+    return solver_pile.n, found, program
+
+
+def test_the_kernels_equal_the_cpu_operator(contacts):
+    n, found, program = contacts
+    cpu, gpu = ContactOperator(found, n), cuda_operator.CudaContactOperator(found, n)
+    rng = np.random.default_rng(46)
+    u, z, s = rng.standard_normal(6 * n), rng.standard_normal(5 * found.m), rng.uniform(0.5, 2.0, 5 * found.m)
+    for ours, theirs in ((gpu.apply(u), cpu.apply(u)), (gpu.transpose(z, s), cpu.transpose(z, s)),
+                         (gpu.transpose(z), cpu.transpose(z)),
+                         (gpu.diagonal(1.0 / program.mass), cpu.diagonal(1.0 / program.mass))):
+        np.testing.assert_allclose(ours, theirs, rtol=1e-14, atol=1e-14 * np.abs(theirs).max())
+
+
+def test_the_dot_product_sums_in_a_fixed_order(contacts):
+    """Over several blocks (1,000 values, blocks of 128): numpy's dot to rounding, and the same bits
+    on every call."""
+    rng = np.random.default_rng(7)
+    a, b = rng.standard_normal(1000), rng.standard_normal(1000)
+    first = cuda_operator.dot(a, b)
+    assert first == pytest.approx(float(np.dot(a, b)), rel=1e-13)
+    assert all(cuda_operator.dot(a, b) == first for _ in range(3))
+
+
+def test_no_contacts_give_zero_forces():
+    from colsim.engine.contacts import Contacts
+
+    empty = Contacts(**{name: np.zeros((0, 3)) if name in ("normal", "tangent1", "tangent2") else np.zeros(0)
+                        for name in Contacts.__dataclass_fields__})
+    gpu = cuda_operator.CudaContactOperator(empty, 4)
+    np.testing.assert_array_equal(gpu.transpose(np.zeros(0)), np.zeros(24))
+    assert gpu.apply(np.ones(24)).shape == (0,) and gpu.diagonal(np.ones(24)).shape == (0, 5)
