@@ -128,7 +128,7 @@ def test_the_rule_catches_an_upward_import(tmp_path, monkeypatch):
     "import colsim.cli; colsim.cli.build_parser().parse_args(['collapse', '--input', 'c.nc', '--output', 'o.nc'])",
     "import colsim.solvers.defaults, colsim.stages.pack_defaults",
     # what the workflow's common.smk imports to plan a study (issue 47.6: a dry run loads no numba)
-    "import colsim.study.figure_names, colsim.study.workflow.commands, colsim.study.workflow.report, "
+    "import colsim.study.figure_names, colsim.study.workflow.command_lines, colsim.study.workflow.report, "
     "colsim.study.workflow.checks, colsim.study.workflow.plan, colsim.stages.pour_geometry",
 ])
 def test_files_and_the_command_line_load_no_numerics(statement):

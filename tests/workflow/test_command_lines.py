@@ -1,9 +1,9 @@
-"""colsim.study.workflow.commands: a run's command-line options and cluster resources, from its settings."""
+"""colsim.study.workflow.command_lines: a run's command-line options and cluster resources, from its settings."""
 from __future__ import annotations
 
 import pytest
 
-from colsim.study.workflow.commands import (PACK_PRIORITY, PACK_REFERENCE_S, PACK_REFERENCE_SPHERES,
+from colsim.study.workflow.command_lines import (PACK_PRIORITY, PACK_REFERENCE_S, PACK_REFERENCE_SPHERES,
                                             SETTINGS_PRIORITY, collapse_options, collapse_priority,
                                             collapse_runtime, numbers, pack_priority, pack_resources, spheres_of)
 from test_study_plan import study_config

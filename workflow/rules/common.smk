@@ -1,7 +1,7 @@
 # The workflow's wiring: check the configuration, then name the study's files. The logic is plain
 # Python in colsim.study.workflow (docs/architecture.md, "The workflow"): checks.py (the
 # configuration's checks), plan.py (folders, keys and settings of packings, columns and runs),
-# commands.py (command-line values and cluster resources), report.py (the study's files for the
+# command_lines.py (command-line values and cluster resources), report.py (the study's files for the
 # report). Here only what needs Snakemake: its validation, its errors, the rules' wildcards.
 import functools
 
@@ -9,11 +9,11 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from colsim.study.figure_names import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
-from colsim.study.workflow import commands
+from colsim.study.workflow import command_lines
 from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
                                           load_schema)
-from colsim.study.workflow.commands import collapse_options, numbers
+from colsim.study.workflow.command_lines import collapse_options, numbers
 from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
                                         StudyPlan, UnknownFolder, benchmarked, fmt, logged, write_settings)
 
@@ -74,33 +74,33 @@ DIAMETERS = (config["diameter_min"], config["diameter_max"])
 
 def collapse_runtime(wildcards):
     """A collapse's time limit on a cluster (minutes), from its run's settings and its column's
-    size (commands.py)."""
-    spheres = commands.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
-    return commands.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
+    size (command_lines.py)."""
+    spheres = command_lines.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
+    return command_lines.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
 
 
 def pack_spheres(wildcards):
-    """About how many spheres a packing's pour holds (commands.py)."""
+    """About how many spheres a packing's pour holds (command_lines.py)."""
     packing = packing_of(wildcards)
-    return commands.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+    return command_lines.spheres_of(packing["r0"], packing["height"], DIAMETERS)
 
 
 def pack_resource(name):
-    """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (commands.py)."""
+    """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (command_lines.py)."""
     def resource(wildcards):
-        return commands.pack_resources(pack_spheres(wildcards))[name]
+        return command_lines.pack_resources(pack_spheres(wildcards))[name]
     return resource
 
 
 def pack_priority(wildcards):
-    """A pour's scheduling priority, from its size (commands.py): the largest first."""
-    return commands.pack_priority(pack_spheres(wildcards))
+    """A pour's scheduling priority, from its size (command_lines.py): the largest first."""
+    return command_lines.pack_priority(pack_spheres(wildcards))
 
 
 def collapse_priority(wildcards):
-    """A collapse's scheduling priority, from its column's a and its run's steps (commands.py)."""
+    """A collapse's scheduling priority, from its column's a and its run's steps (command_lines.py)."""
     run = run_of(wildcards)
-    return commands.collapse_priority(column_of(wildcards), run, PLAN.length)
+    return command_lines.collapse_priority(column_of(wildcards), run, PLAN.length)
 
 
 def report_description():

@@ -9,7 +9,7 @@
 rule packing_settings:
     output:
         f"{PACKING_DIR}/settings.yaml",
-    priority: commands.SETTINGS_PRIORITY
+    priority: command_lines.SETTINGS_PRIORITY
     params:
         settings=packing_of,
     run:
@@ -19,7 +19,7 @@ rule packing_settings:
 rule run_settings:
     output:
         f"{RUN_DIR}/settings.yaml",
-    priority: commands.SETTINGS_PRIORITY
+    priority: command_lines.SETTINGS_PRIORITY
     params:
         settings=run_of,
     run:
@@ -73,7 +73,7 @@ rule trim:
         f"{PACKING_DIR}/packing.nc",
     output:
         COLUMN,
-    priority: commands.PACK_PRIORITY
+    priority: command_lines.PACK_PRIORITY
     params:
         a=lambda wildcards: fmt(column_of(wildcards)),
     log:
