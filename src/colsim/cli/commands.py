@@ -290,16 +290,9 @@ def calibrate(args):
     runs = runs_from_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     result = run_calibration(runs, replicates=args.replicates, tolerance=args.fit_tolerance)
     result.attrs.update(io.global_attributes("mu-r-calibration", "colsim mu_r calibration", _settings(args)))
-    text = calibration_markdown(result)
-    log.info("calibration:\n%s", text)
-    writers = {args.output: lambda tmp: io.write_netcdf(result, tmp)}
-    if args.markdown:
-        writers[args.markdown] = _text_writer(text)
-    if args.figure:
-        from ..study.calibration_plot import calibration_figure
+    from ..study.calibration_plot import calibration_figure
 
-        writers[args.figure] = lambda tmp: calibration_figure(result, tmp)
-    io.write_all(writers)
+    _write_table_and_figure(args, "calibration", result, calibration_markdown(result), calibration_figure)
 
 
 def compare_laws(args):
@@ -316,15 +309,20 @@ def compare_laws(args):
     comparison = friction_law_comparison(summaries)
     comparison.attrs.update(io.global_attributes("friction-law-comparison", "colsim friction law comparison",
                                                  _settings(args)))
-    text = friction_law_markdown(comparison)
-    log.info("friction laws:\n%s", text)
-    writers = {args.output: lambda tmp: io.write_netcdf(comparison, tmp)}
+    from ..study.plots import friction_law_figure
+
+    _write_table_and_figure(args, "friction laws", comparison, friction_law_markdown(comparison), friction_law_figure)
+
+
+def _write_table_and_figure(args, what: str, dataset, text: str, figure) -> None:
+    """Log `text` and write `dataset` to --output, `text` to --markdown and figure(dataset, path) to
+    --figure where given, all or none (io.write_all)."""
+    log.info("%s:\n%s", what, text)
+    writers = {args.output: lambda tmp: io.write_netcdf(dataset, tmp)}
     if args.markdown:
         writers[args.markdown] = _text_writer(text)
     if args.figure:
-        from ..study.plots import friction_law_figure
-
-        writers[args.figure] = lambda tmp: friction_law_figure(comparison, tmp)
+        writers[args.figure] = lambda tmp: figure(dataset, tmp)
     io.write_all(writers)
 
 
