@@ -26,6 +26,7 @@ from pathlib import Path
 
 from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, FrictionLaw
 from ..solvers import defaults
+from ..stages import collapse_defaults
 from ..stages.pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT
 
 log = logging.getLogger("colsim")
@@ -197,20 +198,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lever L of the rolling moment L r between two spheres: paper (its Eqs. 6 and 9: "
                         "2 R_i R_j/(R_i + R_j), each radius when equal) or effective (R_eff = R_i R_j/(R_i + R_j), "
                         "the common DEM convention, half of it); R_i at the floor either way (default: %(default)s)")
-    p.add_argument("--duration", type=_positive, default=4.0, help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
-    p.add_argument("--steps", type=_positive_int, default=1000,
+    p.add_argument("--duration", type=_positive, default=collapse_defaults.DURATION,
+                   help="end time t / sqrt(h0/g), dimensionless (default: %(default)s)")
+    p.add_argument("--steps", type=_positive_int, default=collapse_defaults.STEPS,
                    help="number of equal steps (default: %(default)s, converged; the paper's is 100)")
     p.add_argument("--max-duration", type=_positive, default=None,
                    help="go on past --duration at the same dt until the deposit is at rest, up to this "
                         "t / sqrt(h0/g) (default: stop at --duration)")
-    p.add_argument("--rest-window", type=_positive, default=1.0,
+    p.add_argument("--rest-window", type=_positive, default=collapse_defaults.REST_WINDOW,
                    help="at rest: h_inf and r_inf steady over this t / sqrt(h0/g) (default: %(default)s)")
-    p.add_argument("--rest-tolerance", type=_positive, default=0.1,
+    p.add_argument("--rest-tolerance", type=_positive, default=collapse_defaults.REST_TOLERANCE,
                    help="at rest: h_inf and r_inf moved less than this many mean diameters (default: %(default)s)")
-    p.add_argument("--rest-energy", type=_positive, default=1e-2,
+    p.add_argument("--rest-energy", type=_positive, default=collapse_defaults.REST_ENERGY,
                    help="at rest: kinetic energy below this times its peak (default: %(default)s)")
-    p.add_argument("--frame-every", type=_positive_int, default=25, help="keep a frame every k steps (default: %(default)s)")
-    p.add_argument("--checkpoint-every", type=_positive_int, default=100, help="checkpoint every k steps (default: %(default)s)")
+    p.add_argument("--frame-every", type=_positive_int, default=collapse_defaults.FRAME_EVERY,
+                   help="keep a frame every k steps (default: %(default)s)")
+    p.add_argument("--checkpoint-every", type=_positive_int, default=collapse_defaults.CHECKPOINT_EVERY,
+                   help="checkpoint every k steps (default: %(default)s)")
     p.add_argument("--checkpoint", default=None, help="checkpoint file (default: OUTPUT.checkpoint)")
     _solver_arguments(p)
     _length_floor_argument(p, _floor_under_auto(defaults.AUTO_APGD_TOLERANCE, "the tolerance"))

@@ -30,6 +30,8 @@ from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_checkpoint, save_checkpoint, sittings_commits
 from .analyse import measure_deposit
+from .collapse_defaults import (CHECKPOINT_EVERY, DURATION, FRAME_EVERY, REST_ENERGY, REST_TOLERANCE,
+                                REST_WINDOW, STEPS)
 from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
@@ -44,15 +46,15 @@ class CollapseSettings:
     mu_r: float = 0.12
     floor_mu: float | None = None       # None: same as mu
     floor_mu_r: float | None = None     # None: same as mu_r
-    duration: float = 4.0
-    n_steps: int = 1000
-    frame_every: int = 25
+    duration: float = DURATION
+    n_steps: int = STEPS
+    frame_every: int = FRAME_EVERY
     gravity: float = 9.81
-    checkpoint_every: int = 100
+    checkpoint_every: int = CHECKPOINT_EVERY
     max_duration: float | None = None   # None: stop at `duration` (the paper)
-    rest_window: float = 1.0             # t / sqrt(h0/g)
-    rest_tolerance: float = 0.1          # mean diameters
-    rest_energy: float = 1e-2            # of the peak kinetic energy
+    rest_window: float = REST_WINDOW     # t / sqrt(h0/g)
+    rest_tolerance: float = REST_TOLERANCE   # mean diameters
+    rest_energy: float = REST_ENERGY     # of the peak kinetic energy
     friction_law: str = "associated"     # or "coulomb" (colsim.engine.friction)
     friction_tolerance: float = FrictionLaw().tolerance     # coulomb's fixed point, mean diameters
     rolling_lever: str = "paper"         # or "effective" (R_eff; colsim.engine.state.rolling_lever)

@@ -12,6 +12,7 @@ import xarray as xr
 
 from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
 from ..solvers.defaults import SOLVERS
+from ..stages import collapse_defaults
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
@@ -197,9 +198,8 @@ def means_per_size(study) -> xr.Dataset:
     return means.set_coords([n for n in ("r0", "aspect_ratio", "r0_over_mean_diameter", "duration") if n in means])
 
 
-REST_ENERGY = 1e-2
-"""The collapse's default rest test on the kinetic energy (colsim.stages.collapse.CollapseSettings.rest_energy):
-at rest only below this share of its peak."""
+REST_ENERGY = collapse_defaults.REST_ENERGY
+"""The collapse's default rest test on the kinetic energy, for runs whose settings do not say it."""
 MAIN_MASS_SHARE = 0.5
 """A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:
 its h_inf and r_inf do not describe the deposit."""
