@@ -32,7 +32,7 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost")
+         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -58,6 +58,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "cold_step": c,
             "gauss_seidel": [*c, "--steps", "2", "--n-steps", "100", "--variants", "down:1"],
             "study_cost": _study_results(),
+            "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -66,7 +67,18 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "trajectory": c, "tolerance": [*c, "--record", str(scratch / "tolerance.jsonl")], "cold_step": c,
         "gauss_seidel": [*c, "--steps", "2", "50", "150", "400"],
         "study_cost": _study_results(),
+        "cuda_operator": _cuda([]),
     }[name]
+
+
+def _cuda(arguments: list[str]) -> list[str] | None:
+    """cuda_operator's arguments where a GPU (or numba's CUDA simulator) answers, else None (skipped)."""
+    try:
+        from numba import cuda
+
+        return arguments if cuda.is_available() else None
+    except ImportError:
+        return None
 
 
 def _study_results() -> list[str] | None:
@@ -103,7 +115,9 @@ def run_all(quick: bool) -> int:
                 column = collapse.column_file(*COLUMN["quick" if quick else "full"])
             argv = arguments_for_all(name, quick, column, Path(scratch))
             if argv is None:
-                print(f"\n## {name}: skipped (no study's runs under results/)", flush=True)
+                why = {"study_cost": "no study's runs under results/",
+                       "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator"}[name]
+                print(f"\n## {name}: skipped ({why})", flush=True)
                 continue
             print(f"\n## {name} {' '.join(argv)}", flush=True)
             start = time.perf_counter()

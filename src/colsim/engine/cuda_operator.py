@@ -176,26 +176,37 @@ class CudaContactOperator:
         d = self.device
         return (d["i"], d["j"], d["normal"], d["tangent1"], d["tangent2"], d["radius_i"], d["radius_j"], d["lever"])
 
-    def apply(self, u) -> np.ndarray:
-        """(5m,) B u for u (6n,)."""
-        out = cuda.device_array(5 * self.m, dtype=np.float64)
-        ones = cuda.to_device(np.ones(6 * self.n))
+    def apply_on_device(self, u, out, inv_mass=None, s=None, c=None) -> None:
+        """out (5m,) = S B Mbar^-1 u + c, every array on the device (inv_mass, s: ones, c: zeros if None)."""
+        if not self.m:
+            return
+        inv_mass = self._ones(6 * self.n) if inv_mass is None else inv_mass
+        s = self._ones(5 * self.m) if s is None else s
+        c = cuda.to_device(np.zeros(5 * self.m)) if c is None else c
+        _gradient_kernel[_blocks(self.m), THREADS](u, inv_mass, s, *self._frames(), c, out)
+
+    def transpose_on_device(self, z, s, out) -> None:
+        """out (6n,) = B' S z, every array on the device."""
+        d = self.device
         if self.m:
-            _gradient_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(u, dtype=float)), ones,
-                                                      cuda.to_device(np.ones(5 * self.m)), *self._frames(),
-                                                      cuda.to_device(np.zeros(5 * self.m)), out)
+            _wrench_kernel[_blocks(self.m), THREADS](z, s, d["normal"], d["tangent1"], d["tangent2"],
+                                                    d["radius_i"], d["radius_j"], d["lever"], self.work)
+        _transpose_kernel[_blocks(self.n), THREADS](self.work, d["start"], d["entry"], out)
+
+    def _ones(self, size: int):
+        return cuda.to_device(np.ones(size))
+
+    def apply(self, u) -> np.ndarray:
+        """(5m,) B u for u (6n,), from and to the host."""
+        out = cuda.device_array(5 * self.m, dtype=np.float64)
+        self.apply_on_device(cuda.to_device(np.ascontiguousarray(u, dtype=float)), out)
         return out.copy_to_host()
 
     def transpose(self, z, scaling=None) -> np.ndarray:
-        """(6n,) B' S z for z (5m,) (S = diag(scaling), identity if None)."""
-        d = self.device
+        """(6n,) B' S z for z (5m,) (S = diag(scaling), identity if None), from and to the host."""
         s = np.ones(5 * self.m) if scaling is None else np.ascontiguousarray(scaling, dtype=float)
         out = cuda.device_array(6 * self.n, dtype=np.float64)
-        if self.m:
-            _wrench_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(z, dtype=float)),
-                                                    cuda.to_device(s), d["normal"], d["tangent1"], d["tangent2"],
-                                                    d["radius_i"], d["radius_j"], d["lever"], self.work)
-        _transpose_kernel[_blocks(self.n), THREADS](self.work, d["start"], d["entry"], out)
+        self.transpose_on_device(cuda.to_device(np.ascontiguousarray(z, dtype=float)), cuda.to_device(s), out)
         return out.copy_to_host()
 
     def diagonal(self, inv_mass) -> np.ndarray:
