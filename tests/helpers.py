@@ -93,7 +93,7 @@ CF_CHECKER_NAME_HEURISTICS = ("Coordinate variable 'time' should have standard_n
 
 def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
     """What the IOOS compliance checker (an independent CF checker, offline) finds wrong with the
-    netCDF file `path` at high and medium priority (its errors and warnings), less
+    netCDF file `path` at any priority (`--criteria strict`: errors, warnings and suggestions), less
     :data:`CF_CHECKER_NAME_HEURISTICS`; a check that raised is a failure too."""
     from compliance_checker.base import BaseCheck
     from compliance_checker.suite import CheckSuite
@@ -110,7 +110,7 @@ def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
     failures = [f"{name} raised {error}" for name, error in raised.items()]
     for result in results:
         passed = result.value[0] == result.value[1] if isinstance(result.value, tuple) else bool(result.value)
-        if passed or result.weight < BaseCheck.MEDIUM:
+        if passed or result.weight < BaseCheck.LOW:   # --criteria strict: low priority counts too
             continue
         messages = [m for m in result.msgs if m not in CF_CHECKER_NAME_HEURISTICS]
         if messages or not result.msgs:
