@@ -123,7 +123,7 @@ def gauss_seidel(program, warm_start, height, order: str, inner: int, apgd, max_
     while done < max_sweeps:
         for _ in range(5):
             for p in passes:
-                sweep(p, z, v, s, run_.a, run_.b, ci, cj, nrm, t1, t2, ri, rj, lever, run_.c, run_.inv_mass, inner)
+                sweep(p, z, v, s, run_.mu_s, run_.mu_r_s, ci, cj, nrm, t1, t2, ri, rj, lever, run_.c, run_.inv_mass, inner)
             done += 1
         run_.x, run_.hx = z, run_.apply_T(z)
         res = run_.residuals(program.mu, program.mu_r, scale, floor)

@@ -19,8 +19,8 @@ contacts' frames and radii (12 numbers a contact) instead of the matrix (42 non-
 
 Preconditioning: each contact's normal, sliding and rolling rows are scaled separately, lam = S z
 with S = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(W)^-1/2 (averaged over the two rows
-of a pair). The scaled cone is again a coupled cone with mu' = mu s_n/s_t, mu_r' = mu_r s_n/s_r, so
-the projection stays exact.
+of a pair). The scaled cone is again a coupled cone with mu' = mu s_n/s_t, mu_r' = mu_r s_n/s_r
+(mu_s and mu_r_s in the code), so the projection stays exact.
 
 Stopping (checked every `check_every` iterations, at the current iterate lam, in one compiled
 sweep): the relative primal infeasibility and complementarity of
@@ -69,13 +69,13 @@ log = logging.getLogger(__name__)
 # The iterations: fused numba kernels, or the same steps in numpy
 # --------------------------------------------------------------------------------------------
 
-def _project_step(x, x_prev, beta, g, x_new, step, a, b, blocks):
+def _project_step(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, blocks):
     """x_new = Proj_K(y - step g) at the extrapolated point y = x + beta (x - x_prev), formed here
     rather than stored (one pass less over the contacts' arrays an iteration); returns
     (||x_new - y||^2, g . (x_new - x)), each summed over `blocks` fixed ranges of contacts (one
     thread each) and then in order: one block gives the plain sum, and the result depends on the
     block count, never on the threads' timing."""
-    m = len(a)
+    m = len(mu_s)
     dd_part = np.zeros(blocks)
     uphill_part = np.zeros(blocks)
     for block in prange(blocks):
@@ -90,7 +90,7 @@ def _project_step(x, x_prev, beta, g, x_new, step, a, b, blocks):
             y4 = x[o + 4] + beta * (x[o + 4] - x_prev[o + 4])
             pp, q1, q2, r1, r2 = project_point(
                 y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
-                y3 - step * g[o + 3], y4 - step * g[o + 4], a[k], b[k])
+                y3 - step * g[o + 3], y4 - step * g[o + 4], mu_s[k], mu_r_s[k])
             x_new[o] = pp
             x_new[o + 1] = q1
             x_new[o + 2] = q2
@@ -126,7 +126,7 @@ def _weighted_change(h_new, hy, inv_mass, blocks):
     return total
 
 
-def _iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, a, b, inv_mass,
+def _iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s, inv_mass,
              lip_decay, blocks):
     """n_iter APGD iterations; returns (x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks,
     restarts): the arrays trade places (no copies), hy and g are updated in place.
@@ -147,7 +147,7 @@ def _iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geome
     restarts = 0
     for _ in range(n_iter):
         while True:
-            dd, uphill = _project_step(x, x_prev, beta, g, x_new, 1.0 / lip, a, b, blocks)
+            dd, uphill = _project_step(x, x_prev, beta, g, x_new, 1.0 / lip, mu_s, mu_r_s, blocks)
             _apply_transpose(x_new, s, nrm, t1, t2, ri, rj, reff, start, entry, work, h_new)
             # dd == 0: the step does not move y (every contact already projected onto itself), and
             # the test would compare two roundings of zero: accept, or lip would double forever
@@ -183,8 +183,8 @@ class _Iteration:
     iterations: compiled and matrix-free when given the program's operator (B from the contacts'
     frames, :class:`colsim.engine.operator.ContactOperator`), else numpy with G and T."""
 
-    def __init__(self, G, T, c, a, b, inv_mass, x, scaling, lip_decay=1.0, operator: ContactOperator | None = None):
-        self.G, self.T, self.c, self.a, self.b, self.inv_mass = G, T, c, a, b, inv_mass
+    def __init__(self, G, T, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay=1.0, operator: ContactOperator | None = None):
+        self.G, self.T, self.c, self.mu_s, self.mu_r_s, self.inv_mass = G, T, c, mu_s, mu_r_s, inv_mass
         self.scaling = scaling  # (m, 5) S: lam = S z
         self.geometry = None if operator is None else (
             np.ascontiguousarray(scaling.ravel()), *operator.frames(), operator.start, operator.entry,
@@ -240,7 +240,7 @@ class _Iteration:
         if self.geometry is not None:
             (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, bt,
              rs) = _iterate_compiled(n, self.x, self.x_prev, self.beta, self.hx, self.hy, self.g, self.x_new,
-                                     self.h_new, self.theta, self.lip, self.geometry, self.c, self.a, self.b,
+                                     self.h_new, self.theta, self.lip, self.geometry, self.c, self.mu_s, self.mu_r_s,
                                      self.inv_mass, self.lip_decay, threads())
         else:
             theta, lip, bt, rs = self._iterate_numpy(n)
@@ -249,14 +249,14 @@ class _Iteration:
         self.restarts += rs
 
     def _iterate_numpy(self, n):
-        m = len(self.a)
+        m = len(self.mu_s)
         theta, lip, bt, rs = self.theta, self.lip, 0, 0
         x, hx, hy, g = self.x, self.hx, self.hy, self.g
         x_prev, beta = self.x_prev, self.beta
         y = x + beta * (x - x_prev)
         for _ in range(n):
             while True:
-                x_new = project_coupled_cone((y - g / lip).reshape(m, 5), self.a, self.b).ravel()
+                x_new = project_coupled_cone((y - g / lip).reshape(m, 5), self.mu_s, self.mu_r_s).ravel()
                 h_new = self.T @ x_new
                 d = x_new - y
                 dh = h_new - hy
@@ -356,7 +356,7 @@ class ApgdSolver(Solver):
             s = scales_of_diagonal(operator.diagonal(inv_mass))
         else:
             s = row_scaling(B, inv_mass)
-        a, b = scaled_coefficients(program, s)
+        mu_s, mu_r_s = scaled_coefficients(program, s)
         # In z (lam = S z): gradient G h + c with h = T z = B' S z, G = S B Mbar^-1, and
         # c = S (B u_free + g e_n); the descent test needs only h (f is quadratic). The compiled
         # kernels apply T and G from the contacts' frames; the numpy path forms them.
@@ -365,14 +365,14 @@ class ApgdSolver(Solver):
         c *= s.ravel()
         if warm_start is not None and np.shape(warm_start) == (m, ROWS_PER_CONTACT):
             project = project_compiled if operator is not None else project_coupled_cone
-            x = project(np.asarray(warm_start, dtype=float) / s, a, b).ravel()
+            x = project(np.asarray(warm_start, dtype=float) / s, mu_s, mu_r_s).ravel()
         else:
             x = np.zeros(5 * m)
         if operator is not None:
-            return _Iteration(None, None, c, a, b, inv_mass, x, s, self.lipschitz_decay, operator=operator)
+            return _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay, operator=operator)
         SB = sp.diags(s.ravel()) @ B
         G = (SB @ sp.diags(inv_mass)).tocsr()
-        return _Iteration(G, SB.T.tocsr(), c, a, b, inv_mass, x, s, self.lipschitz_decay)
+        return _Iteration(G, SB.T.tocsr(), c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay)
 
     def stopping_scales(self, program: ConeProgram) -> tuple[float, float, float]:
         """The stopping rule's scales for `program`: the residuals' length L (the free flight or
