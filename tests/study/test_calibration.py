@@ -59,6 +59,20 @@ def test_exact_runs_give_the_true_limits_and_mu_r():
     assert "| lube | both | 0.150" in calibration_markdown(result)
 
 
+def test_a_study_with_missing_runs_still_calibrates():
+    """A study part way (seeds missing in some cells, as when it was cut off): every cell with two
+    sizes is fitted, and the bootstrap resamples a cell's own seeds where the picked ones are missing;
+    exact data still give MU_TRUE to the grid's spacing."""
+    runs = synthetic_runs(np.random.default_rng(0), noise=0.0)
+    keep = ~(((runs.mu_r == 0.3) & (runs.r0 == 3.0) & (runs.seed != 2))    # r0 = 3: seed 2 alone,
+             | ((runs.mu_r == 0.3) & (runs.r0 == 4.0))                      # and no r0 = 4
+             | ((runs.mu_r == 0.06) & (runs.r0 == 4.0) & (runs.seed == 3)))
+    partial = Runs(*(getattr(runs, name)[keep] for name in Runs.__dataclass_fields__))
+    result = calibrate(partial, replicates=50)
+    assert abs(float(result.best_mu_r.sel(law="lube", measure="both")) - MU_TRUE) <= 0.24 / 400
+    assert np.isfinite(result.best_mu_r_low.values).all() and np.isfinite(result.misfit_high.values).all()
+
+
 def test_a_best_value_beyond_the_sweep_is_flagged():
     """Heights scaled down so that even mu_r = 0.3 leaves them short of the law: the best height
     mu_r is the sweep's end, 0.3, and flagged."""

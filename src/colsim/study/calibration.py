@@ -74,9 +74,11 @@ def runs_from_analyses(analyses) -> Runs:
     return Runs(*(np.array(column) for column in zip(*rows)))
 
 
-def _limits(runs: Runs, pick: dict | None = None) -> np.ndarray:
+def _limits(runs: Runs, pick: dict | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
     """(2, n_mu, n_a) limits of the height and the run-out per mu_r and a; pick {r0: seeds to use}
-    (a bootstrap's resample, repeats allowed), else every seed."""
+    (a bootstrap's resample, repeats allowed), else every seed. Where a (mu_r, a, r0) has runs but
+    none of the picked seeds (a study still running, a seed missing), its own seeds are resampled
+    with `rng` instead."""
     mu_rs, ratios, radii = runs.axes()
     out = np.full((2, len(mu_rs), len(ratios)), np.nan)
     for i, m in enumerate(mu_rs):
@@ -85,9 +87,10 @@ def _limits(runs: Runs, pick: dict | None = None) -> np.ndarray:
             rows = []
             for r0 in radii:
                 here = np.flatnonzero(cell & (runs.r0 == r0))
-                if pick is not None:
+                if pick is not None and len(here):
                     by_seed = {int(runs.seed[k]): k for k in here}
-                    here = [by_seed[s] for s in pick[r0] if s in by_seed]
+                    picked = [by_seed[s] for s in pick[r0] if s in by_seed]
+                    here = picked or list(rng.choice(here, size=len(here)))
                 rows.extend(here)
             rows = np.array(rows, dtype=int)
             if len(np.unique(runs.r0[rows])) < 2:
@@ -150,7 +153,7 @@ def calibrate(runs: Runs, replicates: int = 1000, level: float = 0.95, seed: int
         raise ValueError("every (mu_r, a) needs runs at two r0 or more for its limit")
     seeds = {r0: np.unique(runs.seed[runs.r0 == r0]) for r0 in radii}
     rng = np.random.default_rng(seed)
-    boot = np.array([_limits(runs, {r0: rng.choice(s, size=len(s)) for r0, s in seeds.items()})
+    boot = np.array([_limits(runs, {r0: rng.choice(s, size=len(s)) for r0, s in seeds.items()}, rng)
                      for _ in range(replicates)])                     # (B, 2, n_mu, n_a)
     tail = 100 * (1 - level) / 2
     smallest = min(len(s) for s in seeds.values())
