@@ -45,8 +45,10 @@ def calibration_figure(result, path: Path) -> Path:
                         yerr=[value - part[f"{name}_low"].values, part[f"{name}_high"].values - value],
                         fmt="o", ms=4, capsize=2, color=plt.cm.viridis(n / max(len(mu_r) - 1, 1)),
                         label=f"mu_r = {m:g}")
-        for law, style in (("lube", "k-"), ("lajeunesse", "r--")):
-            ax.plot(fine, LAWS[law][index](fine), style, lw=1, label=LAW_NAMES[law])
+        for law, style, marker in (("lube", "k-", "s"), ("lajeunesse", "r--", "^")):
+            line, = ax.plot(fine, LAWS[law][index](fine), style, lw=1)
+            ax.plot(ratios, LAWS[law][index](ratios), marker, mfc="none", color=line.get_color(), ls=style[1:],
+                    lw=1, label=LAW_NAMES[law])   # the markers show the law where the sweep has one a
         ax.set_xlabel("aspect ratio a")
         ax.set_ylabel(f"{label}, large-column limit")
         ax.grid(alpha=0.3)
