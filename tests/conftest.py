@@ -25,10 +25,10 @@ import pytest
 
 from colsim.engine.contacts import overlaps
 from colsim.solvers import ClarabelSolver
-from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
 from colsim.stages.pack import pack, starting_cloud
-from solver_cases import small_pile
+from solver_cases import COLLAPSE, collapse_program, small_pile
 from helpers import COLLAPSE_LAW, DT, G, PACKING_R0, max_speed
 
 CYLINDER_RADIUS = 1.5
@@ -105,3 +105,15 @@ def solver_pile() -> ParticleState:
     """The back-end tests' pile: about 90 spheres poured into a cylinder of radius 1.2
     (solver_cases.small_pile; a few seconds)."""
     return small_pile()
+
+
+@pytest.fixture(scope="session")
+def pile_with_every_contact(solver_pile):
+    """(state, contacts, program): the back-ends' pile in its cylinder, on two fixed spheres under the
+    floor's level, so that its contacts hold every kind (particle, floor, cylinder, fixed sphere);
+    the operator tests on the CPU and the GPU share it."""
+    fixed = FixedSpheres(np.array([[0.0, 0.0, -0.05], [0.5, 0.0, -0.05]]), np.array([0.2, 0.2]))
+    settings = replace(COLLAPSE, walls=Walls(floor=True, cylinder_radius=1.2, fixed=fixed))
+    program, found = collapse_program(solver_pile, settings)
+    assert {0, 1, 2} <= set(found.family.tolist()) and np.any(found.j <= -2)
+    return solver_pile, found, program

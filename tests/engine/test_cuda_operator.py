@@ -5,29 +5,17 @@ particle, floor, cylinder and fixed-sphere contacts. They run on numba's CUDA si
 
 Bound 1e-14 relative: the same arithmetic in the same order, each body's sums in contact order on
 both; only a fused multiply-add that one compiler makes and the other does not can change a last bit."""
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
 from colsim.engine.operator import ContactOperator
-from colsim.engine.state import FixedSpheres, Walls
-from solver_cases import COLLAPSE, collapse_program
 
 cuda_operator = pytest.importorskip("colsim.engine.cuda_operator", reason="numba.cuda is not importable")
 
 
-@pytest.fixture(scope="module")
-def contacts(solver_pile):
-    fixed = FixedSpheres(np.array([[0.0, 0.0, -0.05], [0.5, 0.0, -0.05]]), np.array([0.2, 0.2]))
-    settings = replace(COLLAPSE, walls=Walls(floor=True, cylinder_radius=1.2, fixed=fixed))
-    program, found = collapse_program(solver_pile, settings)
-    assert {0, 1, 2} <= set(found.family.tolist()) and np.any(found.j <= -2)
-    return solver_pile.n, found, program
-
-
-def test_the_kernels_equal_the_cpu_operator(contacts):
-    n, found, program = contacts
+def test_the_kernels_equal_the_cpu_operator(pile_with_every_contact):
+    state, found, program = pile_with_every_contact
+    n = state.n
     cpu, gpu = ContactOperator(found, n), cuda_operator.CudaContactOperator(found, n)
     rng = np.random.default_rng(46)
     u, z, s = rng.standard_normal(6 * n), rng.standard_normal(5 * found.m), rng.uniform(0.5, 2.0, 5 * found.m)
@@ -37,7 +25,7 @@ def test_the_kernels_equal_the_cpu_operator(contacts):
         np.testing.assert_allclose(ours, theirs, rtol=1e-14, atol=1e-14 * np.abs(theirs).max())
 
 
-def test_the_dot_product_sums_in_a_fixed_order(contacts):
+def test_the_dot_product_sums_in_a_fixed_order():
     """Over several blocks (1,000 values, blocks of 128): numpy's dot to rounding, and the same bits
     on every call."""
     rng = np.random.default_rng(7)

@@ -2,29 +2,16 @@
 contacts' frames equal the products with the assembled matrix, to rounding (1e-12 relative: the
 same sums in another order), on a pile with particle, floor, cylinder and fixed-sphere contacts;
 and a program solved by APGD never forms the matrix."""
-from dataclasses import replace
-
 import numpy as np
 import pytest
 
 from colsim.engine.cones import row_scaling, scales_of_diagonal
 from colsim.engine.operator import ContactOperator
 from colsim.engine.program import assemble, contact_jacobian
-from colsim.engine.state import FixedSpheres, Walls
 from colsim.solvers.apgd import ApgdSolver
-from solver_cases import COLLAPSE, collapse_program
+from solver_cases import COLLAPSE
 
 pytest.importorskip("numba")
-
-
-@pytest.fixture(scope="module")
-def pile_with_every_contact(solver_pile):
-    """The back-ends' pile in its cylinder, on two fixed spheres under the floor's level."""
-    fixed = FixedSpheres(np.array([[0.0, 0.0, -0.05], [0.5, 0.0, -0.05]]), np.array([0.2, 0.2]))
-    settings = replace(COLLAPSE, walls=Walls(floor=True, cylinder_radius=1.2, fixed=fixed))
-    program, found = collapse_program(solver_pile, settings)
-    assert {0, 1, 2} <= set(found.family.tolist()) and np.any(found.j <= -2)
-    return solver_pile, found, program
 
 
 def test_products_equal_the_matrix_s(pile_with_every_contact):

@@ -117,12 +117,9 @@ class _Version(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         from .. import __version__
-        from ..io.git import git_state
+        from ..io.netcdf import source_commit   # as every file names it (colsim_commit)
 
-        state = git_state(Path(__file__).resolve().parent)
-        commit = "not a git checkout" if state["commit"] is None else (
-            state["commit"][:12] + (" (modified)" if state["dirty"] else ""))
-        print(f"colsim {__version__}, commit {commit}")
+        print(f"colsim {__version__}, commit {source_commit()}")
         parser.exit()
 
 
