@@ -50,7 +50,8 @@ def check_attributes(attrs) -> None:
             continue
         value = np.asarray(attrs[name])
         if value.shape not in ((), (1,)) or value.dtype.kind not in "iuf":
-            raise FileProblem(f"attribute {name} is {str(attrs[name])[:60]!r}, not one number")
+            raise FileProblem(f"attribute {name} is {str(attrs[name])[:60]!r}, not one number: colsim reads one"
+                              " finite number")
         number = float(value.reshape(-1)[0])
         if not np.isfinite(number) or number < 0 or (positive and number == 0):
             raise FileProblem(f"attribute {name} is {number:g}, not a {'positive' if positive else 'non-negative'}"
@@ -59,7 +60,7 @@ def check_attributes(attrs) -> None:
         seed = np.asarray(attrs["seed"])
         number = float(seed.reshape(-1)[0]) if seed.size == 1 and seed.dtype.kind in "iuf" else np.nan
         if not (np.isfinite(number) and number == int(number) and 0 <= number < 2**32):
-            raise FileProblem(f"attribute seed is {str(attrs['seed'])[:60]!r}, not an integer in 0..2^32-1")
+            raise FileProblem(f"attribute seed {str(attrs['seed'])[:60]} is not an integer in 0..2^32-1")
     if "config" in attrs:
         try:
             config = json.loads(str(attrs["config"]))

@@ -11,9 +11,10 @@ import numpy as np
 import xarray as xr
 
 from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
+from ..io.checks import FileProblem, check_attributes
+from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 from ..solvers.defaults import SOLVERS
 from ..stages import collapse_defaults
-from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -94,22 +95,19 @@ BACKENDS = set(SOLVERS) | {"clarabel-fallback"}
 
 
 def run_key(analysis) -> tuple[float, float, int]:
-    """(aspect_ratio, mu_r, seed) of one analysis, checked: finite numbers and an integer seed in
-    0..2^32-1, and its fixed-vocabulary attributes from their vocabularies (else ValueError naming
-    the run)."""
-    def number(name, default=None):
-        value = analysis.attrs.get(name, default)
-        try:
-            value = float(np.asarray(value).item())
-        except (TypeError, ValueError):
-            value = float("nan")
-        if not np.isfinite(value):
-            raise ValueError(f"{_run_name(analysis)}: attribute {name} is {analysis.attrs.get(name)!r}, not a finite number")
-        return value
-
-    a, mu_r, seed = number("aspect_ratio"), number("mu_r"), number("seed", 0)
-    if seed != int(seed) or not 0 <= seed < 2**32:
-        raise ValueError(f"{_run_name(analysis)}: seed {analysis.attrs.get('seed')!r} is not an integer in 0..2^32-1")
+    """(aspect_ratio, mu_r, seed) of one analysis, checked: its numeric attributes and seed by
+    :func:`colsim.io.checks.check_attributes` (as every input file is), aspect_ratio and mu_r
+    present, and its fixed-vocabulary attributes from their vocabularies (else ValueError naming the
+    run)."""
+    try:
+        check_attributes(analysis.attrs)
+    except FileProblem as problem:
+        raise ValueError(f"{_run_name(analysis)}: {problem}") from None
+    for name in ("aspect_ratio", "mu_r"):
+        if name not in analysis.attrs:
+            raise ValueError(f"{_run_name(analysis)}: attribute {name} is missing, not a finite number")
+    a, mu_r = (float(np.asarray(analysis.attrs[name]).reshape(-1)[0]) for name in ("aspect_ratio", "mu_r"))
+    seed = int(np.asarray(analysis.attrs.get("seed", 0)).reshape(-1)[0])
     for name, allowed in VOCABULARY.items():
         if name in analysis.attrs and analysis.attrs[name] not in allowed:
             raise ValueError(f"{_run_name(analysis)}: {name} {str(analysis.attrs[name])[:80]!r} is not one of {', '.join(allowed)}")
@@ -121,7 +119,7 @@ def run_key(analysis) -> tuple[float, float, int]:
             isinstance(v, int) and v >= 0 for v in backends.values()):
         raise ValueError(f"{_run_name(analysis)}: solver_backends is not a count of steps by back-end "
                          f"({', '.join(sorted(BACKENDS))})")
-    return a, mu_r, int(seed)
+    return a, mu_r, seed
 
 
 def collect_analyses(analyses) -> xr.Dataset:
