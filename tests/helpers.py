@@ -3,6 +3,7 @@ workflow tests (test_workflow, test_slurm) a copy of the workflow, a snakemake r
 dry run plans and the names of the tiny study's files."""
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -72,14 +73,28 @@ RUN_PATH = re.compile(r"results/r0_(?P<r0>[^/]+)/seed_(?P<seed>\d+)/pack_(?P<pac
                       r"/a_(?P<a>[^/]+)/mu_r_(?P<mu_r>[^/]+)/run_(?P<run>[0-9a-f]{10})/collapse\.nc")
 
 
+SETTINGS_LINE = re.compile(r"printf '%s\\n' '(?P<text>\{.*\})' > (?P<path>\S+)\.tmp ")
+
+
+def planned_settings(result: subprocess.CompletedProcess) -> dict[str, dict]:
+    """{path: settings} of the settings.yaml files a dry run with -p would write (their text is
+    in the settings rules' command lines)."""
+    return {match.group("path"): json.loads(match.group("text"))
+            for match in map(SETTINGS_LINE.search, result.stdout.splitlines()) if match}
+
+
 def planned_collapses(result: subprocess.CompletedProcess) -> list[dict]:
     """The collapses of a dry run with -p: for each, the parts of its folder (r0, seed, packing, a,
-    mu_r, run: strings), its `path` and its `command` line."""
+    mu_r, run: strings), its `path`, its `command` line and the `settings` its settings.yaml will
+    hold (None where that file exists already)."""
+    settings = planned_settings(result)
     found = []
     for line in result.stdout.splitlines():
         if "colsim collapse" in line:
             match = RUN_PATH.search(line.split("--output", 1)[1])
-            found.append({**match.groupdict(), "path": match.group(0), "command": line})
+            folder = match.group(0).rsplit("/", 1)[0]
+            found.append({**match.groupdict(), "path": match.group(0), "command": line,
+                          "settings": settings.get(f"{folder}/settings.yaml")})
     return found
 
 

@@ -126,9 +126,9 @@ def test_the_rule_catches_an_upward_import(tmp_path, monkeypatch):
 @pytest.mark.parametrize("statement", [
     "import colsim.io, colsim.io.trajectory, colsim.io.steps, colsim.io.checkpoint, colsim.io.vtk",
     "import colsim.cli; colsim.cli.build_parser().parse_args(['collapse', '--input', 'c.nc', '--output', 'o.nc'])",
-    "import colsim.solvers.defaults, colsim.stages.pack_defaults",
+    "import colsim.solvers.defaults, colsim.stages.settings",
     # what the workflow's common.smk imports to plan a study (issue 47.6: a dry run loads no numba)
-    "import colsim.study.figure_names, colsim.study.workflow.command_lines, colsim.study.workflow.report, "
+    "import colsim.study.figure_names, colsim.study.workflow.job_resources, colsim.study.workflow.report, "
     "colsim.study.workflow.checks, colsim.study.workflow.plan, colsim.stages.pour_geometry",
 ])
 def test_files_and_the_command_line_load_no_numerics(statement):

@@ -1,11 +1,12 @@
 """The argument parser (colsim.cli.entry): its defaults and help come from the one place each
-default lives (colsim.solvers.defaults, colsim.stages.pack_defaults), and a bad value stops it
+default lives (colsim.solvers.defaults, colsim.stages.settings), and a bad value stops it
 with exit status 2 naming the option."""
 import pytest
 
 from colsim.cli import build_parser
+from colsim.cli.flags import stage_settings
 from colsim.solvers import defaults
-from colsim.stages import pack_defaults
+from colsim.stages.settings import PackSettings, SolverSettings
 
 COLLAPSE = ["collapse", "--input", "column.nc", "--output", "collapse.nc"]
 PACK = ["pack", "--height", "2", "--output", "pack.nc"]
@@ -19,7 +20,7 @@ def _help(parser, command: str) -> str:
 def test_solver_defaults_and_choices_are_the_defaults_module_s():
     parser = build_parser()
     for args in (COLLAPSE, PACK):
-        assert parser.parse_args(args).solver == defaults.DEFAULT_SOLVER
+        assert stage_settings(parser.parse_args(args), SolverSettings).solver == defaults.DEFAULT_SOLVER
     text = _help(parser, "collapse")
     assert f"dt/sqrt(h0/g) = {defaults.AUTO_APGD_BELOW:g}" in text
     assert f"under auto {defaults.AUTO_APGD_LENGTH_FLOOR:g}" in text
@@ -27,11 +28,10 @@ def test_solver_defaults_and_choices_are_the_defaults_module_s():
     assert "{" + ",".join(defaults.SOLVERS) + "}" in text
 
 
-def test_pack_defaults_are_the_pack_defaults_module_s():
-    chosen = build_parser().parse_args(PACK)
-    assert chosen.max_spheres == pack_defaults.DEFAULT_MAX_SPHERES
-    assert chosen.layer_height == pack_defaults.LAYER_HEIGHT
-    assert chosen.freeze_depth == pack_defaults.FREEZE_DEPTH
+def test_pack_defaults_are_the_pack_settings_s():
+    chosen = stage_settings(build_parser().parse_args(PACK), PackSettings)
+    assert chosen == PackSettings(height=2.0)
+    assert (chosen.max_spheres, chosen.layer_height, chosen.freeze_depth) == (500_000, None, 3.5)
 
 
 @pytest.mark.parametrize("args, option", [(COLLAPSE + ["--solver", "gauss-seidel"], "--solver"),

@@ -53,17 +53,24 @@ def test_auto_falls_back_to_clarabel_at_the_iteration_cap(solver_pile):
     assert backends == ["clarabel-fallback"] * 3
 
 
+def _solver_settings(parser, argv):
+    """The back-end's settings (colsim.stages.settings.SolverSettings) a command line gives."""
+    from colsim.cli.flags import stage_settings
+    from colsim.stages.settings import SolverSettings
+    return stage_settings(parser.parse_args(argv), SolverSettings)
+
+
 def test_auto_uses_the_length_floor_in_both_stages():
     from colsim.cli import build_parser
     from colsim.cli.commands import _pack_solver, _solver
     assert AutoSolver().apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR > 0
     assert ApgdSolver().length_floor == 0.0
     parser = build_parser()
-    collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
+    collapse_args = _solver_settings(parser, ["collapse", "--input", "c.nc", "--output", "t.nc"])
     assert _solver(collapse_args, 0.004).apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR
-    pack_args = parser.parse_args(["pack", "--height", "2", "--output", "p.nc"])
+    pack_args = _solver_settings(parser, ["pack", "--height", "2", "--output", "p.nc"])
     assert _pack_solver(pack_args).apgd.length_floor == AutoSolver.APGD_LENGTH_FLOOR
-    chosen = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc", "--solver", "apgd",
+    chosen = _solver_settings(parser, ["collapse", "--input", "c.nc", "--output", "t.nc", "--solver", "apgd",
                                 "--solver-length-floor", "0.5"])
     assert _solver(chosen, 0.004).length_floor == 0.5
 
@@ -79,12 +86,12 @@ def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     assert ApgdSolver().overlap_tolerance == 0.0
     assert AutoSolver.APGD_OVERLAP_TOLERANCE <= APGD_TOLERANCE * AutoSolver.APGD_LENGTH_FLOOR
     parser = build_parser()
-    collapse_args = parser.parse_args(["collapse", "--input", "c.nc", "--output", "t.nc"])
+    collapse_args = _solver_settings(parser, ["collapse", "--input", "c.nc", "--output", "t.nc"])
     assert _solver(collapse_args, 0.004).apgd.overlap_tolerance == AutoSolver.APGD_OVERLAP_TOLERANCE
-    pack_args = parser.parse_args(["pack", "--height", "2", "--output", "p.nc"])
+    pack_args = _solver_settings(parser, ["pack", "--height", "2", "--output", "p.nc"])
     packing = _pack_solver(pack_args)
     assert packing.apgd.overlap_tolerance == 0.0
     assert "overlap_tolerance" not in packing.describe()["apgd"]
     assert _solver(collapse_args, 0.004).describe()["apgd"]["overlap_tolerance"] == 1e-4
-    chosen = parser.parse_args(["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "1e-5"])
+    chosen = _solver_settings(parser, ["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "1e-5"])
     assert _pack_solver(chosen).apgd.overlap_tolerance == 1e-5

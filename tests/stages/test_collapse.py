@@ -116,27 +116,3 @@ def test_collapse_runs_on_to_rest_and_stops_there(packing):
         CollapseSettings(duration=4.0, max_duration=2.0)
 
 
-def test_each_collapse_default_is_declared_once():
-    """Issue 47: the collapse's defaults live in colsim.stages.collapse_defaults; the stage's
-    settings, the CLI, the summary's rest flag, the config schema and config.yaml all say the same."""
-    import yaml
-
-    from colsim.cli import build_parser
-    from colsim.stages import collapse_defaults as d
-    from colsim.study.collect import REST_ENERGY
-    from helpers import ROOT
-
-    settings = CollapseSettings()
-    names = {"duration": "DURATION", "n_steps": "STEPS", "frame_every": "FRAME_EVERY",
-             "checkpoint_every": "CHECKPOINT_EVERY", "rest_window": "REST_WINDOW",
-             "rest_tolerance": "REST_TOLERANCE", "rest_energy": "REST_ENERGY"}
-    cli = vars(build_parser().parse_args(["collapse", "--input", "c.nc", "--output", "o.nc"]))
-    schema = yaml.safe_load((ROOT / "workflow/schemas/config.schema.yaml").read_text())["properties"]["collapse"]["properties"]
-    study = yaml.safe_load((ROOT / "config.yaml").read_text())["collapse"]
-    for field, constant in names.items():
-        value = getattr(d, constant)
-        assert getattr(settings, field) == value, field
-        assert cli["steps" if field == "n_steps" else field] == value, field
-        key = "steps" if field == "n_steps" else field
-        assert schema[key]["default"] == value and study[key] == value, key
-    assert REST_ENERGY == d.REST_ENERGY

@@ -13,7 +13,9 @@ import xarray as xr
 import yaml
 
 from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, cf_check_failures, copy_workflow,
-                     planned_collapses, planned_outputs, snakemake)
+                     planned_collapses, planned_outputs, planned_settings, snakemake)
+
+from colsim.study.workflow.plan import fmt
 
 
 @pytest.fixture(scope="module")
@@ -332,9 +334,9 @@ def test_every_named_configuration_plans(tmp_path, name):
 
 
 def steps_and_end(collapse: dict) -> tuple[str, str, bool]:
-    """(steps, end time, whether it goes on to rest) of a planned collapse, from its command line."""
-    words = collapse["command"].split()
-    return words[words.index("--steps") + 1], words[words.index("--duration") + 1], "--max-duration" in words
+    """(steps, end time, whether it goes on to rest) of a planned collapse, from its settings."""
+    settings = collapse["settings"]
+    return str(settings["steps"]), fmt(settings["duration"]), settings["rest"] is not None
 
 
 def test_the_convergence_study_plans_its_runs(tmp_path):
@@ -372,7 +374,8 @@ def test_a_run_to_rest_and_a_run_stopped_at_its_end_time_keep_separate_folders(t
     rest_runs = {c["path"] for c in planned_collapses(to_rest)}
     fixed_runs = {c["path"] for c in planned_collapses(fixed)}
     assert len(rest_runs) == len(fixed_runs) == 48 and not rest_runs & fixed_runs
-    assert "--max-duration 12 " in to_rest.stdout and "--max-duration" not in fixed.stdout
+    assert all(c["settings"]["rest"]["max_duration"] == 12 for c in planned_collapses(to_rest))
+    assert all(c["settings"]["rest"] is None for c in planned_collapses(fixed))
 
 
 def test_the_friction_law_study_plans_both_laws(tmp_path):
@@ -383,14 +386,14 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
     result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/friction-law.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     collapses = planned_collapses(result)
-    coulomb = [c for c in collapses if "--friction-law coulomb " in c["command"]]
-    associated = [c for c in collapses if "--friction-law associated " in c["command"]]
+    coulomb = [c for c in collapses if c["settings"]["friction_law"] == "coulomb"]
+    associated = [c for c in collapses if c["settings"]["friction_law"] == "associated"]
     assert len(coulomb) == len(associated) == 9 and len(collapses) == 18
     columns = {(c["seed"], c["a"]) for c in coulomb}
     assert columns == {(c["seed"], c["a"]) for c in associated} == {(s, a) for s in "123" for a in ("0.5", "2", "5")}
     assert not {c["path"] for c in coulomb} & {c["path"] for c in associated}
-    assert all("--friction-tolerance 1e-05" in c["command"] for c in coulomb)
-    assert not any("--friction-tolerance" in c["command"] for c in associated)
+    assert all(c["settings"]["friction_tolerance"] == 1e-05 for c in coulomb)
+    assert all(c["settings"]["friction_tolerance"] is None for c in associated)
     planned = set(planned_outputs(result))
     assert {"results/friction-law/friction_law.md", "results/friction-law/figures/friction_law.png"} <= planned
     # a Coulomb run's cluster time limit comes from its settings: 24 h against 2 h
@@ -402,7 +405,7 @@ def test_the_friction_law_study_plans_both_laws(tmp_path):
     alone = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "coulomb.yaml", timeout=120)
     assert alone.returncode == 0, alone.stderr[-3000:]
     runs = planned_collapses(alone)
-    assert runs and all("--friction-law coulomb " in c["command"] for c in runs)
+    assert runs and all(c["settings"]["friction_law"] == "coulomb" for c in runs)
 
 
 def plan_with_and_without(tmp_path, setting: str):
@@ -415,25 +418,26 @@ def plan_with_and_without(tmp_path, setting: str):
     return on, off
 
 
-def test_run_to_rest_reaches_the_collapse_command(tmp_path):
-    """collapse.max_duration set: every study collapse gets the rest options; unset (the paper):
-    none does, and the command is the fixed-length one."""
+def test_run_to_rest_reaches_the_collapse_settings(tmp_path):
+    """collapse.max_duration set: every study collapse's settings hold the rest options; unset (the
+    paper): none do, and the run is the fixed-length one. Each collapse reads its settings file."""
     on, off = plan_with_and_without(tmp_path, "collapse: {max_duration: 8, rest_tolerance: 0.2}\n")
-    commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
-    assert len(commands) == 4
-    assert all("--max-duration 8 --rest-window 1 --rest-tolerance 0.2 --rest-energy 0.01" in c for c in commands)
-    assert "--max-duration" not in off.stdout and "colsim collapse" in off.stdout
+    runs = planned_collapses(on)
+    assert len(runs) == 4 and all(f"--settings {c['path'].rsplit('/', 1)[0]}/settings.yaml" in c["command"] for c in runs)
+    assert all(c["settings"]["rest"] == {"max_duration": 8.0, "rest_window": 1.0, "rest_tolerance": 0.2,
+                                         "rest_energy": 0.01} for c in runs)
+    assert [c["settings"]["rest"] for c in planned_collapses(off)] == [None] * 4
 
 
 def test_the_overlap_tolerance_reaches_the_collapse_only_when_set(tmp_path):
     """solver_overlap_tolerance: 0 reaches every `colsim collapse` (not the packing); unset (null,
     colsim's default) the command is as before the key existed, so no finished run is redone."""
     on, off = plan_with_and_without(tmp_path, "solver_overlap_tolerance: 0\n")
-    commands = [line for line in on.stdout.splitlines() if "colsim collapse" in line]
-    assert len(commands) == 4 and all("--solver auto --solver-overlap-tolerance 0 " in c for c in commands)
-    assert "overlap-tolerance" not in off.stdout and "--solver auto " in off.stdout
-    packs = [line for line in on.stdout.splitlines() if "colsim pack" in line]
-    assert packs and not any("overlap" in line for line in packs)
+    runs = planned_collapses(on)
+    assert len(runs) == 4 and all(c["settings"]["solver_overlap_tolerance"] == 0 for c in runs)
+    assert all(c["settings"]["solver_overlap_tolerance"] is None for c in planned_collapses(off))
+    packs = [settings for path, settings in planned_settings(on).items() if "/run_" not in path and "pack_" in path]
+    assert packs and not any("overlap" in json.dumps(settings) for settings in packs)
 
 
 def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
@@ -443,9 +447,9 @@ def test_mu_r_reaches_the_collapse_at_full_precision(tmp_path):
     (directory / "hexagon.yaml").write_text("mu_r: [0.1308996938995747]\n")
     result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "hexagon.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
-    commands = [line for line in result.stdout.splitlines() if "colsim collapse" in line]
-    assert len(commands) == 2 and all("--mu-r 0.1308996938995747 " in c for c in commands), commands
-    assert all("/mu_r_0.1308996938995747/run_" in c for c in commands)
+    runs = planned_collapses(result)
+    assert len(runs) == 2 and all(c["settings"]["mu_r"] == 0.1308996938995747 for c in runs), runs
+    assert all("/mu_r_0.1308996938995747/run_" in c["path"] for c in runs)
     (directory / "close.yaml").write_text("mu_r: [0.1000001, 0.1000002]\naspect_ratios: [1]\n")
     result = snakemake(directory, "-n", "-p", "all", "--configfile", "config/tiny.yaml", "close.yaml", timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
@@ -532,8 +536,8 @@ def test_a_folder_whose_settings_the_study_does_not_have_is_an_error(tmp_path):
     folder, instead of being made with this configuration's settings."""
     directory = copy_workflow(tmp_path)
     for target, message in (
-            ("pack_0123456789/a_1/mu_r_0.12/run_0123456789/collapse.nc",
-             "no run of this study has the folder mu_r_0.12/run_0123456789"),
+            ("pack_0123456789/a_1/mu_r_0.12/run_0123456789/collapse.nc",   # its column's folder is unknown first
+             "no column of this study has the folder pack_0123456789/a_1"),
             ("pack_0123456789/packing.nc", "no packing of this study has the folder r0_1/seed_1/pack_0123456789")):
         result = snakemake(directory, "-n", f"results/r0_1/seed_1/{target}", "--configfile", "config/tiny.yaml",
                            timeout=120)

@@ -1,7 +1,7 @@
 # The workflow's wiring: check the configuration, then name the study's files. The logic is plain
 # Python in colsim.study.workflow (docs/architecture.md, "The workflow"): checks.py (the
 # configuration's checks), plan.py (folders, keys and settings of packings, columns and runs),
-# command_lines.py (command-line values and cluster resources), report.py (the study's files for the
+# job_resources.py (jobs' cluster resources and priorities), report.py (the study's files for the
 # report). Here only what needs Snakemake: its validation, its errors, the rules' wildcards.
 import functools
 
@@ -9,13 +9,13 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
 
 from colsim.study.figure_names import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
-from colsim.study.workflow import command_lines
+from colsim.study.workflow import job_resources
 from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
                                           load_schema)
-from colsim.study.workflow.command_lines import collapse_options, numbers
 from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
-                                        StudyPlan, UnknownFolder, benchmarked, fmt, logged, write_settings)
+                                        StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, fmt, logged,
+                                        settings_text)
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
@@ -74,33 +74,33 @@ DIAMETERS = (config["diameter_min"], config["diameter_max"])
 
 def collapse_runtime(wildcards):
     """A collapse's time limit on a cluster (minutes), from its run's settings and its column's
-    size (command_lines.py)."""
-    spheres = command_lines.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
-    return command_lines.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
+    size (job_resources.py)."""
+    spheres = job_resources.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
+    return job_resources.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
 
 
 def pack_spheres(wildcards):
-    """About how many spheres a packing's pour holds (command_lines.py)."""
+    """About how many spheres a packing's pour holds (job_resources.py)."""
     packing = packing_of(wildcards)
-    return command_lines.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+    return job_resources.spheres_of(packing["r0"], packing["height"], DIAMETERS)
 
 
 def pack_resource(name):
-    """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (command_lines.py)."""
+    """A packing's time limit (minutes) or memory (MB) on a cluster, from its size (job_resources.py)."""
     def resource(wildcards):
-        return command_lines.pack_resources(pack_spheres(wildcards))[name]
+        return job_resources.pack_resources(pack_spheres(wildcards))[name]
     return resource
 
 
 def pack_priority(wildcards):
-    """A pour's scheduling priority, from its size (command_lines.py): the largest first."""
-    return command_lines.pack_priority(pack_spheres(wildcards))
+    """A pour's scheduling priority, from its size (job_resources.py): the largest first."""
+    return job_resources.pack_priority(pack_spheres(wildcards))
 
 
 def collapse_priority(wildcards):
-    """A collapse's scheduling priority, from its column's a and its run's steps (command_lines.py)."""
+    """A collapse's scheduling priority, from its column's a and its run's steps (job_resources.py)."""
     run = run_of(wildcards)
-    return command_lines.collapse_priority(column_of(wildcards), run, PLAN.length)
+    return job_resources.collapse_priority(column_of(wildcards), run, PLAN.length)
 
 
 def report_description():

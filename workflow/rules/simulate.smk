@@ -1,29 +1,32 @@
 # Stages 1-4 of the study, one job per file: pack per (r0, seed), trim per a, collapse per mu_r,
-# analyse per collapse. Every swept value reaches `colsim` from the settings its folder's key names
-# (common.smk: packing_of, column_of, run_of; colsim.study.workflow.plan), never parsed back from the
-# folder's name, so a changed setting is a new folder and never an overwrite.
+# analyse per collapse. A packing's, a run's and the analyses' settings reach `colsim` as the
+# settings.yaml their folder's key names (common.smk: packing_of, column_of, run_of;
+# colsim.study.workflow.plan), read by `colsim STAGE --settings`, never parsed back from the folder's
+# name, so a changed setting is a new folder and never an overwrite. The command lines add only
+# what does not change a result: threads, checkpoints, the packing's size bound.
 
 
-# A packing's and a run's settings, readable beside its files; the simulation rules take them as
-# input, so they exist before the file they describe.
+# A packing's and a run's settings, readable beside its files (one line of JSON, which is YAML;
+# `snakemake -n -p` shows each); the simulation rules take them as input and pass them to colsim,
+# so they exist before the file they describe.
 rule packing_settings:
     output:
         f"{PACKING_DIR}/settings.yaml",
-    priority: command_lines.SETTINGS_PRIORITY
+    priority: job_resources.SETTINGS_PRIORITY
     params:
-        settings=packing_of,
-    run:
-        write_settings(params.settings, output[0])
+        text=lambda wildcards: settings_text(packing_of(wildcards)),
+    shell:
+        WRITE_SETTINGS
 
 
 rule run_settings:
     output:
         f"{RUN_DIR}/settings.yaml",
-    priority: command_lines.SETTINGS_PRIORITY
+    priority: job_resources.SETTINGS_PRIORITY
     params:
-        settings=run_of,
-    run:
-        write_settings(params.settings, output[0])
+        text=lambda wildcards: settings_text(run_of(wildcards)),
+    shell:
+        WRITE_SETTINGS
 
 
 rule pack:
@@ -37,33 +40,14 @@ rule pack:
         mem_mb=pack_resource("mem_mb"),
         runtime=pack_resource("runtime"),
     params:
-        r0=lambda wildcards: fmt(packing_of(wildcards)["r0"]),
-        seed=lambda wildcards: packing_of(wildcards)["seed"],
-        height=lambda wildcards: fmt(packing_of(wildcards)["height"]),
-        root_seed=config["root_seed"],
-        diameter_min=config["diameter_min"],
-        diameter_max=config["diameter_max"],
-        density=config["density"],
-        gravity=config["gravity"],
-        dt=config["pack"]["dt"],
-        rest_energy=config["pack"]["rest_energy"],
-        max_steps=config["pack"]["max_steps"],
         max_spheres=config["pack"]["max_spheres"],
-        mu=config["pack"]["mu"],
-        layer_height=config["pack"]["layer_height"],
-        freeze_depth=config["pack"]["freeze_depth"],
-        solver=config["solver"],
     log:
         logged(f"{PACKING_DIR}/pack.log"),
     benchmark:
         benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
-        "colsim pack --r0 {params.r0} --height {params.height} --seed {params.seed}"
-        " --root-seed {params.root_seed} --diameter-min {params.diameter_min}"
-        " --diameter-max {params.diameter_max} --density {params.density} --gravity {params.gravity}"
-        " --dt {params.dt} --rest-energy {params.rest_energy} --max-steps {params.max_steps} --mu {params.mu}"
-        " --max-spheres {params.max_spheres} --layer-height {params.layer_height} --freeze-depth {params.freeze_depth}"
-        " --solver {params.solver} --threads {threads} --output {output:q} > {log:q} 2>&1"
+        "colsim pack --settings {input:q} --max-spheres {params.max_spheres} --threads {threads}"
+        " --output {output:q} > {log:q} 2>&1"
 
 
 # A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
@@ -73,7 +57,7 @@ rule trim:
         f"{PACKING_DIR}/packing.nc",
     output:
         COLUMN,
-    priority: command_lines.PACK_PRIORITY
+    priority: job_resources.PACK_PRIORITY
     params:
         a=lambda wildcards: fmt(column_of(wildcards)),
     log:
@@ -99,16 +83,13 @@ rule collapse:
         mem_mb=4000,
         runtime=collapse_runtime,
     params:
-        mu=lambda wildcards: run_of(wildcards)["mu"],
-        mu_r=lambda wildcards: run_of(wildcards)["mu_r"],
-        options=lambda wildcards: collapse_options(run_of(wildcards)),
         checkpoint_every=config["collapse"]["checkpoint_every"],
     log:
         logged(f"{RUN_DIR}/collapse.log"),
     benchmark:
         benchmarked(f"{RUN_DIR}/collapse.tsv")
     shell:
-        "colsim collapse --input {input.column:q} --mu {params.mu} --mu-r {params.mu_r} {params.options}"
+        "colsim collapse --settings {input.settings:q} --input {input.column:q}"
         " --checkpoint-every {params.checkpoint_every} --threads {threads} --output {output:q} > {log:q} 2>&1"
 
 
@@ -116,9 +97,9 @@ rule analysis_settings:
     output:
         ANALYSIS_SETTINGS,
     params:
-        settings=analysis_settings_of,
-    run:
-        write_settings(params.settings, output[0])
+        text=lambda wildcards: settings_text(analysis_settings_of(wildcards)),
+    shell:
+        WRITE_SETTINGS
 
 
 rule analyse:
@@ -127,18 +108,12 @@ rule analyse:
         settings=PLAN.analysis_settings_path(),   # changed analysis settings: a new input, and a rerun
     output:
         f"{RUN_DIR}/analysis.nc",
-    params:
-        contact_tolerance=config["analysis"]["contact_tolerance"],
-        check_tolerances=numbers(config["analysis"]["check_tolerances"]),
-        mass_shares=numbers(config["analysis"]["mass_shares"]),
     log:
         logged(f"{RUN_DIR}/analyse.log"),
     benchmark:
         benchmarked(f"{RUN_DIR}/analyse.tsv")
     shell:
-        "colsim analyse --input {input.collapse:q} --contact-tolerance {params.contact_tolerance}"
-        " --check-tolerances {params.check_tolerances} --mass-shares {params.mass_shares}"
-        " --output {output:q} > {log:q} 2>&1"
+        "colsim analyse --settings {input.settings:q} --input {input.collapse:q} --output {output:q} > {log:q} 2>&1"
 
 
 # Not part of `all`: a ParaView time series of one collapse, on request, e.g.

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,9 +18,12 @@ from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
 from ..solvers.registry import make_solver
-from ..stages.collapse import CollapseSettings, collapse as run_collapse
-from ..stages.pack import pack as run_pack, solid_fraction
+from ..stages.collapse import collapse as run_collapse
+from ..stages.pack import pack_from, solid_fraction
+from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
+                               by_name)
 from ..stages.trim import kept_by_trim
+from .flags import stage_settings
 from .progress import progress_bar
 
 log = logging.getLogger("colsim")
@@ -74,66 +78,72 @@ def check_outputs(args) -> None:
         check_checkpoint_path(args.checkpoint or f"{args.output}.checkpoint")
 
 
-def _apgd_options(args, tolerance=None) -> dict:
-    """APGD's options the arguments set (--solver-tolerance, else `tolerance` when given;
-    --solver-length-floor, --solver-overlap-tolerance); the rest keep the back-end's defaults."""
+def _recorded(args, *stage_settings) -> dict:
+    """What a stage's file records of how it was made: the command, its files and every setting it
+    ran with (by name, defaults included), so that a run is reproduced from its file alone."""
+    files = {k: v for k, v in vars(args).items() if k in ("command", "settings", *INPUT_ARGUMENTS, *OUTPUT_ARGUMENTS)}
+    recorded = dict(files)
+    for each in stage_settings:
+        recorded |= by_name(each)
+    return recorded
+
+
+def _apgd_options(solver: SolverSettings, tolerance=None) -> dict:
+    """APGD's options the settings set (solver_tolerance, else `tolerance` when given;
+    solver_length_floor, solver_overlap_tolerance); the rest keep the back-end's defaults."""
     options = {}
-    if args.solver_tolerance is not None or tolerance is not None:
-        options["tolerance"] = tolerance if args.solver_tolerance is None else args.solver_tolerance
-    if args.solver_length_floor is not None:
-        options["length_floor"] = args.solver_length_floor
-    if args.solver_overlap_tolerance is not None:
-        options["overlap_tolerance"] = args.solver_overlap_tolerance
+    if solver.solver_tolerance is not None or tolerance is not None:
+        options["tolerance"] = tolerance if solver.solver_tolerance is None else solver.solver_tolerance
+    if solver.solver_length_floor is not None:
+        options["length_floor"] = solver.solver_length_floor
+    if solver.solver_overlap_tolerance is not None:
+        options["overlap_tolerance"] = solver.solver_overlap_tolerance
     return options
 
 
-def _solver(args, scaled_time_step: float):
-    """The back-end the arguments name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'.
+def _solver(solver: SolverSettings, scaled_time_step: float):
+    """The back-end the settings name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'.
     APGD's own options given to another back-end are refused: it would ignore them, yet the file
     would record them."""
-    if args.solver in ("auto", "apgd"):
-        options = _apgd_options(args)
+    if solver.solver in ("auto", "apgd"):
+        options = _apgd_options(solver)
     else:
-        ignored = [flag for flag, value in (("--solver-length-floor", args.solver_length_floor),
-                                            ("--solver-overlap-tolerance", args.solver_overlap_tolerance))
+        ignored = [flag for flag, value in (("--solver-length-floor", solver.solver_length_floor),
+                                            ("--solver-overlap-tolerance", solver.solver_overlap_tolerance))
                    if value is not None]
         if ignored:
             raise io.InputError(f"{' and '.join(ignored)} {'are' if len(ignored) > 1 else 'is'} APGD's"
-                                f" (--solver auto or apgd); --solver {args.solver} would ignore it")
-        options = {} if args.solver_tolerance is None else {"tolerance": args.solver_tolerance}
-    if args.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
+                                f" (--solver auto or apgd); --solver {solver.solver} would ignore it")
+        options = {} if solver.solver_tolerance is None else {"tolerance": solver.solver_tolerance}
+    if solver.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
         options = {"scaled_time_step": scaled_time_step, "apgd": options}
-    return make_solver(args.solver, **options)
+    return make_solver(solver.solver, **options)
 
 
-def _pack_solver(args):
+def _pack_solver(solver: SolverSettings):
     """The packing's back-end: under auto, APGD for every step at the packing's own tolerance
-    (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or --solver-tolerance), Clarabel where APGD
+    (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or solver_tolerance), Clarabel where APGD
     reaches its cap; no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
-    if args.solver != "auto":
-        return _solver(args, scaled_time_step=None)
+    if solver.solver != "auto":
+        return _solver(solver, scaled_time_step=None)
     return make_solver("auto", scaled_time_step=None,
                        apgd={"overlap_tolerance": defaults.PACK_APGD_OVERLAP_TOLERANCE,
-                             **_apgd_options(args, defaults.PACK_APGD_TOLERANCE)})
+                             **_apgd_options(solver, defaults.PACK_APGD_TOLERANCE)})
 
 
 def pack(args):
-    if args.diameter_min > args.diameter_max:
-        raise ValueError(f"--diameter-min {args.diameter_min} exceeds --diameter-max {args.diameter_max}")
-    rng = np.random.default_rng([args.seed, args.root_seed])
-    use_threads(args.threads)
-    solver = _pack_solver(args)
+    settings, solving = stage_settings(args, PackSettings, SolverSettings)
+    rng = np.random.default_rng([settings.seed, settings.root_seed])
+    use_threads(solving.threads)
+    solver = _pack_solver(solving)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    result = run_pack(args.r0, args.height, rng, solver, (args.diameter_min, args.diameter_max),
-                      args.density, args.gravity, args.dt, args.rest_energy, args.max_steps, mu=args.mu,
-                      max_spheres=args.max_spheres, layer_height=args.layer_height,
-                      freeze_depth=args.freeze_depth, checkpoint=checkpoint,
-                      checkpoint_every=args.checkpoint_every)
+    result = pack_from(settings, rng, solver, checkpoint=checkpoint)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
-                                 {**_settings(args), "solver_settings": solver.describe()}, args.seed)
-    attrs.update({"r0": args.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
+                                 {**_recorded(args, settings, solving), "solver_settings": solver.describe()},
+                                 settings.seed)
+    attrs.update({"r0": settings.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
-                  "gravity": args.gravity,
+                  "gravity": settings.gravity,
                   "clouds": result.clouds, "most_fixed": result.most_fixed, "threading_layer": threading_layer(),
                   "colsim_commits": "; ".join(result.commits)})
     io.write_state(args.output, result.state, attrs,
@@ -145,43 +155,40 @@ def pack(args):
 
 
 def trim(args):
+    settings = stage_settings(args, TrimSettings)
     state, source = io.read_state(args.input)
     r0 = float(source.attrs["r0"])
-    h0 = args.aspect_ratio * r0
+    h0 = settings.aspect_ratio * r0
     kept = kept_by_trim(state, h0)
     column = state.subset(kept)
     forces = io.contact_forces_of(source)
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
-                                 {**_settings(args), "input_config": io.config_of(source)},
+                                 {**_recorded(args, settings), "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
     fraction = solid_fraction(column, r0, h0)
-    attrs.update({"r0": r0, "h0": h0, "aspect_ratio": args.aspect_ratio, "solid_fraction": fraction,
+    attrs.update({"r0": r0, "h0": h0, "aspect_ratio": settings.aspect_ratio, "solid_fraction": fraction,
                   "gravity": float(source.attrs.get("gravity", 9.81)),
                   "packing_wall_time": float(source.attrs.get("wall_time", np.nan)),
                   "packing_cpu_time": float(source.attrs.get("cpu_time", np.nan))})
     extra = {} if forces is None else io.contact_force_variables(forces.subset(kept))
     io.write_state(args.output, column, attrs, extra)
-    log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", args.aspect_ratio, column.n, h0, fraction)
+    log.info("column a = %g: %d spheres, h0 = %.3f, solid fraction %.3f", settings.aspect_ratio, column.n, h0,
+             fraction)
 
 
 def collapse(args):
+    settings, solving = stage_settings(args, CollapseSettings, SolverSettings)
     column, source = io.read_state(args.input)
     if "h0" not in source.attrs:
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
-    use_threads(args.threads)
-    settings = CollapseSettings(
-        mu=args.mu, mu_r=args.mu_r, floor_mu=args.floor_mu, floor_mu_r=args.floor_mu_r,
-        duration=args.duration, n_steps=args.steps, frame_every=args.frame_every,
-        gravity=float(source.attrs.get("gravity", 9.81)),
-        checkpoint_every=args.checkpoint_every, max_duration=args.max_duration,
-        rest_window=args.rest_window, rest_tolerance=args.rest_tolerance, rest_energy=args.rest_energy,
-        friction_law=args.friction_law, friction_tolerance=args.friction_tolerance,
-        rolling_lever=args.rolling_lever)
+    settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
+    use_threads(solving.threads)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    law = "" if args.friction_law == "associated" else f" {args.friction_law}"
-    progress = progress_bar(settings.max_steps, f"collapse a={source.attrs['aspect_ratio']:g} mu_r={args.mu_r:g}{law}")
-    solver = _solver(args, settings.duration / settings.n_steps)
+    law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"
+    progress = progress_bar(settings.max_steps,
+                            f"collapse a={source.attrs['aspect_ratio']:g} mu_r={settings.mu_r:g}{law}")
+    solver = _solver(solving, settings.scaled_step)
     try:
         run = run_collapse(column, h0, settings, solver, io.contact_forces_of(source),
                            checkpoint=checkpoint, progress=progress)
@@ -190,7 +197,7 @@ def collapse(args):
     # the back-end's settings in full (defaults included), so that a summary never mixes runs
     # solved to different stopping rules (summary.check_same_settings)
     attrs = io.global_attributes(io.TRAJECTORY_KIND, "colsim collapse",
-                                 {**_settings(args), "solver_settings": solver.describe(),
+                                 {**_recorded(args, settings, solving), "solver_settings": solver.describe(),
                                   "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
     attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
@@ -212,11 +219,10 @@ def collapse(args):
 
 
 def analyse(args):
+    settings = stage_settings(args, AnalysisSettings)
     trajectory = io.open_dataset(args.input, io.TRAJECTORY_KIND)
-    settings = analysis.AnalysisSettings(args.contact_tolerance, tuple(args.check_tolerances),
-                                         tuple(args.mass_shares), args.bin_width)
     attrs = io.global_attributes(io.ANALYSIS_KIND, "colsim collapse analysis",
-                                 {**_settings(args), "input_config": io.config_of(trajectory)},
+                                 {**_recorded(args, settings), "input_config": io.config_of(trajectory)},
                                  trajectory.attrs.get("seed"))
     result = analysis.analyse_trajectory(trajectory, settings, attrs)
     io.write_dataset(result, args.output)

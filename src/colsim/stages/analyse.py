@@ -28,8 +28,9 @@ from scipy.sparse.csgraph import connected_components
 from ..engine.contacts import touching_pairs
 from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
 from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates, state_from_dataset
+from .settings import AnalysisSettings
 
-DEFAULT_CONTACT_TOLERANCE = 0.01  # fraction of the smallest diameter
+DEFAULT_CONTACT_TOLERANCE = AnalysisSettings.contact_tolerance  # fraction of the smallest diameter
 #: the front followed frame by frame: the radius holding this share of the mass (:func:`mass_front`),
 #: stored in the analysis as FRONT_MASS_VARIABLE over time
 FRONT_MASS_SHARE = 0.95
@@ -103,17 +104,6 @@ def undisturbed_top_radius(initial: ParticleState, final: ParticleState, h0: flo
     if not still.any():
         return 0.0
     return float(np.percentile(np.hypot(initial.position[still, 0], initial.position[still, 1]), 95))
-
-
-@dataclass(frozen=True)
-class AnalysisSettings:
-    """What `colsim analyse` measures: contact tolerances as fractions of the smallest diameter (the
-    study's and the checks'), mass shares (0-1], radial bin of the profile (length; None: d_max)."""
-
-    contact_tolerance: float = DEFAULT_CONTACT_TOLERANCE
-    check_tolerances: tuple = (0.1, 0.5, 1.0)
-    mass_shares: tuple = (0.9, 0.95, 0.99)
-    bin_width: float | None = None
 
 
 def _scalar(value, units: str, long_name: str):

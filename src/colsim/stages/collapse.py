@@ -25,90 +25,16 @@ import numpy as np
 
 from ..engine.records import Carry
 from ..engine.solver_contract import Solver
-from ..engine.state import ContactLaw, FrictionLaw, ParticleState, StepSettings, Walls
+from ..engine.state import ParticleState
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_checkpoint, save_checkpoint, sittings_commits
 from .analyse import measure_deposit
-from .collapse_defaults import (CHECKPOINT_EVERY, DURATION, FRAME_EVERY, REST_ENERGY, REST_TOLERANCE,
-                                REST_WINDOW, STEPS)
+from .settings import CollapseSettings, SMALLEST_SCALED_STEP  # noqa: F401 (the stage's settings, here too)
 from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
 
-
-
-@dataclass
-class CollapseSettings:
-    """The collapse's physics and numerics. Times are dimensionless (t / sqrt(h0/g))."""
-
-    mu: float = 0.577
-    mu_r: float = 0.12
-    floor_mu: float | None = None       # None: same as mu
-    floor_mu_r: float | None = None     # None: same as mu_r
-    duration: float = DURATION
-    n_steps: int = STEPS
-    frame_every: int = FRAME_EVERY
-    gravity: float = 9.81
-    checkpoint_every: int = CHECKPOINT_EVERY
-    max_duration: float | None = None   # None: stop at `duration` (the paper)
-    rest_window: float = REST_WINDOW     # t / sqrt(h0/g)
-    rest_tolerance: float = REST_TOLERANCE   # mean diameters
-    rest_energy: float = REST_ENERGY     # of the peak kinetic energy
-    friction_law: str = "associated"     # or "coulomb" (colsim.engine.friction)
-    friction_tolerance: float = FrictionLaw().tolerance     # coulomb's fixed point, mean diameters
-    rolling_lever: str = "paper"         # or "effective" (R_eff; colsim.engine.state.rolling_lever)
-
-    def __post_init__(self):
-        for name in ("mu", "mu_r"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"friction coefficient {name} must be >= 0, got {getattr(self, name)}")
-        if self.duration <= 0 or self.n_steps < 1 or self.frame_every < 1:
-            raise ValueError(f"need duration > 0, n_steps >= 1, frame_every >= 1; got "
-                             f"{self.duration}, {self.n_steps}, {self.frame_every}")
-        if self.duration / self.n_steps < SMALLEST_SCALED_STEP:
-            raise ValueError(f"the step dt/sqrt(h0/g) = {self.duration / self.n_steps:.3g} (duration {self.duration:g}"
-                             f" over {self.n_steps} steps) is below {SMALLEST_SCALED_STEP:g}, where the step's"
-                             " arithmetic loses its digits")
-        if self.gravity <= 0:
-            raise ValueError(f"gravity must be positive, got {self.gravity}")
-        if self.max_duration is not None and self.max_duration < self.duration:
-            raise ValueError(f"max_duration {self.max_duration} is below duration {self.duration}")
-        self.friction()   # checks the law's name and tolerance
-        self.law()        # checks the rolling lever
-        if self.rest_window <= 0 or self.rest_tolerance <= 0 or self.rest_energy <= 0:
-            raise ValueError(f"need rest_window, rest_tolerance and rest_energy > 0; got "
-                             f"{self.rest_window}, {self.rest_tolerance}, {self.rest_energy}")
-
-    def friction(self) -> FrictionLaw:
-        return FrictionLaw(self.friction_law, self.friction_tolerance)
-
-    def law(self) -> ContactLaw:
-        floor_mu = self.mu if self.floor_mu is None else self.floor_mu
-        floor_mu_r = self.mu_r if self.floor_mu_r is None else self.floor_mu_r
-        return ContactLaw(mu=(self.mu, floor_mu, 0.0), mu_r=(self.mu_r, floor_mu_r, 0.0),
-                          rolling_lever=self.rolling_lever)
-
-    def time_step(self, h0: float) -> float:
-        return self.duration / self.n_steps * np.sqrt(h0 / self.gravity)
-
-    def step_settings(self, h0: float) -> StepSettings:
-        """The engine's settings for one step of the collapse of a column of height h0: the
-        floor and no cylinder, gravity, the contact and friction laws, dt from `time_step`."""
-        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity),
-                            walls=Walls(floor=True, cylinder_radius=None), law=self.law(),
-                            friction=self.friction())
-
-    def scaled_time(self, steps: int) -> float:
-        """t / sqrt(h0/g) after `steps` steps."""
-        return steps * self.duration / self.n_steps
-
-    @property
-    def max_steps(self) -> int:
-        """Steps to max_duration (n_steps without one)."""
-        if self.max_duration is None:
-            return self.n_steps
-        return int(round(self.n_steps * self.max_duration / self.duration))
 
 
 @dataclass
@@ -127,10 +53,6 @@ class CollapseRun:
     cpu_time: float = float("nan")
     commits: tuple = ()
 
-
-#: the smallest step dt/sqrt(h0/g) a collapse takes: 4e-5 of the default step, far below any use;
-#: at 1e-300 the step's masses over dt^2 overflow
-SMALLEST_SCALED_STEP = 1e-9
 
 #: settings that change when a run stops or checkpoints, never a step: a checkpoint resumes across them
 NOT_IN_FINGERPRINT = ("checkpoint_every", "max_duration")

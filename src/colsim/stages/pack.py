@@ -36,7 +36,7 @@ from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, sittings_commits
-from .pack_defaults import CHECKPOINT_EVERY, DEFAULT_MAX_SPHERES, FREEZE_DEPTH, LAYER_HEIGHT, POUR_STEP_RANGE
+from .settings import POUR_STEP_RANGE, PackSettings
 from .pour_geometry import CLOUD_SOLID_FRACTION, cloud_spheres, expected_spheres, mean_sphere_volume  # noqa: F401
 from .stopwatch import Stopwatch
 
@@ -153,12 +153,22 @@ LANDED_ENERGY_FACTOR = 100.0
 LOG_INTERVAL_S = 60.0
 
 
+def pack_from(settings: PackSettings, rng: np.random.Generator, solver: Solver,
+              checkpoint: str | Path | None = None, progress=None) -> PackingResult:
+    """:func:`pack` with the pour's settings (`colsim pack`'s)."""
+    return pack(settings.r0, settings.height, rng, solver, (settings.diameter_min, settings.diameter_max),
+                settings.density, settings.gravity, settings.dt, settings.rest_energy, settings.max_steps,
+                progress=progress, mu=settings.mu, max_spheres=settings.max_spheres,
+                layer_height=settings.layer_height, freeze_depth=settings.freeze_depth, checkpoint=checkpoint,
+                checkpoint_every=settings.checkpoint_every)
+
+
 def pack(r0: float, height: float, rng: np.random.Generator, solver: Solver, diameter_range=(0.25, 0.5),
-         density: float = 1.0, gravity: float = 9.81, dt: float = 0.02, rest_energy: float = 1e-3,
-         max_steps: int = 5000, progress=None, mu: float = 0.0,
-         max_spheres: int | None = DEFAULT_MAX_SPHERES, layer_height: float | None = LAYER_HEIGHT,
-         freeze_depth: float = FREEZE_DEPTH, checkpoint: str | Path | None = None,
-         checkpoint_every: int = CHECKPOINT_EVERY) -> PackingResult:
+         density: float = PackSettings.density, gravity: float = PackSettings.gravity, dt: float = PackSettings.dt,
+         rest_energy: float = PackSettings.rest_energy, max_steps: int = PackSettings.max_steps, progress=None,
+         mu: float = PackSettings.mu, max_spheres: int | None = PackSettings.max_spheres,
+         layer_height: float | None = PackSettings.layer_height, freeze_depth: float = PackSettings.freeze_depth,
+         checkpoint: str | Path | None = None, checkpoint_every: int = PackSettings.checkpoint_every) -> PackingResult:
     """Fill a cylinder of radius r0 until the settled packing is taller than `height` (length),
     solving each step with `solver`. mu: sliding friction between the spheres and with the floor
     while filling (the paper's 0; the cylinder stays frictionless, rolling is free).
@@ -290,7 +300,7 @@ def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarra
 
 def _settle(state: ParticleState, fixed: np.ndarray, settings: StepSettings, solver: Solver,
             warm: WarmStart | None, steps: int, max_steps: int, rest_energy: float, progress,
-            resume: dict | None = None, save=None, save_every: int = CHECKPOINT_EVERY,
+            resume: dict | None = None, save=None, save_every: int = PackSettings.checkpoint_every,
             clock: Stopwatch | None = None, history: list | None = None):
     """Step the spheres not `fixed` ((n,) bool) on the fixed ones until :func:`is_at_rest` with
     rest_energy. warm: forces by pair in the numbering of `state` (None: cold). Returns the new

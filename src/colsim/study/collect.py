@@ -14,7 +14,7 @@ from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
 from ..io.checks import FileProblem, check_attributes
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 from ..solvers.defaults import SOLVERS
-from ..stages import collapse_defaults
+from ..stages.settings import CollapseSettings
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
                      "solid_fraction", "final_to_peak_kinetic_energy", "wall_time",
@@ -34,7 +34,7 @@ RUN_ATTRIBUTES = {
 # checkpointing, threads and the packing's size bound (none of which changes a result)
 SWEPT = ("aspect_ratio", "mu_r", "seed")
 NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads",
-                             "max_spheres"}
+                             "max_spheres", "settings", "verbose", "quiet"}
 
 
 def run_settings(analysis) -> dict:
@@ -196,7 +196,7 @@ def means_per_size(study) -> xr.Dataset:
     return means.set_coords([n for n in ("r0", "aspect_ratio", "r0_over_mean_diameter", "duration") if n in means])
 
 
-REST_ENERGY = collapse_defaults.REST_ENERGY
+REST_ENERGY = CollapseSettings.rest_energy
 """The collapse's default rest test on the kinetic energy, for runs whose settings do not say it."""
 MAIN_MASS_SHARE = 0.5
 """A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:

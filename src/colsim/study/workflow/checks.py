@@ -10,7 +10,7 @@ import re
 import jsonschema
 import yaml
 
-from ...stages.pack_defaults import POUR_STEP_RANGE
+from ...stages.settings import POUR_STEP_RANGE
 from ...stages.pour_geometry import expected_spheres
 
 #: far above any study's configuration (the default has about 100)

@@ -17,7 +17,6 @@ from __future__ import annotations
 import hashlib
 import json
 
-from ...io import atomic_path
 
 RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
@@ -62,12 +61,14 @@ def study_dir(config) -> str:
     return f"{RESULTS}/{config['study']}" if config["study"] else RESULTS
 
 
-def write_settings(settings, path) -> None:
-    """Write a run's or packing's settings (its identity) as YAML, atomically."""
-    import yaml   # Snakemake's dependency, not colsim's: only the workflow writes settings
+def settings_text(settings) -> str:
+    """A packing's, a run's or the analyses' settings (their identity) as the text of their
+    settings.yaml: one line of JSON, keys sorted (JSON is YAML; the dry run's -p shows it whole)."""
+    return json.dumps(settings, sort_keys=True)
 
-    with atomic_path(path) as tmp, open(tmp, "w") as stream:
-        yaml.safe_dump(settings, stream, sort_keys=True)
+
+#: the settings rules' command: the text to a temporary file, then renamed (never half-written)
+WRITE_SETTINGS = "printf '%s\\n' {params.text:q} > {output:q}.tmp && mv {output:q}.tmp {output:q}"
 
 
 class UnknownFolder(LookupError):

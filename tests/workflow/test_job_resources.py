@@ -1,32 +1,13 @@
-"""colsim.study.workflow.command_lines: a run's command-line options and cluster resources, from its settings."""
+"""colsim.study.workflow.job_resources: a job's cluster resources and priority, from its settings."""
 from __future__ import annotations
 
 import pytest
 
-from colsim.study.workflow.command_lines import (PACK_PRIORITY, PACK_REFERENCE_S, PACK_REFERENCE_SPHERES,
-                                            SETTINGS_PRIORITY, collapse_options, collapse_priority,
-                                            collapse_runtime, numbers, pack_priority, pack_resources, spheres_of)
+from colsim.study.workflow.job_resources import (PACK_PRIORITY, PACK_REFERENCE_S, PACK_REFERENCE_SPHERES,
+                                                 SETTINGS_PRIORITY, collapse_priority, collapse_runtime,
+                                                 pack_priority, pack_resources, spheres_of)
 from test_study_plan import study_config
 from colsim.study.workflow.plan import StudyPlan
-
-
-def test_list_options_keep_every_digit():
-    assert numbers([0.1, 0.5, 1.0]) == "0.1 0.5 1" and numbers([0.1308996938995747]) == "0.1308996938995747"
-
-
-def test_a_runs_options_come_from_its_settings():
-    plan = StudyPlan(study_config())
-    run = plan.run_settings(0.12, 100, 4.0, "associated")
-    assert collapse_options(run) == ("--rolling-lever paper --friction-law associated --steps 100 --duration 4"
-                                     " --frame-every 10 --solver auto")
-    coulomb = plan.run_settings(0.12, 100, 4.0, "coulomb")
-    assert collapse_options(coulomb).startswith("--rolling-lever paper --friction-law coulomb --steps 100")
-    assert "--friction-tolerance 1e-05 --solver auto" in collapse_options(coulomb)
-    rest = StudyPlan(study_config({"collapse": {"max_duration": 8, "rest_tolerance": 0.2},
-                                   "solver_overlap_tolerance": 0}))
-    options = collapse_options(rest.run_settings(0.12, 100, 4.0, "associated"))
-    assert options.endswith("--max-duration 8 --rest-window 1 --rest-tolerance 0.2 --rest-energy 0.01"
-                            " --solver auto --solver-overlap-tolerance 0")
 
 
 def test_a_runs_time_limit_and_priority_come_from_its_settings():

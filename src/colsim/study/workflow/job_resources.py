@@ -1,34 +1,8 @@
-"""The values and options of the workflow's `colsim` command lines and its jobs' cluster resources,
-from a packing's or a run's settings (plan.py): a value is formatted once, here, as it appears on
-the command line, and never read back from a folder's name."""
+"""A workflow job's cluster resources (time limit, memory) and scheduling priority, from a packing's
+or a run's settings (plan.py) and about how many spheres it holds."""
 from __future__ import annotations
 
 import numpy as np
-
-from .plan import fmt
-
-
-def numbers(values) -> str:
-    """A list option's values, each without loss (fmt): [0.1, 0.5, 1.0] -> '0.1 0.5 1'."""
-    return " ".join(fmt(value) for value in values)
-
-
-def collapse_options(run: dict) -> str:
-    """What follows --mu-r on a run's collapse command line, from its settings: the rolling lever,
-    the friction law (and a Coulomb run's fixed-point tolerance), steps, end time, frames, the rest
-    options, the solver (and its overlap tolerance when the study sets one)."""
-    options = (f"--rolling-lever {run['rolling_lever']} --friction-law {run['friction_law']}"
-               f" --steps {run['steps']} --duration {fmt(run['duration'])} --frame-every {run['frame_every']}")
-    if run["friction_law"] == "coulomb":
-        options += f" --friction-tolerance {run['friction_tolerance']}"
-    if run["rest"] is not None:
-        rest = run["rest"]
-        options += (f" --max-duration {fmt(rest['max_duration'])} --rest-window {fmt(rest['rest_window'])}"
-                    f" --rest-tolerance {fmt(rest['rest_tolerance'])} --rest-energy {fmt(rest['rest_energy'])}")
-    options += f" --solver {run['solver']}"
-    if run["solver_overlap_tolerance"] is not None:
-        options += f" --solver-overlap-tolerance {run['solver_overlap_tolerance']}"
-    return options
 
 
 #: Cluster sizing by the column's spheres, from one-thread jobs on this project's 2-core machine

@@ -1,0 +1,89 @@
+"""The workflow's settings files are what `colsim STAGE --settings` runs with, and the rules'
+command lines name no setting that changes a result (issue 47)."""
+import re
+
+from colsim.cli import build_parser
+from colsim.cli.flags import stage_settings
+from colsim.stages import settings as stage
+from colsim.study.workflow import plan as plan_module
+from colsim.study.workflow.plan import StudyPlan, settings_text
+from helpers import ROOT
+from test_study_plan import study_config
+
+FILES = {"pack": ["--output", "p.nc"], "collapse": ["--input", "c.nc", "--output", "o.nc"],
+         "analyse": ["--input", "o.nc", "--output", "a.nc"]}
+
+
+def _read(command, path):
+    classes = (stage.STAGES[command], stage.SolverSettings) if command in stage.SOLVING_STAGES else (stage.STAGES[command],)
+    return stage_settings(build_parser().parse_args([command, *FILES[command], "--settings", str(path)]), *classes)
+
+
+def test_the_workflow_s_settings_files_are_what_the_stages_run_with(tmp_path):
+    """A packing's, a run's and the analyses' settings.yaml, as the workflow writes them, read by
+    `colsim STAGE --settings` into the stage's settings: each value the plan gives, nothing else."""
+    plan = StudyPlan(study_config({"collapse": {"max_duration": 8, "rest_tolerance": 0.2}, "rolling_lever": "effective"}))
+    cases = {"pack": plan.packing_settings(3.0, 2), "collapse": plan.run_settings(0.2, 100, 4.0, "coulomb"),
+             "analyse": plan.analysis_settings()}
+    made = {}
+    for command, written in cases.items():
+        path = tmp_path / f"{command}.yaml"
+        path.write_text(settings_text(written) + "\n")
+        made[command] = _read(command, path)
+    packing, pack_solver = made["pack"]
+    config = plan.config
+    assert (packing.r0, packing.seed, packing.height, packing.root_seed) == (3.0, 2, cases["pack"]["height"],
+                                                                            config["root_seed"])
+    assert (packing.dt, packing.max_steps, pack_solver.solver) == (config["pack"]["dt"], config["pack"]["max_steps"],
+                                                                 config["solver"])
+    run, solver = made["collapse"]
+    assert (run.mu, run.mu_r, run.n_steps, run.duration, run.friction_law) == (config["mu"], 0.2, 100, 4.0, "coulomb")
+    assert (run.rolling_lever, run.max_duration, run.rest_tolerance, run.frame_every) == (
+        "effective", 8.0, 0.2, config["collapse"]["frame_every"])
+    assert run.friction_tolerance == config["friction_tolerance"] and solver.solver == config["solver"]
+    analysis = made["analyse"]
+    assert analysis.check_tolerances == tuple(config["analysis"]["check_tolerances"])
+    assert analysis.contact_tolerance == config["analysis"]["contact_tolerance"]
+
+
+def test_the_rules_command_lines_name_no_setting_that_changes_a_result():
+    """A setting reaches a stage in its settings.yaml alone: adding one touches its dataclass, the
+    schema and config.yaml, not a rule. The rules' flags are files, threads, checkpoints and the
+    packing's size bound, and the trim's swept a."""
+    rules = (ROOT / "workflow/rules/simulate.smk").read_text()
+    flags = set(re.findall(r'colsim [a-z-]+[^\n]*|^\s+" --[^\n]*', rules, flags=re.M))
+    named = {flag for line in flags for flag in re.findall(r"--([a-z-]+)", line)}
+    assert named <= {"settings", "input", "output", "output-dir", "threads", "checkpoint-every", "max-spheres",
+                     "aspect-ratio"}, named
+    for command in ("pack", "collapse", "analyse"):
+        assert re.search(rf"colsim {command} --settings", rules), command
+
+
+#: settings in config.yaml that do not decide a result, so no key hashes them: plan.NOT_IDENTITY's
+#: and the collapse's checkpoints and threads
+NOT_IDENTITY = set(plan_module.NOT_IDENTITY) | {"checkpoint_every", "threads"}
+#: top-level settings of one stage only (the schema says so)
+ONE_STAGE = {"solver_overlap_tolerance": "collapse"}
+
+
+def _names(settings: dict) -> set:
+    """The setting names a settings dictionary holds, its sections' included."""
+    return {key for key, value in settings.items() if not isinstance(value, dict)} | {
+        key for value in settings.values() if isinstance(value, dict) for key in value}
+
+
+def test_every_setting_the_config_holds_is_in_its_key_or_said_not_to_change_a_result():
+    """Adding a setting to a stage and config.yaml but not to the plan's settings (the run's key)
+    fails here: the run would be made with it, yet two values would share one folder."""
+    config = study_config({"collapse": {"max_duration": 8}, "pack": {"layer_height": 2.5}})
+    plan = StudyPlan(config)
+    places = {"pack": ("pack", plan.packing_settings(3.0, 1)), "collapse": ("collapse", plan.run_settings(
+        0.12, 100, 4.0, "coulomb")), "analyse": ("analysis", plan.analysis_settings())}
+    for command, (section, identity) in places.items():
+        classes = (stage.STAGES[command], stage.SolverSettings) if command in stage.SOLVING_STAGES else (stage.STAGES[command],)
+        for cls in classes:
+            for item in stage.declared(cls):
+                name = stage.external_name(item)
+                if name in config.get(section, {}) or name in config and ONE_STAGE.get(name, command) == command:
+                    assert name in _names(identity) or name in NOT_IDENTITY, (
+                        f"{command}'s {name} is in the configuration but not in its settings' key (plan.py)")
