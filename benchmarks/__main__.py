@@ -32,7 +32,7 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator")
+         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -59,6 +59,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "gauss_seidel": [*c, "--steps", "2", "--n-steps", "100", "--variants", "down:1"],
             "study_cost": _study_results(),
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
+            "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -68,11 +69,12 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "gauss_seidel": [*c, "--steps", "2", "50", "150", "400"],
         "study_cost": _study_results(),
         "cuda_operator": _cuda([]),
+        "gpu": _cuda([]),
     }[name]
 
 
 def _cuda(arguments: list[str]) -> list[str] | None:
-    """cuda_operator's arguments where a GPU (or numba's CUDA simulator) answers, else None (skipped)."""
+    """A GPU benchmark's arguments where a GPU (or numba's CUDA simulator) answers, else None (skipped)."""
     try:
         from numba import cuda
 
@@ -116,7 +118,8 @@ def run_all(quick: bool) -> int:
             argv = arguments_for_all(name, quick, column, Path(scratch))
             if argv is None:
                 why = {"study_cost": "no study's runs under results/",
-                       "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator"}[name]
+                       "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
+                       "gpu": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator"}[name]
                 print(f"\n## {name}: skipped ({why})", flush=True)
                 continue
             print(f"\n## {name} {' '.join(argv)}", flush=True)

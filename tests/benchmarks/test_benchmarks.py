@@ -17,8 +17,8 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 
 import record   # noqa: E402
 
-NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "gauss_seidel", "packings", "solvers", "step", "stopping", "study_cost", "threads",
-         "tolerance", "trajectory")
+NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "gauss_seidel", "gpu", "packings",
+         "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 

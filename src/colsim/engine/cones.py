@@ -15,6 +15,8 @@ particle at rest) and F = max(mean p, F0), so that a step whose contacts all ope
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -71,28 +73,29 @@ def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> n
     return out
 
 
-def project_point(p0, q1, q2, r1, r2, a, b):
-    """:func:`project_coupled_cone` of one point (scalar code; compiled by numba when installed)."""
-    nq = np.sqrt(q1 * q1 + q2 * q2)
-    nr = np.sqrt(r1 * r1 + r2 * r2)
-    if p0 >= 0.0 and nq <= a * p0 and nr <= b * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
+def project_point(p0, q1, q2, r1, r2, mu, mu_r):
+    """:func:`project_coupled_cone` of one point onto {||q|| <= mu p, ||r|| <= mu_r p} (scalar code:
+    compiled by numba when installed, and for the GPU by numba.cuda)."""
+    nq = math.sqrt(q1 * q1 + q2 * q2)
+    nr = math.sqrt(r1 * r1 + r2 * r2)
+    if p0 >= 0.0 and nq <= mu * p0 and nr <= mu_r * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
         return p0, q1, q2, r1, r2
-    bq = nq / a if a > 0 else np.inf
-    br = nr / b if b > 0 else np.inf
+    bq = nq / mu if mu > 0 else math.inf
+    br = nr / mu_r if mu_r > 0 else math.inf
     if bq <= br:
-        t1, t2, c2, n2 = bq, br, b, nr
+        t1, t2, c2, n2 = bq, br, mu_r, nr
     else:
-        t1, t2, c2, n2 = br, bq, a, nq
-    if t1 < np.inf and t1 - p0 - c2 * max(n2 - c2 * t1, 0.0) < 0.0:
-        if t2 < np.inf and t2 - p0 < 0.0:
+        t1, t2, c2, n2 = br, bq, mu, nq
+    if t1 < math.inf and t1 - p0 - c2 * max(n2 - c2 * t1, 0.0) < 0.0:
+        if t2 < math.inf and t2 - p0 < 0.0:
             p = max(p0, t2)                                   # no term active
         else:
             p = min(max((p0 + c2 * n2) / (1.0 + c2 * c2), t1), t2)  # only the t2 term active
     else:
-        p = min(max((p0 + a * nq + b * nr) / (1.0 + a * a + b * b), 0.0), t1)  # both active
+        p = min(max((p0 + mu * nq + mu_r * nr) / (1.0 + mu * mu + mu_r * mu_r), 0.0), t1)  # both active
     p = max(p, 0.0)
-    fq = a * p / nq if nq > a * p else 1.0
-    fr = b * p / nr if nr > b * p else 1.0
+    fq = mu * p / nq if nq > mu * p else 1.0
+    fr = mu_r * p / nr if nr > mu_r * p else 1.0
     return p, q1 * fq, q2 * fq, r1 * fr, r2 * fr
 
 

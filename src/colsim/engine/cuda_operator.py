@@ -12,8 +12,8 @@ summed in a fixed order.
   sums in block order (:func:`dot`): the same bits every run on one device, for one block size.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set by the tests),
-which is how CI checks them against the CPU kernels. Nothing in a step uses them yet: the APGD
-iteration, detection and the warm start follow (docs/performance.md, "One GPU").
+which is how CI checks them against the CPU kernels. APGD's iterations on the GPU use them
+(:mod:`colsim.solvers.apgd_cuda`); detection and the warm start follow (docs/performance.md, "One GPU").
 """
 from __future__ import annotations
 
@@ -22,13 +22,14 @@ import math
 import numpy as np
 from numba import cuda
 
-from .operator import body_contacts
+from .operator import ContactGeometry, body_contacts
 
 #: threads a block; a power of two (the dot product's tree halves it)
 THREADS = 128
 
 
-def _blocks(count: int) -> int:
+def blocks_for(count: int) -> int:
+    """Blocks of THREADS threads for one thread an item."""
     return max(1, math.ceil(count / THREADS))
 
 
@@ -149,10 +150,27 @@ def _block_dot_kernel(a, b, partial):
 def dot(a, b) -> float:
     """a . b of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
     block order, so the result is the same every run."""
-    blocks = _blocks(a.shape[0])
+    blocks = blocks_for(a.shape[0])
     partial = cuda.device_array(blocks, dtype=np.float64)
     _block_dot_kernel[blocks, THREADS](a, b, partial)
     return float(np.sum(partial.copy_to_host()))
+
+
+def gradient_on_device(geometry: ContactGeometry, h, inv_mass, c, out) -> None:
+    """out (5m,) = S B Mbar^-1 h + c, every array on the device (colsim.engine.operator.gradient_of)."""
+    g = geometry
+    if g.i.shape[0]:
+        _gradient_kernel[blocks_for(g.i.shape[0]), THREADS](h, inv_mass, g.s, g.i, g.j, g.normal, g.tangent1,
+                                                           g.tangent2, g.radius_i, g.radius_j, g.lever, c, out)
+
+
+def transpose_on_device(geometry: ContactGeometry, z, out) -> None:
+    """out (6n,) = B' S z, every array on the device (colsim.engine.operator.transpose_of)."""
+    g = geometry
+    if g.i.shape[0]:
+        _wrench_kernel[blocks_for(g.i.shape[0]), THREADS](z, g.s, g.normal, g.tangent1, g.tangent2, g.radius_i,
+                                                         g.radius_j, g.lever, g.work)
+    _transpose_kernel[blocks_for(g.start.shape[0] - 1), THREADS](g.work, g.start, g.entry, out)
 
 
 class CudaContactOperator:
@@ -164,13 +182,32 @@ class CudaContactOperator:
         i = np.ascontiguousarray(contacts.i, dtype=np.int64)
         j = np.ascontiguousarray(contacts.j, dtype=np.int64)
         start, entry = body_contacts(i, j, self.n)
-        self.m = len(i)
-        host = {"i": i, "j": j, "start": start, "entry": entry,
-                **{name: np.ascontiguousarray(getattr(contacts, attribute), dtype=float) for name, attribute in (
-                    ("normal", "normal"), ("tangent1", "tangent1"), ("tangent2", "tangent2"),
-                    ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "rolling_radius"))}}
-        self.device = {name: cuda.to_device(array) for name, array in host.items()}
+        self._copy({"i": i, "j": j, "start": start, "entry": entry,
+                    **{name: getattr(contacts, attribute) for name, attribute in (
+                        ("normal", "normal"), ("tangent1", "tangent1"), ("tangent2", "tangent2"),
+                        ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "rolling_radius"))}})
+
+    @classmethod
+    def from_operator(cls, operator) -> "CudaContactOperator":
+        """The GPU's copy of a :class:`colsim.engine.operator.ContactOperator` (its lists of each
+        body's contacts included)."""
+        self = cls.__new__(cls)
+        self.n = int(operator.n)
+        self._copy({name: getattr(operator, name) for name in ("i", "j", "start", "entry", "normal", "tangent1",
+                                                              "tangent2", "radius_i", "radius_j", "lever")})
+        return self
+
+    def _copy(self, host: dict) -> None:
+        self.m = len(host["i"])
+        self.device = {name: cuda.to_device(np.ascontiguousarray(array, dtype=np.int64 if name in (
+            "i", "j", "start", "entry") else float)) for name, array in host.items()}
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
+
+    def geometry(self, s) -> ContactGeometry:
+        """The contacts by name on the device, with the rows' scaling s (5m,) (a device array)."""
+        d = self.device
+        return ContactGeometry(s, d["i"], d["j"], d["normal"], d["tangent1"], d["tangent2"], d["radius_i"],
+                               d["radius_j"], d["lever"], d["start"], d["entry"], self.work)
 
     def _frames(self):
         d = self.device
@@ -183,15 +220,11 @@ class CudaContactOperator:
         inv_mass = self._ones(6 * self.n) if inv_mass is None else inv_mass
         s = self._ones(5 * self.m) if s is None else s
         c = cuda.to_device(np.zeros(5 * self.m)) if c is None else c
-        _gradient_kernel[_blocks(self.m), THREADS](u, inv_mass, s, *self._frames(), c, out)
+        gradient_on_device(self.geometry(s), u, inv_mass, c, out)
 
     def transpose_on_device(self, z, s, out) -> None:
         """out (6n,) = B' S z, every array on the device."""
-        d = self.device
-        if self.m:
-            _wrench_kernel[_blocks(self.m), THREADS](z, s, d["normal"], d["tangent1"], d["tangent2"],
-                                                    d["radius_i"], d["radius_j"], d["lever"], self.work)
-        _transpose_kernel[_blocks(self.n), THREADS](self.work, d["start"], d["entry"], out)
+        transpose_on_device(self.geometry(s), z, out)
 
     def _ones(self, size: int):
         return cuda.to_device(np.ones(size))
@@ -213,6 +246,6 @@ class CudaContactOperator:
         """(m, 5) the diagonal of B Mbar^-1 B' (inv_mass: (6n,) the diagonal of Mbar^-1)."""
         out = cuda.device_array((max(self.m, 1), 5), dtype=np.float64)
         if self.m:
-            _diagonal_kernel[_blocks(self.m), THREADS](cuda.to_device(np.ascontiguousarray(inv_mass, dtype=float)),
+            _diagonal_kernel[blocks_for(self.m), THREADS](cuda.to_device(np.ascontiguousarray(inv_mass, dtype=float)),
                                                       *self._frames(), out)
         return out.copy_to_host()[: self.m]

@@ -9,6 +9,8 @@ number of threads.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .compiled import HAVE_NUMBA, numba, prange
@@ -123,6 +125,47 @@ if HAVE_NUMBA:
     jacobian_diagonal = _parallel(jacobian_diagonal)
 
 
+class ContactGeometry(NamedTuple):
+    """The contacts of one program as the kernels take them, by name (numpy arrays for the CPU's,
+    device arrays for the GPU's): s (5m,) the rows' scaling S; i, j (m,) the bodies (j < 0: a wall
+    or a fixed sphere); normal, tangent1, tangent2 (m, 3) the frames; radius_i, radius_j (m,) the
+    contact points' distances from the centres; lever (m,) the rolling lever; start (n + 1,) and
+    entry (2m,) each body's contacts (:func:`body_contacts`); work (m, 9) room for the wrenches."""
+
+    s: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    normal: np.ndarray
+    tangent1: np.ndarray
+    tangent2: np.ndarray
+    radius_i: np.ndarray
+    radius_j: np.ndarray
+    lever: np.ndarray
+    start: np.ndarray
+    entry: np.ndarray
+    work: np.ndarray
+
+
+def transpose_of(geometry: ContactGeometry, z: np.ndarray, out: np.ndarray) -> None:
+    """out (6n,) = B' S z (:func:`apply_transpose` by the geometry's names)."""
+    g = geometry
+    apply_transpose(z, g.s, g.normal, g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, g.start, g.entry,
+                    g.work, out)
+
+
+def gradient_of(geometry: ContactGeometry, h: np.ndarray, inv_mass: np.ndarray, c: np.ndarray,
+                out: np.ndarray) -> None:
+    """out (5m,) = S B Mbar^-1 h + c (:func:`apply_gradient` by the geometry's names)."""
+    g = geometry
+    apply_gradient(h, inv_mass, g.s, g.i, g.j, g.normal, g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever,
+                   c, out)
+
+
+if HAVE_NUMBA:
+    transpose_of = numba.njit(cache=True)(transpose_of)
+    gradient_of = numba.njit(cache=True)(gradient_of)
+
+
 class ContactOperator:
     """B of m contacts among n bodies, applied without the matrix (:func:`apply_gradient`,
     :func:`apply_transpose`). Walls and fixed spheres (j < 0) do not move: no second body."""
@@ -141,6 +184,12 @@ class ContactOperator:
     @property
     def m(self) -> int:
         return len(self.i)
+
+    def geometry(self, scaling: np.ndarray) -> ContactGeometry:
+        """The contacts by name with the rows' scaling S (5m,), for the kernels."""
+        return ContactGeometry(np.ascontiguousarray(scaling, dtype=float), self.i, self.j, self.normal,
+                               self.tangent1, self.tangent2, self.radius_i, self.radius_j, self.lever,
+                               self.start, self.entry, self.work)
 
     def frames(self) -> tuple:
         """(i, j, normal, tangent1, tangent2, R_i, R_j, lever): the kernels' contact arguments."""

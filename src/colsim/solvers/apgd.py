@@ -42,6 +42,7 @@ global frame, and re-expresses them in the next step's contact frames.
 from __future__ import annotations
 
 import logging
+import math
 import time
 
 import numpy as np
@@ -51,9 +52,7 @@ from . import defaults
 from ..engine.cones import (HAVE_NUMBA, force_floor, length_scale, mean_diameter, project_compiled,
                             project_coupled_cone, project_point, row_scaling, scaled_coefficients,
                             scaled_residuals, scales_of_diagonal)
-from ..engine.operator import ContactOperator
-from ..engine.operator import apply_gradient as _apply_gradient
-from ..engine.operator import apply_transpose as _apply_transpose
+from ..engine.operator import ContactOperator, gradient_of, transpose_of
 from ..engine.program import ROWS_PER_CONTACT, ConeProgram
 from ..engine.solver_contract import ConeSolution, Solver, SolverError, at_step
 from ..engine.compiled import prange
@@ -126,56 +125,86 @@ def _weighted_change(h_new, hy, inv_mass, blocks):
     return total
 
 
-def _iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s, inv_mass,
-             lip_decay, blocks):
-    """n_iter APGD iterations; returns (x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks,
-    restarts): the arrays trade places (no copies), hy and g are updated in place.
+# APGD's control flow, written once: Nesterov's momentum, the gradient restart, the backtracking on
+# the step length. It drives a kernel set: the CPU's (below, compiled together with it) or the GPU's
+# (colsim.solvers.apgd_cuda, run from Python, each kernel a launch). The numpy loop in
+# _Iteration._iterate_numpy is the tests' oracle.
 
-    x, hx = T x: the iterate; the extrapolated point is y = x + beta (x - x_prev), never stored
-    (:func:`_project_step`), hy = T y, and g = G hy + c the gradient at y.
-    geometry = (s, i, j, normal, tangent1, tangent2, R_i, R_j, lever, start, entry, work) gives
-    T = B' S and G = S B Mbar^-1 without the matrices (:func:`_apply_transpose`,
-    :func:`_apply_gradient`). After each iteration lip *= lip_decay. The step 1/lip is accepted
-    when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact descent test of a
-    quadratic), or when d = 0 (nothing moved; the test would compare roundings of zero), else lip
-    doubles. Restart when g . (x_new - x) > 0. The loops over contacts and bodies run on numba's
-    threads; the sums over them in `blocks` fixed blocks (one: the serial
-    order), so a result depends on the block count alone.
-    """
-    s, ci, cj, nrm, t1, t2, ri, rj, reff, start, entry, work = geometry
-    backtracks = 0
-    restarts = 0
-    for _ in range(n_iter):
-        while True:
-            dd, uphill = _project_step(x, x_prev, beta, g, x_new, 1.0 / lip, mu_s, mu_r_s, blocks)
-            _apply_transpose(x_new, s, nrm, t1, t2, ri, rj, reff, start, entry, work, h_new)
-            # dd == 0: the step does not move y (every contact already projected onto itself), and
-            # the test would compare two roundings of zero: accept, or lip would double forever
-            if dd == 0.0 or _weighted_change(h_new, hy, inv_mass, blocks) <= lip * dd * (1.0 + 1e-12):
-                break
-            lip *= 2.0
-            backtracks += 1
-        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
-        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-        if uphill > 0.0:
-            theta_new = 1.0
-            beta = 0.0
-            restarts += 1
-        theta = theta_new
-        lip *= lip_decay
-        x_prev, x, x_new = x, x_new, x_prev
-        for i in prange(len(hx)):
-            hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
-        hx, h_new = h_new, hx
-        _apply_gradient(hy, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, g)
-    return x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts
+def apgd_iterations(trial_step, extrapolate, gradient):
+    """The function iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c,
+    mu_s, mu_r_s, inv_mass, lip_decay, reduction) that runs n_iter APGD iterations with the kernel set
+    and returns (x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts): the arrays
+    trade places (no copies), hy and g are updated in place.
+
+    x, hx = T x: the iterate; the extrapolated point is y = x + beta (x - x_prev), never stored,
+    hy = T y, and g = G hy + c the gradient at y; T = B' S and G = S B Mbar^-1 come from the contact
+    `geometry` (:class:`colsim.engine.operator.ContactGeometry`). After each iteration lip *= lip_decay.
+    The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
+    descent test of a quadratic), or when d = 0 (nothing moved; the test would compare roundings of
+    zero), else lip doubles. Restart when g . (x_new - x) > 0.
+
+    The kernel set: trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_s,
+    inv_mass, reduction) sets x_new = Proj_K(y - step g) and h_new = T x_new and returns
+    (||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}); extrapolate(hy, h_new, hx, beta)
+    sets hy = h_new + beta (h_new - hx); gradient(hy, inv_mass, geometry, c, g) sets g = G hy + c.
+    `reduction` is how the kernels sum (the CPU's: a count of fixed blocks; the GPU's: room for the
+    blocks' sums)."""
+
+    def iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s,
+                inv_mass, lip_decay, reduction):
+        backtracks = 0
+        restarts = 0
+        for _ in range(n_iter):
+            while True:
+                dd, uphill, change = trial_step(x, x_prev, beta, g, x_new, 1.0 / lip, h_new, hy, geometry,
+                                                mu_s, mu_r_s, inv_mass, reduction)
+                # dd == 0: the step does not move y (every contact already projected onto itself), and
+                # the test would compare two roundings of zero: accept, or lip would double forever
+                if dd == 0.0 or change <= lip * dd * (1.0 + 1e-12):
+                    break
+                lip *= 2.0
+                backtracks += 1
+            theta_new = 0.5 * (-theta * theta + theta * math.sqrt(theta * theta + 4.0))
+            beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+            if uphill > 0.0:
+                theta_new = 1.0
+                beta = 0.0
+                restarts += 1
+            theta = theta_new
+            lip *= lip_decay
+            x_prev, x, x_new = x, x_new, x_prev
+            extrapolate(hy, h_new, hx, beta)
+            hx, h_new = h_new, hx
+            gradient(hy, inv_mass, geometry, c, g)
+        return x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts
+
+    return iterate
+
+
+def _trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, blocks):
+    """The CPU's trial step (:func:`apgd_iterations`): sums over `blocks` fixed blocks."""
+    dd, uphill = _project_step(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, blocks)
+    transpose_of(geometry, x_new, h_new)
+    return dd, uphill, _weighted_change(h_new, hy, inv_mass, blocks)
+
+
+def _extrapolate(hy, h_new, hx, beta):
+    for i in prange(len(hy)):
+        hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
+
+
+def _gradient(hy, inv_mass, geometry, c, g):
+    gradient_of(geometry, hy, inv_mass, c, g)
 
 
 if HAVE_NUMBA:
     _parallel = numba.njit(cache=True, parallel=True)
     _project_step = _parallel(_project_step)
     _weighted_change = _parallel(_weighted_change)
-    _iterate_compiled = _parallel(_iterate)
+    _extrapolate = _parallel(_extrapolate)
+    _trial_step = numba.njit(cache=True)(_trial_step)
+    _gradient = numba.njit(cache=True)(_gradient)
+    _iterate_compiled = numba.njit(cache=True)(apgd_iterations(_trial_step, _extrapolate, _gradient))
 
 
 class _Iteration:
@@ -186,9 +215,8 @@ class _Iteration:
     def __init__(self, G, T, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay=1.0, operator: ContactOperator | None = None):
         self.G, self.T, self.c, self.mu_s, self.mu_r_s, self.inv_mass = G, T, c, mu_s, mu_r_s, inv_mass
         self.scaling = scaling  # (m, 5) S: lam = S z
-        self.geometry = None if operator is None else (
-            np.ascontiguousarray(scaling.ravel()), *operator.frames(), operator.start, operator.entry,
-            operator.work)
+        self.operator = operator
+        self.geometry = None if operator is None else operator.geometry(scaling.ravel())
         hx = self.apply_T(x)
         self.x, self.hx = x.copy(), hx
         self.x_prev, self.beta, self.hy = x.copy(), 0.0, hx.copy()   # y = x + beta (x - x_prev) = x
@@ -203,8 +231,7 @@ class _Iteration:
         if self.geometry is None:
             return self.T @ z
         out = np.empty(len(self.inv_mass))
-        s, _, _, nrm, t1, t2, ri, rj, lever, start, entry, work = self.geometry
-        _apply_transpose(z, s, nrm, t1, t2, ri, rj, lever, start, entry, work, out)
+        transpose_of(self.geometry, z, out)
         return out
 
     def apply_G(self, h: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -212,7 +239,7 @@ class _Iteration:
         if self.geometry is None:
             return self.G @ h + c
         out = np.empty_like(c)
-        _apply_gradient(h, self.inv_mass, *self.geometry[:9], c, out)
+        gradient_of(self.geometry, h, self.inv_mass, c, out)
         return out
 
     def lipschitz_estimate(self, iterations: int = 12) -> float:
@@ -235,6 +262,10 @@ class _Iteration:
     def residuals(self, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
         """:func:`colsim.engine.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
         return scaled_residuals(self.gradient_at_x(), self.x, self.scaling.ravel(), mu, mu_r, scale, floor)
+
+    def host_x(self) -> np.ndarray:
+        """(5m,) the scaled iterate z."""
+        return self.x
 
     def iterate(self, n: int):
         if self.geometry is not None:
@@ -291,7 +322,8 @@ class ApgdSolver(Solver):
     tolerance: on the relative primal infeasibility and complementarity (dimensionless).
     max_iter: iterations before :class:`SolverError`. check_every: iterations between residual
     checks. precondition: scale each contact's normal, sliding and rolling rows separately.
-    kernel: 'numba' (fused compiled iterations, the default when numba is installed) or 'numpy'.
+    kernel: 'numba' (fused compiled iterations, the default when numba is installed), 'cuda' (the
+    same iterations on one GPU, or on numba's simulator: :mod:`colsim.solvers.apgd_cuda`) or 'numpy'.
     length_floor: the residuals' length is at least this many mean diameters (module docstring;
     0: the step's free flight alone).
     overlap_tolerance: the primal residual also counts as met once the largest cone violation of
@@ -314,10 +346,16 @@ class ApgdSolver(Solver):
             raise ValueError("max_iter and check_every must be >= 1")
         if kernel is None:
             kernel = "numba" if HAVE_NUMBA else "numpy"
-        if kernel not in ("numba", "numpy"):
-            raise ValueError(f"APGD kernel must be 'numba' or 'numpy', got {kernel!r}")
-        if kernel == "numba" and not HAVE_NUMBA:
-            raise ValueError("APGD kernel 'numba' needs numba installed")
+        if kernel not in ("numba", "numpy", "cuda"):
+            raise ValueError(f"APGD kernel must be 'numba', 'cuda' or 'numpy', got {kernel!r}")
+        if kernel in ("numba", "cuda") and not HAVE_NUMBA:
+            raise ValueError(f"APGD kernel {kernel!r} needs numba installed")
+        if kernel == "cuda":
+            from numba import cuda
+
+            if not cuda.is_available():
+                raise ValueError("APGD kernel 'cuda' needs a CUDA GPU (none is visible here) or numba's "
+                                 "simulator (NUMBA_ENABLE_CUDASIM=1)")
         self.tolerance = float(tolerance)
         self.max_iter = int(max_iter)
         self.check_every = int(check_every)
@@ -348,7 +386,7 @@ class ApgdSolver(Solver):
         m = program.m
         inv_mass = 1.0 / program.mass
         # the compiled kernels apply B and B' from the contacts' frames and never form B
-        operator = program.operator if self.kernel == "numba" else None
+        operator = program.operator if self.kernel in ("numba", "cuda") else None
         B = None if operator is not None else program.jacobian.tocsr()
         if not self.precondition:
             s = np.ones((m, 5))
@@ -369,7 +407,12 @@ class ApgdSolver(Solver):
         else:
             x = np.zeros(5 * m)
         if operator is not None:
-            return _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay, operator=operator)
+            start = _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay, operator=operator)
+            if self.kernel == "cuda":
+                from .apgd_cuda import CudaIteration
+
+                return CudaIteration(start, operator, program.mu, program.mu_r)
+            return start
         SB = sp.diags(s.ravel()) @ B
         G = (SB @ sp.diags(inv_mass)).tocsr()
         return _Iteration(G, SB.T.tocsr(), c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay)
@@ -396,7 +439,7 @@ class ApgdSolver(Solver):
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         run = self.prepare(program, warm_start)
         s_flat = run.scaling.ravel()
-        started = "warm" if np.any(run.x) else "cold"
+        started = "warm" if np.any(run.host_x()) else "cold"
         scale, floor, primal_tolerance = self.stopping_scales(program)
         setup_time = time.perf_counter() - start
 
@@ -415,7 +458,7 @@ class ApgdSolver(Solver):
                 converged = True
                 break
         solve_time = time.perf_counter() - start - setup_time
-        forces = (s_flat * run.x).reshape(m, 5)
+        forces = (s_flat * run.host_x()).reshape(m, 5)
         info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:

@@ -1,0 +1,89 @@
+"""APGD's iterations on the GPU (colsim.solvers.apgd_cuda, issue 46): the one control flow
+(colsim.solvers.apgd.apgd_iterations) driving the CUDA kernels follows the CPU's, and a solve on the
+device meets Clarabel as the CPU's does. They run on numba's CUDA simulator here (conftest sets
+NUMBA_ENABLE_CUDASIM=1 unless told otherwise), on a GPU where there is one.
+
+Bounds: a kernel against its CPU twin 1e-12 relative (the same arithmetic; the sums over contacts
+and bodies are added in another order, per block of 128 then by block, so they differ by rounding,
+about 1e-16 a term); 30 iterations 1e-10 of the largest force (rounding carried through as many
+steps, with the same restarts and backtracks); a whole solve: the bounds of test_apgd's
+test_agrees_with_clarabel (1e-3)."""
+import numpy as np
+import pytest
+
+from colsim.solvers import ClarabelSolver
+from colsim.solvers.apgd import ApgdSolver, _trial_step
+from solver_cases import collapse_program, mid_collapse
+
+apgd_cuda = pytest.importorskip("colsim.solvers.apgd_cuda", reason="numba.cuda is not importable")
+cuda = pytest.importorskip("numba").cuda
+
+#: spheres of the program: the simulator runs every thread of a block (128) as a Python thread, about
+#: 1 s an iteration at this size, 3.4 s at the whole pile's 90 spheres
+SPHERES = 16
+
+
+@pytest.fixture(scope="module")
+def program(solver_pile):
+    """One collapse step of the pile's lowest spheres, mid-collapse: contacts between spheres, with
+    the floor and with the cylinder, some sliding."""
+    state = mid_collapse(solver_pile)
+    lowest = np.zeros(state.n, dtype=bool)
+    lowest[np.argsort(state.position[:, 2])[:SPHERES]] = True
+    program = collapse_program(state.subset(lowest))[0]
+    assert program.m > SPHERES and np.all(program.mu > 0) and np.any(program.mu_r > 0)
+    return program
+
+
+def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
+    cpu = ApgdSolver(kernel="numba").prepare(program)
+    gpu = ApgdSolver(kernel="cuda").prepare(program)
+    step = 1.0 / cpu.lip
+    x_new, h_new = np.empty_like(cpu.x), np.empty_like(cpu.hx)
+    ours = apgd_cuda.trial_step(gpu.x, gpu.x_prev, 0.0, gpu.g, gpu.x_new, step, gpu.h_new, gpu.hy, gpu.geometry,
+                                gpu.mu_s, gpu.mu_r_s, gpu.inv_mass, gpu.parts)
+    theirs = _trial_step(cpu.x, cpu.x_prev, 0.0, cpu.g, x_new, step, h_new, cpu.hy, cpu.geometry, cpu.mu_s,
+                         cpu.mu_r_s, cpu.inv_mass, 1)
+    np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-300)
+    for device, host in ((gpu.x_new, x_new), (gpu.h_new, h_new)):
+        np.testing.assert_allclose(device.copy_to_host(), host, rtol=1e-12, atol=1e-12 * np.abs(host).max())
+    for run in (cpu, gpu):
+        run.iterate(10)
+    for scale, floor in ((1.0, 1e-6), (1e-3, 1e-2)):
+        expected = cpu.residuals(program.mu, program.mu_r, scale, floor)
+        found = gpu.residuals(program.mu, program.mu_r, scale, floor)
+        assert found == pytest.approx(expected, rel=1e-12, abs=1e-300)
+
+
+def test_thirty_iterations_follow_the_cpu_s(program):
+    """The same control flow on both kernel sets: the same restarts and backtracks, the same
+    Lipschitz estimate and momentum, and the iterate to rounding."""
+    cpu = ApgdSolver(kernel="numba").prepare(program)
+    gpu = ApgdSolver(kernel="cuda").prepare(program)
+    for run in (cpu, gpu):
+        run.iterate(10)
+        run.iterate(20)   # the momentum carried from one call to the next
+    assert (gpu.backtracks, gpu.restarts) == (cpu.backtracks, cpu.restarts)
+    assert gpu.lip == pytest.approx(cpu.lip, rel=1e-12) and gpu.theta == pytest.approx(cpu.theta, rel=1e-12)
+    x = cpu.host_x()
+    np.testing.assert_allclose(gpu.host_x(), x, rtol=0, atol=1e-10 * np.abs(x).max())
+
+
+def test_a_solve_on_the_device_agrees_with_clarabel(program):
+    """The device's solve, its stopping check included, warm-started from the CPU's answer (a cold
+    solve takes hundreds of iterations, minutes on the simulator): it stops at its first check, and
+    meets Clarabel (at 1e-10) within test_apgd's bounds, 1e-3 on the velocities and the net forces."""
+    warm = ApgdSolver(kernel="numba").solve(program).forces
+    sol = ApgdSolver(kernel="cuda").solve(program, warm_start=warm)
+    assert sol.info["kernel"] == "cuda" and sol.info["start"] == "warm" and sol.iterations == 10
+    assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
+    ref = ClarabelSolver(tolerance=1e-10).solve(program)
+    du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
+    net, net_ref = (program.jacobian.T @ forces.ravel() for forces in (sol.forces, ref.forces))
+    assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
+
+
+def test_cuda_without_a_gpu_or_the_simulator_is_a_clear_error(monkeypatch):
+    monkeypatch.setattr(cuda, "is_available", lambda: False)
+    with pytest.raises(ValueError, match="needs a CUDA GPU"):
+        ApgdSolver(kernel="cuda")
