@@ -54,7 +54,7 @@ def lattice_contacts(spheres: int, seed: int = 0) -> tuple[Contacts, int]:
     radius = np.full(m, DIAMETER / 2)
     contacts = Contacts(i=i, j=j, family=np.zeros(m, dtype=np.int64), normal=normal, tangent1=t1, tangent2=t2,
                         gap=np.linalg.norm(d, axis=1) - DIAMETER, radius_i=radius, radius_j=radius,
-                        rolling_radius=radius.copy(), mu=np.full(m, 0.577), mu_r=np.full(m, 0.12))
+                        lever=radius.copy(), mu=np.full(m, 0.577), mu_r=np.full(m, 0.12))
     return contacts, n
 
 

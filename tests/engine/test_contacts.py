@@ -46,8 +46,8 @@ def test_detect_finds_the_pairs_and_walls_within_the_margin_with_exact_gaps():
     np.testing.assert_allclose(found.normal[floor_b], [0.0, 0.0, -1.0], atol=1e-15)  # towards the wall
     assert found.gap[cylinder_b] == pytest.approx(1.0 - 0.55 - 0.3, abs=1e-15)
     # the paper's lever between spheres (2 R_i R_j / (R_i + R_j)), R_i at a wall; the floor's mu, the cylinder's 0
-    assert found.rolling_radius[pair] == pytest.approx(2 * 0.2 * 0.3 / 0.5)
-    assert found.rolling_radius[floor_b] == pytest.approx(0.3)
+    assert found.lever[pair] == pytest.approx(2 * 0.2 * 0.3 / 0.5)
+    assert found.lever[floor_b] == pytest.approx(0.3)
     assert found.mu[floor_b] == 0.5 and found.mu[cylinder_b] == 0.0
 
 

@@ -22,7 +22,7 @@ def _contacts(i, j, normal, radius):
     reff = np.where(j >= 0, ri * rj / (ri + rj), ri)
     m = len(i)
     return Contacts(i=i, j=j, family=np.where(j >= 0, PARTICLE, FLOOR), normal=normal, tangent1=t1,
-                    tangent2=t2, gap=np.zeros(m), radius_i=ri, radius_j=rj, rolling_radius=reff,
+                    tangent2=t2, gap=np.zeros(m), radius_i=ri, radius_j=rj, lever=reff,
                     mu=np.full(m, 0.5), mu_r=np.full(m, 0.1))
 
 
@@ -48,8 +48,8 @@ def test_jacobian_rows_are_the_relative_displacement(n_dir, radii, seed):
         if b >= 0:
             du += dx[b] - radius[b] * np.cross(dth[b], n)
             rot = rot + dth[b]
-        expected = [n @ du, t1 @ du, t2 @ du, contacts.rolling_radius[k] * (t1 @ rot),
-                    contacts.rolling_radius[k] * (t2 @ rot)]
+        expected = [n @ du, t1 @ du, t2 @ du, contacts.lever[k] * (t1 @ rot),
+                    contacts.lever[k] * (t2 @ rot)]
         np.testing.assert_allclose(local[k], expected, atol=1e-12)
     np.testing.assert_allclose(local[0, 0], normal @ (dx[2] - dx[0]), atol=1e-12)
     # Newton's third law: any pair force lam acts on the two particles with opposite net forces

@@ -29,7 +29,7 @@ class Contacts:
     normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
     gap: (m,) float, length, surface distance at the start of the step
     radius_i, radius_j: (m,) float, length (radius_j = 0 for walls, the fixed sphere's radius)
-    rolling_radius: (m,) float, length, the lever L of the rolling moment L r (law.rolling_lever:
+    lever: (m,) float, length, the lever L of the rolling moment L r (law.rolling_lever:
         the paper's 2 R_i R_j/(R_i + R_j) or R_eff = R_i R_j/(R_i + R_j)), R_i for a wall
     mu, mu_r: (m,) float, sliding and rolling coefficients
     """
@@ -43,7 +43,7 @@ class Contacts:
     gap: np.ndarray
     radius_i: np.ndarray
     radius_j: np.ndarray
-    rolling_radius: np.ndarray
+    lever: np.ndarray
     mu: np.ndarray
     mu_r: np.ndarray
 
@@ -229,11 +229,11 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     radius_i = state.radius[i]
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
                                walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
-    rolling_radius = rolling_lever(radius_i, radius_j, law.rolling_lever)
+    lever = rolling_lever(radius_i, radius_j, law.rolling_lever)
     t1, t2 = tangent_basis(normal)
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
-        radius_i=radius_i, radius_j=radius_j, rolling_radius=rolling_radius,
+        radius_i=radius_i, radius_j=radius_j, lever=lever,
         mu=np.asarray(law.mu)[family], mu_r=np.asarray(law.mu_r)[family],
     )
 

@@ -185,7 +185,7 @@ class CudaContactOperator:
         self._copy({"i": i, "j": j, "start": start, "entry": entry,
                     **{name: getattr(contacts, attribute) for name, attribute in (
                         ("normal", "normal"), ("tangent1", "tangent1"), ("tangent2", "tangent2"),
-                        ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "rolling_radius"))}})
+                        ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "lever"))}})
 
     @classmethod
     def from_operator(cls, operator) -> "CudaContactOperator":

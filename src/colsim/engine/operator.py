@@ -28,7 +28,7 @@ def body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.nda
     return start, entry[np.argsort(bodies, kind="stable")]
 
 
-def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work):
+def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, lever, work):
     """work (m, 9): contact k's force on its second body (minus that on its first), its moment on
     the first body and on the second, from scaled forces z (5m,)."""
     for k in prange(len(ri)):
@@ -37,17 +37,17 @@ def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work):
         r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
         for d in range(3):
             sliding = q2 * t1[k, d] - q1 * t2[k, d]
-            rolling = reff[k] * (r1 * t1[k, d] + r2 * t2[k, d])
+            rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
             work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
             work[k, 3 + d] = ri[k] * sliding - rolling
             work[k, 6 + d] = rj[k] * sliding + rolling
 
 
-def apply_transpose(z, s, nrm, t1, t2, ri, rj, reff, start, entry, work, out):
+def apply_transpose(z, s, nrm, t1, t2, ri, rj, lever, start, entry, work, out):
     """out (6n,) = B' S z without forming B: each body sums its contacts' forces and moments
     (:func:`_contact_wrenches`) in contact order, so the sums are the same on any number of
     threads; work: (m, 9) scratch."""
-    _contact_wrenches(z, s, nrm, t1, t2, ri, rj, reff, work)
+    _contact_wrenches(z, s, nrm, t1, t2, ri, rj, lever, work)
     n = len(start) - 1
     for body in prange(n):
         for d in range(3):
@@ -65,7 +65,7 @@ def apply_transpose(z, s, nrm, t1, t2, ri, rj, reff, start, entry, work, out):
             out[3 * n + 3 * body + d] = moment
 
 
-def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
+def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
     """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion."""
     rot = len(h) // 2
     for k in prange(len(ci)):
@@ -77,16 +77,16 @@ def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
             un += nrm[k, d] * dx
             ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
             ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
-            ur1 -= reff[k] * t1[k, d] * w
-            ur2 -= reff[k] * t2[k, d] * w
+            ur1 -= lever[k] * t1[k, d] * w
+            ur2 -= lever[k] * t2[k, d] * w
             if b >= 0:
                 dx = h[3 * b + d] * inv_mass[3 * b + d]
                 w = h[rot + 3 * b + d] * inv_mass[rot + 3 * b + d]
                 un += nrm[k, d] * dx
                 ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
                 ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
-                ur1 += reff[k] * t1[k, d] * w
-                ur2 += reff[k] * t2[k, d] * w
+                ur1 += lever[k] * t1[k, d] * w
+                ur2 += lever[k] * t2[k, d] * w
         o = 5 * k
         out[o] = s[o] * un + c[o]
         out[o + 1] = s[o + 1] * ut1 + c[o + 1]
@@ -95,7 +95,7 @@ def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, reff, c, out):
         out[o + 4] = s[o + 4] * ur2 + c[o + 4]
 
 
-def jacobian_diagonal(inv_mass, ci, cj, nrm, t1, t2, ri, rj, reff, out):
+def jacobian_diagonal(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
     """out (m, 5) = the diagonal of B Mbar^-1 B': for each row of B, its squared entries weighted by
     the inverse masses and inertias of the body they act on."""
     rot = len(inv_mass) // 2
@@ -113,8 +113,8 @@ def jacobian_diagonal(inv_mass, ci, cj, nrm, t1, t2, ri, rj, reff, out):
                 out[k, 0] += nrm[k, d] ** 2 * lin
                 out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
                 out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
-                out[k, 3] += (reff[k] * t1[k, d]) ** 2 * ang
-                out[k, 4] += (reff[k] * t2[k, d]) ** 2 * ang
+                out[k, 3] += (lever[k] * t1[k, d]) ** 2 * ang
+                out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
 
 
 if HAVE_NUMBA:
@@ -177,7 +177,7 @@ class ContactOperator:
         self.normal, self.tangent1, self.tangent2, self.radius_i, self.radius_j, self.lever = (
             np.ascontiguousarray(v, dtype=float) for v in (
                 contacts.normal, contacts.tangent1, contacts.tangent2, contacts.radius_i,
-                contacts.radius_j, contacts.rolling_radius))
+                contacts.radius_j, contacts.lever))
         self.start, self.entry = body_contacts(self.i, self.j, n_bodies)
         self.work = np.empty((len(self.i), 9))
 

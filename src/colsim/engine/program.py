@@ -115,7 +115,7 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
     n_, t1, t2 = contacts.normal, contacts.tangent1, contacts.tangent2
     ri = contacts.radius_i[:, None]
     rj = contacts.radius_j[:, None]
-    reff = contacts.rolling_radius[:, None]
+    lever = contacts.lever[:, None]
     k = np.arange(m)
 
     rows, cols, vals = [], [], []
@@ -135,16 +135,16 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
     block(1, dth, -ri * t2, i)
     block(2, dx, -t2, i)
     block(2, dth, ri * t1, i)
-    block(3, dth, -reff * t1, i)
-    block(4, dth, -reff * t2, i)
+    block(3, dth, -lever * t1, i)
+    block(4, dth, -lever * t2, i)
     # body j (particles only; walls do not move): du = (dx_j - R_j dth_j x n) - ...
     block(0, dx, n_, j)
     block(1, dx, t1, j)
     block(1, dth, -rj * t2, j)
     block(2, dx, t2, j)
     block(2, dth, rj * t1, j)
-    block(3, dth, reff * t1, j)
-    block(4, dth, reff * t2, j)
+    block(3, dth, lever * t1, j)
+    block(4, dth, lever * t2, j)
 
     return sp.csr_matrix(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
