@@ -123,11 +123,14 @@ def test_grid_helpers_agree_with_the_exact_curve():
 
 def test_the_calibrate_command_writes_its_table_dataset_and_figure(tmp_path):
     """`colsim calibrate ANALYSES`: from analysis files of synthetic runs (2 mu_r, 2 a, 2 r0, 2 seeds,
-    exact values at MU_TRUE), the dataset with units and long names, the table naming the best mu_r,
-    and the figure; a single mu_r is refused in one line."""
+    exact values at MU_TRUE), the dataset with units and long names, CF-1.8 clean (the IOOS checker;
+    the laws and measures as auxiliary labels, colsim.io.open_dataset makes them an index again),
+    the table naming the best mu_r, and the figure; a single mu_r is refused in one line."""
     import xarray as xr
 
+    from colsim import io
     from colsim.cli import main
+    from helpers import cf_check_failures
 
     mu_rs, ratios, radii = np.array([0.1, 0.2]), np.array([1.0, 3.0]), np.array([2.0, 4.0])
     limits = true_limits(mu_rs, ratios)
@@ -147,7 +150,10 @@ def test_the_calibrate_command_writes_its_table_dataset_and_figure(tmp_path):
     out = tmp_path / "calibration.nc"
     assert main(["calibrate", *map(str, paths), "--output", str(out), "--markdown", str(tmp_path / "c.md"),
                  "--figure", str(tmp_path / "c.png"), "--replicates", "20"]) == 0
-    result = xr.load_dataset(out)
+    assert cf_check_failures(out) == []
+    plain = xr.load_dataset(out)
+    assert list(plain.law_label.values) == ["lube", "lajeunesse"] and "law" not in plain.coords
+    result = io.open_dataset(out, "mu-r-calibration")
     assert float(result.best_mu_r.sel(law="lube", measure="both")) == pytest.approx(MU_TRUE, abs=1e-3)
     for name, variable in result.data_vars.items():
         assert "long_name" in variable.attrs, name

@@ -205,9 +205,34 @@ def write_dataset(dataset, path) -> None:
         write_netcdf(dataset, tmp)
 
 
+LABEL_SUFFIX = "_label"
+
+
+def cf_labels(dataset):
+    """`dataset` with each dimension labelled by text (law: 'lube', 'lajeunesse') as CF-1.8 has it:
+    a coordinate variable must be numeric, so the labels become the auxiliary coordinate
+    DIM_label along the dimension, which has no coordinate variable (:func:`labels_as_index` puts
+    them back; in plain xarray, ``ds.swap_dims(law="law_label")``)."""
+    text = [name for name in dataset.dims if name in dataset.coords and dataset[name].dtype.kind in "OUS"]
+    if not text:
+        return dataset
+    return dataset.drop_indexes(text).rename_vars({name: name + LABEL_SUFFIX for name in text})
+
+
+def labels_as_index(dataset):
+    """The inverse of :func:`cf_labels`: each DIM_label along a dimension DIM without a coordinate
+    variable becomes DIM's index again, so that ``.sel(law="lube")`` works."""
+    for name in list(dataset.coords):
+        dim = name[: -len(LABEL_SUFFIX)]
+        if name.endswith(LABEL_SUFFIX) and dataset[name].dims == (dim,) and dim not in dataset.coords:
+            dataset = dataset.rename_vars({name: dim}).set_xindex(dim)
+    return dataset
+
+
 def write_netcdf(dataset, path) -> None:
-    """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units made CF."""
-    dataset = cf_units(dataset.copy())
+    """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units and text
+    labels made CF (:func:`cf_units`, :func:`cf_labels`)."""
+    dataset = cf_units(cf_labels(dataset.copy()))
     encoding = cf_encoding(dataset)
     for name, variable in dataset.variables.items():   # CF: flag_values of the type stored
         if "flag_values" in variable.attrs:
@@ -267,7 +292,7 @@ def open_dataset(path, kind: str):
                 checks.check_trajectory(dataset)
         except checks.FileProblem as problem:
             raise InputError(f"input file {path}: {problem}") from None
-    return dataset
+    return labels_as_index(dataset)
 
 
 def config_of(dataset) -> dict:
