@@ -550,3 +550,15 @@ def test_the_friction_tolerance_has_one_default():
     schema = yaml.safe_load((ROOT / "workflow" / "schemas" / "config.schema.yaml").read_text())
     config = yaml.safe_load((ROOT / "config.yaml").read_text())
     assert schema["properties"]["friction_tolerance"]["default"] == config["friction_tolerance"] == FrictionLaw().tolerance
+
+
+def test_the_lint_asks_only_for_a_conda_environment(tmp_path):
+    """`snakemake --lint`: every rule has its log, no long run directive; what is left is the request
+    for a conda environment or container a rule, declined in the Snakefile (the pip lock is the
+    environment)."""
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "--lint", timeout=120)
+    lints = set(re.findall(r"^    \* (.+?):?$", result.stdout + result.stderr, flags=re.M))
+    assert lints == {"Specify a conda environment or container for each rule."}, lints
+    assert "conda environment" in (directory / "Snakefile").read_text()
+

@@ -12,6 +12,8 @@
 rule packing_settings:
     output:
         f"{PACKING_DIR}/settings.yaml",
+    log:
+        logged(f"{PACKING_DIR}/settings.log"),
     priority: job_resources.SETTINGS_PRIORITY
     params:
         text=lambda wildcards: settings_text(packing_of(wildcards)),
@@ -22,6 +24,8 @@ rule packing_settings:
 rule run_settings:
     output:
         f"{RUN_DIR}/settings.yaml",
+    log:
+        logged(f"{RUN_DIR}/settings.log"),
     priority: job_resources.SETTINGS_PRIORITY
     params:
         text=lambda wildcards: settings_text(run_of(wildcards)),
@@ -96,6 +100,8 @@ rule collapse:
 rule analysis_settings:
     output:
         ANALYSIS_SETTINGS,
+    log:
+        logged(ANALYSIS_SETTINGS[: -len(".yaml")] + ".log"),
     params:
         text=lambda wildcards: settings_text(analysis_settings_of(wildcards)),
     shell:

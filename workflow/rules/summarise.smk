@@ -77,6 +77,4 @@ rule study_config:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
         study_report.write_study_files(dict(params.config), input[0], params.template, output.config,
-                                     output.description, STUDY_DIR)
-        with open(log[0], "w") as stream:
-            print(f"wrote {output.config} and {output.description}", file=stream)
+                                       output.description, STUDY_DIR, log[0])

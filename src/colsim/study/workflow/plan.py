@@ -68,7 +68,7 @@ def settings_text(settings) -> str:
 
 
 #: the settings rules' command: the text to a temporary file, then renamed (never half-written)
-WRITE_SETTINGS = "printf '%s\\n' {params.text:q} > {output:q}.tmp && mv {output:q}.tmp {output:q}"
+WRITE_SETTINGS = "(printf '%s\\n' {params.text:q} > {output:q}.tmp && mv {output:q}.tmp {output:q}) 2> {log:q}"
 
 
 class UnknownFolder(LookupError):

@@ -39,10 +39,10 @@ def render_description(template_text: str, **values) -> str:
     return environment.from_string(template_text).render(**values)
 
 
-def write_study_files(study, summary_path, template, config_path, description_path, study_dir) -> None:
+def write_study_files(study, summary_path, template, config_path, description_path, study_dir, log_path) -> None:
     """Write the study's configuration (YAML) and the report's description rendered from it and from
     the summary (its attributes, and the table against Lube at figures.side_view_mu_r), each to a
-    temporary name and then renamed."""
+    temporary name and then renamed; then a line saying so to `log_path`."""
     import xarray
 
     from ..markdown import lube_rst
@@ -57,6 +57,8 @@ def write_study_files(study, summary_path, template, config_path, description_pa
                         (description_path, lambda s: s.write(text))):
         with atomic_path(path) as tmp, open(tmp, "w") as stream:
             write(stream)
+    with open(log_path, "w") as stream:
+        print(f"wrote {config_path} and {description_path}", file=stream)
 
 
 def report_description(description: str) -> str:
