@@ -9,9 +9,8 @@ from helpers import ROOT
 
 #: where a stage's settings sit in config.yaml: its section, else the top level
 SECTIONS = {"pack": "pack", "collapse": "collapse", "analyse": "analysis", "trim": None}
-#: settings the study sets to its own values, not the stage's default, and why
-STUDY_CHOICES = {"r0": "the study's column size", "root_seed": "the study's seed", "mu_r": "the sweep",
-                 "max_duration": "the study's runs go on to rest"}
+#: settings the study sets to its own values, not the stage's default, and why (the help says so)
+STUDY_CHOICES = {"mu_r": "the sweep", "max_duration": "the study's runs go on to rest"}
 #: settings the workflow does not take from config.yaml, and why
 NOT_IN_CONFIG = {"height": "from the study's largest a", "seed": "the seeds swept", "aspect_ratio": "swept",
                  "checkpoint_every": "the pour's (the collapse's is in config.yaml)", "floor_mu": "the command line's only",
@@ -45,6 +44,7 @@ def test_the_schema_and_config_yaml_say_the_stage_s_default(name, item):
         return
     default = list(item.default) if item.metadata["many"] else item.default
     if key in STUDY_CHOICES:
+        assert "default study" in item.metadata["help"], f"{key}'s help does not give the study's value"
         return
     assert schema.get("default") == default, f"the schema's default of {key} is not {name}'s {default}"
     assert config == default, f"config.yaml's {key} is not {name}'s default {default}"

@@ -87,3 +87,18 @@ def test_every_setting_the_config_holds_is_in_its_key_or_said_not_to_change_a_re
                 if name in config.get(section, {}) or name in config and ONE_STAGE.get(name, command) == command:
                     assert name in _names(identity) or name in NOT_IDENTITY, (
                         f"{command}'s {name} is in the configuration but not in its settings' key (plan.py)")
+
+
+def test_the_cli_defaults_make_the_default_study_s_packing(tmp_path):
+    """`colsim pack --height 15 --seed 1` (docs/cli.md's first line) runs with the settings of the
+    default study's packing of seed 1: the CLI's defaults are config.yaml's."""
+    import yaml
+    from snakemake.utils import validate
+
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    validate(config, str(ROOT / "workflow/schemas/config.schema.yaml"))
+    path = tmp_path / "settings.yaml"
+    path.write_text(settings_text(StudyPlan(config).packing_settings(config["r0"], 1)))
+    by_hand = stage_settings(build_parser().parse_args(["pack", "--height", "15", "--seed", "1", "--output", "p.nc"]),
+                             stage.PackSettings, stage.SolverSettings)
+    assert _read("pack", path) == by_hand

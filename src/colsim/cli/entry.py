@@ -67,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action=_Version, help="show colsim's version and commit, and exit")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("pack", help="fill a cylinder by free fall (mu = mu_r = 0) and let it settle")
+    p = sub.add_parser("pack", help="fill a cylinder by free fall (mu_r = 0, and mu = 0 unless --mu) and let it settle")
     _stage_arguments(p, "pack")
     p.add_argument("--output", required=True, help="packing file to write (netCDF)")
     p.add_argument("--checkpoint", default=None,
