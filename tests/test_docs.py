@@ -116,3 +116,13 @@ def test_every_configuration_file_is_listed_with_its_commands():
         name = f"config/{path.name}"
         assert f"\n{name} " in text, f"{name} missing from the workflow's files"
         assert f"| `{name}` | `snakemake -j2 all --configfile {name}` |" in text, f"{name} missing from the table"
+
+
+@pytest.mark.parametrize("page", sorted(p.name for p in (ROOT / "docs" / "validation").glob("*.md") if p.name != "README.md"))
+def test_every_validation_page_names_its_lever_commit_and_config(page):
+    """Issue 48.4: a measurement says what made it: the rolling lever, the commit and the
+    configuration (a file, or 'none' for one made by hand)."""
+    text = (ROOT / "docs" / "validation" / page).read_text()
+    assert "lever" in text.lower(), "no rolling lever named"
+    assert re.search(r"commit[^.]*\b[0-9a-f]{7,40}\b", text, flags=re.I), "no commit named"
+    assert re.search(r"config", text, flags=re.I), "no configuration named"
