@@ -53,15 +53,15 @@ def test_the_rules_command_lines_name_no_setting_that_changes_a_result():
     rules = (ROOT / "workflow/rules/simulate.smk").read_text()
     flags = set(re.findall(r'colsim [a-z-]+[^\n]*|^\s+" --[^\n]*', rules, flags=re.M))
     named = {flag for line in flags for flag in re.findall(r"--([a-z-]+)", line)}
-    assert named <= {"settings", "input", "output", "output-dir", "threads", "checkpoint-every", "max-spheres",
-                     "aspect-ratio"}, named
+    assert named <= {"settings", "input", "output", "output-dir", "threads", "device", "checkpoint-every",
+                     "max-spheres", "aspect-ratio"}, named
     for command in ("pack", "collapse", "analyse"):
         assert re.search(rf"colsim {command} --settings", rules), command
 
 
 #: settings in config.yaml that do not decide a result, so no key hashes them: plan.NOT_IDENTITY's
 #: and the collapse's checkpoints and threads
-NOT_IDENTITY = set(plan_module.NOT_IDENTITY) | {"checkpoint_every", "threads"}
+NOT_IDENTITY = set(plan_module.NOT_IDENTITY) | {"checkpoint_every", "threads", "device"}
 #: top-level settings of one stage only (the schema says so)
 ONE_STAGE = {"solver_overlap_tolerance": "collapse"}
 

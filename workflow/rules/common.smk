@@ -69,6 +69,10 @@ friction_law_outputs = PLAN.friction_law_outputs
 calibration_outputs = PLAN.calibration_outputs
 
 
+#: GPUs a pack or collapse job asks for: one where APGD runs on a GPU (device: cuda)
+GPUS_A_JOB = 1 if config["device"] == "cuda" else 0
+
+
 DIAMETERS = (config["diameter_min"], config["diameter_max"])
 
 

@@ -3,7 +3,9 @@
 # settings.yaml their folder's key names (common.smk: packing_of, column_of, run_of;
 # colsim.study.workflow.plan), read by `colsim STAGE --settings`, never parsed back from the folder's
 # name, so a changed setting is a new folder and never an overwrite. The command lines add only
-# what does not change a result: threads, checkpoints, the packing's size bound.
+# what does not change a result: threads, the device, checkpoints, the packing's size bound. A job
+# on a GPU asks for resources gpu=1 (profiles/default: one GPU, so such jobs run one at a time;
+# SLURM: a GPU request).
 
 
 # A packing's and a run's settings, readable beside its files (one line of JSON, which is YAML;
@@ -43,15 +45,17 @@ rule pack:
     resources:
         mem_mb=pack_resource("mem_mb"),
         runtime=pack_resource("runtime"),
+        gpu=GPUS_A_JOB,
     params:
         max_spheres=config["pack"]["max_spheres"],
+        device=config["device"],
     log:
         logged(f"{PACKING_DIR}/pack.log"),
     benchmark:
         benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
         "colsim pack --settings {input:q} --max-spheres {params.max_spheres} --threads {threads}"
-        " --output {output:q} > {log:q} 2>&1"
+        " --device {params.device} --output {output:q} > {log:q} 2>&1"
 
 
 # A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
@@ -86,15 +90,18 @@ rule collapse:
     resources:
         mem_mb=4000,
         runtime=collapse_runtime,
+        gpu=GPUS_A_JOB,
     params:
         checkpoint_every=config["collapse"]["checkpoint_every"],
+        device=config["device"],
     log:
         logged(f"{RUN_DIR}/collapse.log"),
     benchmark:
         benchmarked(f"{RUN_DIR}/collapse.tsv")
     shell:
         "colsim collapse --settings {input.settings:q} --input {input.column:q}"
-        " --checkpoint-every {params.checkpoint_every} --threads {threads} --output {output:q} > {log:q} 2>&1"
+        " --checkpoint-every {params.checkpoint_every} --threads {threads} --device {params.device}"
+        " --output {output:q} > {log:q} 2>&1"
 
 
 rule analysis_settings:

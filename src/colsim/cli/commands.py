@@ -90,8 +90,8 @@ def _recorded(args, *stage_settings) -> dict:
 
 def _apgd_options(solver: SolverSettings, tolerance=None) -> dict:
     """APGD's options the settings set (solver_tolerance, else `tolerance` when given;
-    solver_length_floor, solver_overlap_tolerance); the rest keep the back-end's defaults."""
-    options = {}
+    solver_length_floor, solver_overlap_tolerance, the device); the rest keep the back-end's defaults."""
+    options = {"kernel": "cuda"} if solver.device == "cuda" else {}
     if solver.solver_tolerance is not None or tolerance is not None:
         options["tolerance"] = tolerance if solver.solver_tolerance is None else solver.solver_tolerance
     if solver.solver_length_floor is not None:
@@ -111,6 +111,8 @@ def _solver(solver: SolverSettings, scaled_time_step: float):
         ignored = [flag for flag, value in (("--solver-length-floor", solver.solver_length_floor),
                                             ("--solver-overlap-tolerance", solver.solver_overlap_tolerance))
                    if value is not None]
+        if solver.device != "cpu":
+            ignored.append(f"--device {solver.device}")
         if ignored:
             raise io.InputError(f"{' and '.join(ignored)} {'are' if len(ignored) > 1 else 'is'} APGD's"
                                 f" (--solver auto or apgd); --solver {solver.solver} would ignore it")

@@ -1,0 +1,64 @@
+"""`--device cuda` (issue 46.5): APGD's iterations of pack and collapse on one GPU, here on numba's
+CUDA simulator (conftest sets NUMBA_ENABLE_CUDASIM=1). The rest of a step stays on the CPU, so the
+GPU's collapse takes the CPU's steps with the same solver: the same iterations and, up to the
+rounding of its sums, the same deposit."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+
+def colsim(*args, cwd, simulator: bool = True):
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if simulator else "0"}
+    return subprocess.run([sys.executable, "-m", "colsim.cli", "-q", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=900, env=env)
+
+
+@pytest.fixture(scope="module")
+def column(tmp_path_factory):
+    """A 27-sphere column (r0 = 0.8, a = 1)."""
+    folder = tmp_path_factory.mktemp("device")
+    for args in (["pack", "--r0", "0.8", "--height", "0.8", "--seed", "1", "--output", "pack.nc"],
+                 ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc"]):
+        assert colsim(*args, cwd=folder).returncode == 0
+    return folder
+
+
+@pytest.mark.slow
+def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
+    """4 steps at dt/sqrt(h0/g) = 0.004 (the simulator runs about 1 s an iteration: 80 iterations
+    here; 20 steps would take 5 minutes): the same iterations a step, and the end positions within
+    1e-9 of a diameter (measured: equal; both stop at the same check, and the GPU's sums differ from
+    the CPU's by rounding only)."""
+    runs = {}
+    for device in ("cpu", "cuda"):
+        done = colsim("collapse", "--input", "column.nc", "--steps", "4", "--duration", "0.016", "--device", device,
+                      "--output", f"{device}.nc", cwd=column)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs[device] = xr.load_dataset(column / f"{device}.nc")
+    cpu, gpu = runs["cpu"], runs["cuda"]
+    np.testing.assert_array_equal(gpu.step_solver_iterations.values, cpu.step_solver_iterations.values)
+    assert set(gpu.step_solver_backend.values) == {"apgd"}
+    diameter = 2 * float(cpu.radius.mean())
+    end = [run.position.isel(time=-1).values for run in (cpu, gpu)]
+    assert np.abs(end[0] - end[1]).max() <= 1e-9 * diameter
+    assert '"device": "cuda"' in gpu.attrs["config"] and '"kernel": "cuda"' in gpu.attrs["config"]
+
+
+@pytest.mark.parametrize("extra, simulator, words", [
+    (["--solver", "clarabel", "--device", "cuda"], True, ["--device cuda", "APGD's", "--solver clarabel"]),
+    (["--device", "cuda"], False, ["needs a CUDA GPU", "NUMBA_ENABLE_CUDASIM"]),
+    (["--device", "tpu"], True, ["--device", "invalid choice: 'tpu'"]),
+])
+def test_a_device_colsim_cannot_use_is_refused_in_one_line(column, extra, simulator, words):
+    done = colsim("collapse", "--input", "column.nc", "--steps", "2", *extra, "--output", "x.nc", cwd=column,
+                  simulator=simulator)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    last = done.stderr.strip().splitlines()[-1]
+    assert all(word in last for word in words), last
+    assert not (column / "x.nc").exists()
