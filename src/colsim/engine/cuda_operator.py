@@ -20,7 +20,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import cuda
+
+if not hasattr(np, "row_stack"):   # numba-cuda 0.30.4 calls np.row_stack, which numpy 2.5 removed
+    np.row_stack = np.vstack       # (the same function; numpy 2.4, this project's lock, still has it)
+
+from numba import cuda  # noqa: E402 (after the alias)
 
 from .operator import ContactGeometry, body_contacts
 

@@ -16,11 +16,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import cuda
 
+from ..engine.cuda_operator import (THREADS, CudaContactOperator, blocks_for, cuda, gradient_on_device,
+                                    transpose_on_device)   # first: it makes numba.cuda importable on numpy 2.5
 from ..engine.cones import combine_residuals, project_point
-from ..engine.cuda_operator import (THREADS, CudaContactOperator, blocks_for, gradient_on_device,
-                                    transpose_on_device)
 from .apgd import apgd_iterations
 
 _project_point = cuda.jit(device=True)(getattr(project_point, "py_func", project_point))
