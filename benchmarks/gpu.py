@@ -4,6 +4,13 @@ and the compiled CPU kernels (the process's numba threads), with a residual chec
 as a solve makes it.
 
     python -m benchmarks gpu --spheres 73000 704000 2000000 --iterations 60
+    python -m benchmarks gpu --spheres --columns r0_3_a5.nc r0_6_a5.nc --steps 20
+
+With --columns (`colsim trim` files), also the first --steps steps of each column's collapse (the
+default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
+packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`: detection and the
+rest of a step on the CPU): seconds a step, APGD's share of them, iterations a step, and how far the
+two end positions are apart over a mean diameter (one step of each first, to compile the kernels).
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
 spheres of unit mass and inertia, loaded by gravity over one step (dt 1e-3): c = S (B u_free + gap),
@@ -63,10 +70,34 @@ def timed(run, iterations: int, mu, mu_r, synchronise=lambda: None) -> float:
     return time.perf_counter() - begin
 
 
+def collapse_steps(column: str, steps: int, device: str) -> dict:
+    """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
+    solve's share, iterations a step, the end positions."""
+    from colsim import io
+    from colsim.solvers import make_solver
+    from colsim.stages.collapse import collapse
+    from colsim.stages.settings import CollapseSettings
+
+    state, source = io.read_state(column)
+    settings = CollapseSettings(mu_r=0.12, checkpoint_every=10**9)
+    solver = make_solver("auto", scaled_time_step=settings.scaled_step,
+                         apgd={"kernel": "cuda"} if device == "cuda" else {})
+    start = time.perf_counter()
+    run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
+                   stop_after=steps)
+    wall = time.perf_counter() - start
+    d = run.diagnostics
+    return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": sum(x.solve_time for x in d) / wall,
+            "iterations": float(np.mean([x.solver_iterations for x in d])), "end": run.frames[-1][1].position,
+            "diameter": 2 * float(state.radius.mean())}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--spheres", type=int, nargs="+", default=[73_000, 704_000, 2_000_000])
+    parser.add_argument("--spheres", type=int, nargs="*", default=[73_000, 704_000, 2_000_000])
     parser.add_argument("--iterations", type=int, default=60)
+    parser.add_argument("--columns", nargs="*", default=[], help="column files (colsim trim) to collapse")
+    parser.add_argument("--steps", type=int, default=20, help="steps of each column's collapse")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
@@ -79,7 +110,7 @@ def main(argv=None):
     table = record.table(["spheres", "contacts", f"CPU ms an iteration ({threads()} threads)",
                           f"GPU ms an iteration ({device})", "GPU vs CPU", "iterate difference / largest",
                           "restarts, backtracks (CPU; GPU)"])
-    for spheres in args.spheres:
+    for spheres in args.spheres:   # none with `--spheres` alone
         for warm_up in range(2):   # the first compiles both kernel sets; both start again from the same point
             cpu, operator, mu, mu_r = start_of(spheres)
             gpu = CudaIteration(cpu, operator, mu, mu_r)
@@ -97,6 +128,24 @@ def main(argv=None):
                         "gpu_ms": 1e3 * per_gpu, "cpu_threads": threads(), "device": device,
                         "simulator": bool(numba_config.ENABLE_CUDASIM), "iterations": args.iterations,
                         "relative_difference": difference})
+    if not args.columns:
+        return
+    steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
+                          f"GPU s a step ({device})", "APGD share (GPU)", "GPU vs CPU", "iterations a step (CPU; GPU)",
+                          "end positions apart / mean diameter"], title=f"the first {args.steps} collapse steps")
+    for column in args.columns:
+        for where in ("cpu", "cuda"):   # compiles each kernel set (numba's and the GPU's) before timing
+            collapse_steps(column, 1, where)
+        cpu, gpu = (collapse_steps(column, args.steps, where) for where in ("cpu", "cuda"))
+        apart = float(np.abs(cpu["end"] - gpu["end"]).max() / cpu["diameter"])
+        steps.row(column, cpu["spheres"], f"{cpu['s_a_step']:.3f}", f"{cpu['solve_share']:.0%}", f"{gpu['s_a_step']:.3f}",
+                  f"{gpu['solve_share']:.0%}", f"{cpu['s_a_step'] / gpu['s_a_step']:.1f}",
+                  f"{cpu['iterations']:.0f}; {gpu['iterations']:.0f}", f"{apart:.1e}",
+                  data={"column": column, "spheres": cpu["spheres"], "steps": args.steps, "device": device,
+                        "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
+                        "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
+                        "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
+                        "apart_over_diameter": apart})
 
 
 if __name__ == "__main__":
