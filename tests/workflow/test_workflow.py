@@ -101,13 +101,14 @@ def test_figures_logs_and_benchmarks_exist(tiny_study):
     # runs' in results/logs, the study's in results/tiny/logs (the paraview test's exports aside)
     logs = [p for p in (tiny_study / "results").rglob("*.log") if p.name != "export_vtk.log"]
     benchmarks = [p for p in (tiny_study / "results").rglob("*.tsv") if p.name != "export_vtk.tsv"]
-    # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config
-    assert len(logs) == 14 and len(benchmarks) == 14
+    # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config; and the settings files'
+    # (a packing's, 4 runs', the analyses'), which have no benchmark
+    assert len(logs) == 14 + 6 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))
     collapse_logs = list((tiny_study / "results" / "logs").rglob("collapse.log"))
     assert len(collapse_logs) == 4 and all(" by apgd" in log.read_text() for log in collapse_logs)
     settings = list((tiny_study / "results").rglob("settings.yaml"))   # 1 packing and 4 runs
-    assert len(settings) == 5 and any("rolling_lever: paper" in s.read_text() for s in settings)
+    assert len(settings) == 5 and any('"rolling_lever": "paper"' in s.read_text() for s in settings)
 
 
 @pytest.mark.slow
@@ -182,8 +183,9 @@ def test_a_rewritten_rule_does_not_redo_its_results(tiny_study):
     are its folder's key, so only a missing or outdated file is made again."""
     rules = tiny_study / "workflow" / "rules" / "simulate.smk"
     original = rules.read_text()
-    edited = original.replace('        solver=config["solver"],\n', '        solver=config["solver"],\n        edited=1,\n', 1)
-    edited = edited.replace('" --solver {params.solver} --threads {threads}', '" --solver {params.solver} --verbose --threads {threads}', 1)
+    edited = original.replace('        max_spheres=config["pack"]["max_spheres"],\n',
+                              '        max_spheres=config["pack"]["max_spheres"],\n        edited=1,\n', 1)
+    edited = edited.replace("--max-spheres {params.max_spheres} --threads", "--max-spheres {params.max_spheres} --verbose --threads", 1)
     assert edited.count("edited=1") == 1 and "--verbose --threads" in edited
     rules.write_text(edited)
     try:
