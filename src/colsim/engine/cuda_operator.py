@@ -133,6 +133,19 @@ def _diagonal_kernel(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
             out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
 
 
+@cuda.jit(device=True)
+def block_reduce(cache, t, largest):
+    """Reduce a block's shared array `cache` (THREADS values, thread t's at cache[t]) into cache[0]
+    by a fixed tree: the sum, or the largest value where `largest`. Every thread of the block calls it."""
+    cuda.syncthreads()
+    half = THREADS // 2
+    while half > 0:
+        if t < half:
+            cache[t] = max(cache[t], cache[t + half]) if largest else cache[t] + cache[t + half]
+        cuda.syncthreads()
+        half //= 2
+
+
 @cuda.jit
 def _block_dot_kernel(a, b, partial):
     """partial[block] = sum of a[i] b[i] over the block's slice, by a fixed tree in shared memory."""
@@ -140,13 +153,7 @@ def _block_dot_kernel(a, b, partial):
     i = cuda.grid(1)
     t = cuda.threadIdx.x
     cache[t] = a[i] * b[i] if i < a.shape[0] else 0.0
-    cuda.syncthreads()
-    half = THREADS // 2
-    while half > 0:
-        if t < half:
-            cache[t] += cache[t + half]
-        cuda.syncthreads()
-        half //= 2
+    block_reduce(cache, t, False)
     if t == 0:
         partial[cuda.blockIdx.x] = cache[0]
 

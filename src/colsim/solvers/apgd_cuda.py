@@ -17,8 +17,8 @@ import math
 
 import numpy as np
 
-from ..engine.cuda_operator import (THREADS, CudaContactOperator, blocks_for, cuda, gradient_on_device,
-                                    transpose_on_device)   # first: it makes numba.cuda importable on numpy 2.5
+from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for, cuda,
+                                    gradient_on_device, transpose_on_device)   # first: numba.cuda on numpy 2.5
 from ..engine.cones import combine_residuals, project_point
 from .apgd import apgd_iterations
 
@@ -49,14 +49,8 @@ def _project_kernel(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts):
                     + (r1 - y3) * (r1 - y3) + (r2 - y4) * (r2 - y4))
         uphill[t] = (g[o] * (p - x[o]) + g[o + 1] * (q1 - x[o + 1]) + g[o + 2] * (q2 - x[o + 2])
                      + g[o + 3] * (r1 - x[o + 3]) + g[o + 4] * (r2 - x[o + 4]))
-    cuda.syncthreads()
-    half = THREADS // 2
-    while half > 0:
-        if t < half:
-            moved[t] += moved[t + half]
-            uphill[t] += uphill[t + half]
-        cuda.syncthreads()
-        half //= 2
+    block_reduce(moved, t, False)
+    block_reduce(uphill, t, False)
     if t == 0:
         parts[0, cuda.blockIdx.x] = moved[0]
         parts[1, cuda.blockIdx.x] = uphill[0]
@@ -72,13 +66,7 @@ def _weighted_change_kernel(h_new, hy, inv_mass, parts):
     if i < h_new.shape[0]:
         dh = h_new[i] - hy[i]
         cache[t] = dh * dh * inv_mass[i]
-    cuda.syncthreads()
-    half = THREADS // 2
-    while half > 0:
-        if t < half:
-            cache[t] += cache[t + half]
-        cuda.syncthreads()
-        half //= 2
+    block_reduce(cache, t, False)
     if t == 0:
         parts[2, cuda.blockIdx.x] = cache[0]
 
@@ -116,16 +104,10 @@ def _residual_kernel(g, x, s, mu, mu_r, parts):
         dual[t] = max(math.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, math.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
         total[t] = max(p, 0.0)
         comp[t] = abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
-    cuda.syncthreads()
-    half = THREADS // 2
-    while half > 0:
-        if t < half:
-            primal[t] = max(primal[t], primal[t + half])
-            dual[t] = max(dual[t], dual[t + half])
-            total[t] += total[t + half]
-            comp[t] += comp[t + half]
-        cuda.syncthreads()
-        half //= 2
+    block_reduce(primal, t, True)
+    block_reduce(dual, t, True)
+    block_reduce(total, t, False)
+    block_reduce(comp, t, False)
     if t == 0:
         b = cuda.blockIdx.x
         parts[0, b], parts[1, b], parts[2, b], parts[3, b] = primal[0], dual[0], total[0], comp[0]
