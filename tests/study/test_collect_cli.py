@@ -66,3 +66,15 @@ def test_packings_poured_in_one_cloud_before_and_after_layers_are_one_study(tmp_
                                                               "freeze_depth": 3.5, "max_spheres": 500000})
     assert main_in(tmp_path, ["collect", "a.nc", "c.nc", "--output", "summary2.nc"]) == 2
     assert "runs differ in pack.freeze_depth: None in" in capsys.readouterr().err   # the first named
+
+
+def test_runs_on_a_gpu_on_the_cpu_and_from_settings_files_are_one_study(tmp_path):
+    """The device, like the thread count, changes a result by rounding only; the settings file a run
+    read and the logging flags are not settings either: runs that differ in them alone, or that
+    predate them (no such key), are collected together."""
+    _analysis_file(tmp_path / "a.nc", aspect_ratio=1.0, device="cuda", settings="run_a/settings.yaml",
+                   pack={"mu": 0.0, "device": "cuda"})
+    _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, device="cpu", quiet=True, pack={"mu": 0.0, "device": "cpu"})
+    _analysis_file(tmp_path / "c.nc", aspect_ratio=3.0, pack={"mu": 0.0})
+    assert main_in(tmp_path, ["collect", "a.nc", "b.nc", "c.nc", "--output", "summary.nc"]) == 0
+

@@ -31,9 +31,10 @@ RUN_ATTRIBUTES = {
 
 
 # what a run's settings may differ in between the runs of one summary: the swept values, file names,
-# checkpointing, threads and the packing's size bound (none of which changes a result)
+# checkpointing, threads, the device and the packing's size bound (none of which changes a result
+# beyond rounding), and the logging
 SWEPT = ("aspect_ratio", "mu_r", "seed")
-NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads",
+NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads", "device",
                              "max_spheres", "settings", "verbose", "quiet"}
 
 
