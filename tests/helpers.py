@@ -18,7 +18,7 @@ from colsim import io
 from colsim.cli import main
 from colsim.engine.state import ContactLaw, ParticleState
 from colsim.study.collect import SUMMARY_VARIABLES
-from colsim.study.plots import FIGURES
+from colsim.study.figure_names import FIGURES
 
 __all__ = ["CF_UNITS", "COLLAPSE_LAW", "DT", "FIGURES", "G", "PACKING_R0", "ROOT", "SUMMARY_VARIABLES", "TINY",
            "assert_cf_units", "cf_check_failures", "copy_workflow", "main_in", "tiny_state_files", "max_speed", "planned_outputs", "snakemake"]

@@ -111,7 +111,7 @@ def law_summary(h_shift, runout_shift, programs, wall):
 
 
 def test_friction_laws_are_tabled_side_by_side_against_lube(tmp_path):
-    from colsim.study.plots import friction_law_figure
+    from colsim.study.figures import friction_law_figure
     from colsim.study.collect import friction_law_comparison
     from colsim.study.markdown import friction_law_markdown
 

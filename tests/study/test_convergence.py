@@ -95,7 +95,7 @@ def test_unknown_sub_study_and_empty_input_are_errors():
 
 
 def test_convergence_figure_is_written(tmp_path):
-    from colsim.study.plots import convergence_figure
+    from colsim.study.figures import convergence_figure
 
     groups = {"time_step": [analysis(steps=n) for n in (100, 200)], "end_time": [analysis(duration=8.0)],
               "column_size": [analysis(a=0.5, r0=r0, seed=seed, duration=8.0) for r0 in (2.0, 3.0) for seed in (1, 2)],
@@ -111,7 +111,7 @@ def test_column_size_limits_recover_a_known_limit_against_the_laws(tmp_path):
     (no Lajeunesse height above a = 0.74); the table and the figure are written."""
     from colsim.study.convergence import column_size_limit_markdown, column_size_limits
     from colsim.study.experimental_laws import lube_height, lube_runout
-    from colsim.study.plots import column_size_limit_figure
+    from colsim.study.figures import column_size_limit_figure
 
     d, truth = 0.375, {"h": (0.9, -1.2), "runout": (3.5, -4.0)}
     runs = [analysis(a=a, r0=r0, seed=seed, mean_d=d, h=truth["h"][0] + truth["h"][1] * d / r0,

@@ -278,7 +278,7 @@ def convergence(args):
         limits.attrs.update(io.global_attributes("column-size-limits", "colsim column-size limits", _settings(args)))
         writers[args.limits] = lambda tmp: io.write_netcdf(limits, tmp)
     if args.size_figure:
-        from ..study.plots import column_size_limit_figure
+        from ..study.figures import column_size_limit_figure
 
         writers[args.size_figure] = lambda tmp: column_size_limit_figure(table, limits, tmp)
     if args.csv:
@@ -286,7 +286,7 @@ def convergence(args):
     if args.markdown:
         writers[args.markdown] = _text_writer(text)
     if args.figure:
-        from ..study.plots import convergence_figure
+        from ..study.figures import convergence_figure
 
         writers[args.figure] = lambda tmp: convergence_figure(table, tmp)
     io.write_all(writers)
@@ -298,7 +298,7 @@ def calibrate(args):
     runs = runs_from_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
     result = run_calibration(runs, replicates=args.replicates, tolerance=args.fit_tolerance)
     result.attrs.update(io.global_attributes("mu-r-calibration", "colsim mu_r calibration", _settings(args)))
-    from ..study.calibration_plot import calibration_figure
+    from ..study.figures import calibration_figure
 
     _write_table_and_figure(args, "calibration", result, calibration_markdown(result), calibration_figure)
 
@@ -317,7 +317,7 @@ def compare_laws(args):
     comparison = friction_law_comparison(summaries)
     comparison.attrs.update(io.global_attributes("friction-law-comparison", "colsim friction law comparison",
                                                  _settings(args)))
-    from ..study.plots import friction_law_figure
+    from ..study.figures import friction_law_figure
 
     _write_table_and_figure(args, "friction laws", comparison, friction_law_markdown(comparison), friction_law_figure)
 
@@ -335,12 +335,12 @@ def _write_table_and_figure(args, what: str, dataset, text: str, figure) -> None
 
 
 def plot(args):
-    from ..study import plots
+    from ..study import figures
 
     summary = io.open_dataset(args.summary, "collapse-summary")
     analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in args.analyses]
     trajectories = [io.open_dataset(p, io.TRAJECTORY_KIND) for p in args.trajectories]
-    plots.all_figures(summary, analyses, trajectories, Path(args.output_dir))
+    figures.all_figures(summary, analyses, trajectories, Path(args.output_dir))
 
 
 def export_vtk(args):

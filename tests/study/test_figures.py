@@ -1,11 +1,12 @@
-"""colsim.study.plots on small synthetic datasets shaped like colsim's files (no simulation needed)."""
+"""colsim.study.figures on small synthetic datasets shaped like colsim's files (no simulation needed)."""
 import matplotlib
 import numpy as np
 import pytest
 import xarray as xr
 from matplotlib.container import ErrorbarContainer
 
-from colsim.study import plots
+from colsim.study import figures
+from colsim.study.figures import laws, runs, style
 from colsim.study.experimental_laws import LAWS
 from colsim.study.collect import SUMMARY_VARIABLES
 
@@ -56,8 +57,8 @@ def trajectory(a, mu_r, seed, n=60):
 def test_all_figures_writes_every_png(tmp_path):
     analyses = [analysis(a, m, s) for a in (0.5, 1.0, 2.0) for m in (0.0, 0.12) for s in (1, 2)]
     trajectories = [trajectory(a, 0.12, 1) for a in (0.5, 1.0, 2.0)]
-    paths = plots.all_figures(summary(), analyses, trajectories, tmp_path / "figures")
-    assert [p.name for p in paths] == [f"{name}.png" for name in plots.FIGURES]
+    paths = figures.all_figures(summary(), analyses, trajectories, tmp_path / "figures")
+    assert [p.name for p in paths] == [f"{name}.png" for name in figures.FIGURES]
     for path in paths:
         assert path.is_file() and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert path.stat().st_size > 5000
@@ -66,10 +67,10 @@ def test_all_figures_writes_every_png(tmp_path):
 def _drawn_figures(tmp_path, data, analyses, trajectories) -> dict:
     """{figure name: the matplotlib Figure all_figures drew for it} (kept by a figure hook)."""
     KEPT.clear()
-    with matplotlib.rc_context({"figure.hooks": ["test_plots:keep_figure"]}):
-        plots.all_figures(data, analyses, trajectories, tmp_path)
-    assert len(KEPT) == len(plots.FIGURES)
-    return dict(zip(plots.FIGURES, KEPT))
+    with matplotlib.rc_context({"figure.hooks": ["test_figures:keep_figure"]}):
+        figures.all_figures(data, analyses, trajectories, tmp_path)
+    assert len(KEPT) == len(figures.FIGURES)
+    return dict(zip(figures.FIGURES, KEPT))
 
 
 def _errorbars(ax) -> list:
@@ -127,25 +128,25 @@ def test_every_figure_plots_the_values_of_its_data(tmp_path):
     views = figures["side_views"].axes[:4]                              # 2 runs x (before, deposit)
     for ax, (run, frame) in zip(views, [(trajectories[0], 0), (trajectories[0], -1),
                                         (trajectories[1], 0), (trajectories[1], -1)]):
-        x, z, r, colour = plots._slab(run, frame)
+        x, z, r, colour = runs._slab(run, frame)
         (discs,) = ax.collections
         np.testing.assert_allclose(discs.get_offsets(), np.c_[x, z])
         np.testing.assert_allclose(discs.get_array(), colour)
 
 
 def test_single_values_and_no_runs_still_plot(tmp_path):
-    paths = plots.all_figures(summary((1.0,), (0.12,), (1,), missing=False), [], [], tmp_path)
+    paths = figures.all_figures(summary((1.0,), (0.12,), (1,), missing=False), [], [], tmp_path)
     assert all(p.stat().st_size > 0 for p in paths)
 
 
 def test_law_curves_break_at_the_breakpoints():
-    a = plots._law_abscissa(5.0)
+    a = laws._law_abscissa(5.0)
     assert np.isnan(a).sum() == 3
     assert np.nanmin(a) == 0.0 and np.nanmax(a) == 5.0
 
 
 def test_seed_spread_ignores_missing_seeds():
-    mean, low, high = plots._seed_spread([[1.0, 3.0, np.nan], [np.nan, np.nan, np.nan]])
+    mean, low, high = style._seed_spread([[1.0, 3.0, np.nan], [np.nan, np.nan, np.nan]])
     assert mean[0] == 2.0 and low[0] == 1.0 and high[0] == 1.0
     assert np.isnan(mean[1]) and low[1] == 0.0
 
@@ -154,7 +155,7 @@ def test_package_imports_without_matplotlib():
     import subprocess
     import sys
 
-    code = ("import sys; sys.modules['matplotlib'] = None; import colsim, colsim.study.plots, colsim.study.experimental_laws; "
+    code = ("import sys; sys.modules['matplotlib'] = None; import colsim, colsim.study.figures, colsim.study.experimental_laws; "
             "print('ok')")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip() == "ok"
 
@@ -203,14 +204,14 @@ def test_error_bars_are_the_range_below_three_seeds_and_the_standard_error_from_
                         else f"mean of {len(seeds)} seeds, bars: lowest to highest seed")
     assert any("standard error" in t if standard_error else "lowest to highest" in t
                for t in _legend_texts(figures["mu_r_effect"]))
-    kind = plots._bar_kind(data.h_inf_over_r0.values)
+    kind = style._bar_kind(data.h_inf_over_r0.values)
     assert kind == ("se", 3, 3) if standard_error else kind == ("range", 2, 2)
 
 
 def test_bars_are_the_range_when_any_point_has_fewer_than_three_seeds():
     values = np.array([[1.0, 2.0, 3.0], [1.0, 3.0, np.nan]])
-    assert plots._bar_kind(values) == ("range", 2, 3)
-    mean, low, high = plots._bars(values[:1], "se")
+    assert style._bar_kind(values) == ("range", 2, 3)
+    mean, low, high = style._bars(values[:1], "se")
     assert mean[0] == 2.0 and low[0] == high[0] == pytest.approx(1.0 / np.sqrt(3))
 
 
@@ -297,7 +298,7 @@ def test_front_only_moves_outward(tmp_path):
     (end,) = [line for line in ax.get_lines() if line.get_gid() == "end"]
     np.testing.assert_allclose(end.get_data(), [[4.0], [-0.28]])
     assert "farthest reach" in ax.get_ylabel()
-    np.testing.assert_allclose(plots.outward_front([np.nan, 1.0, np.nan, 0.5, 2.0]), [np.nan, 1.0, 1.0, 1.0, 2.0])
+    np.testing.assert_allclose(runs.outward_front([np.nan, 1.0, np.nan, 0.5, 2.0]), [np.nan, 1.0, 1.0, 1.0, 2.0])
 
 
 def test_front_figure_draws_the_mass_share_front_above_the_main_mass_edge(tmp_path):

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import LAWS
-from .plots import _pyplot, _save
+from ..calibration import LAWS
+from .style import _pyplot, _save
 
 LAW_NAMES = {"lube": "Lube et al.", "lajeunesse": "Lajeunesse et al."}
 
