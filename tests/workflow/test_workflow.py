@@ -564,3 +564,16 @@ def test_the_lint_asks_only_for_a_conda_environment(tmp_path):
     assert lints == {"Specify a conda environment or container for each rule."}, lints
     assert "conda environment" in (directory / "Snakefile").read_text()
 
+
+
+@pytest.mark.slow
+def test_the_convergence_table_passes_the_cf_checker(tiny_study, tmp_path):
+    """Issue 48.7: `colsim convergence` on the tiny study's analyses (as a seeds study): its table
+    passes the CF-1.8 checker at strict level, as the stages' files and the calibration's do."""
+    from helpers import main_in
+
+    analyses = sorted(str(p) for p in (tiny_study / "results").rglob("analysis.nc"))
+    assert len(analyses) == 4
+    assert main_in(tmp_path, ["convergence", "--seeds", *analyses, "--default-end", "4",
+                              "--output", "convergence.nc"]) == 0
+    assert cf_check_failures(tmp_path / "convergence.nc") == []
