@@ -12,7 +12,7 @@ from colsim.engine.state import ParticleState
 from colsim.engine.warm_start import WarmStart
 from colsim.io.checkpoint import (CheckpointError, check_checkpoint_path, checkpoint_summary, load_checkpoint,
                                   load_packing_checkpoint, save_checkpoint, save_packing_checkpoint)
-from colsim.io.netcdf import source_commit
+from colsim.io.provenance import source_commit
 
 
 def _diagnostics(step: int) -> StepDiagnostics:

@@ -47,7 +47,7 @@ class _Version(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         from .. import __version__
-        from ..io.netcdf import source_commit   # as every file names it (colsim_commit)
+        from ..io.provenance import source_commit   # as every file names it (colsim_commit)
 
         print(f"colsim {__version__}, commit {source_commit()}")
         parser.exit()
@@ -161,7 +161,7 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     from . import commands
-    from ..io.netcdf import InputError
+    from ..io.files import InputError
     from ..engine.solver_contract import SolverError
     from ..engine.stepper import OverlapError
 

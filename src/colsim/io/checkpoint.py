@@ -22,7 +22,9 @@ import numpy as np
 from ..engine.records import TEXT_DIAGNOSTICS, Carry, StepDiagnostics
 from ..engine.state import ParticleState
 from ..engine.warm_start import WarmStart
-from .netcdf import InputError, atomic_path, check_geometry, source_commit
+from .files import InputError, atomic_path
+from .provenance import source_commit
+from .state_file import check_geometry
 
 log = logging.getLogger(__name__)
 

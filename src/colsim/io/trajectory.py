@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from .netcdf import AT_REST_FLAGS, at_rest_variable, component_coordinate, run_coordinates
+from .netcdf import AT_REST_FLAGS, at_rest_variable, run_coordinates
+from .state_file import component_coordinate
 from .steps import step_variables
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .netcdf import write_all
+from .files import write_all
 
 
 def _data_array(name: str, values: np.ndarray, components: int, dtype: str = "Float64",

@@ -27,7 +27,8 @@ from scipy.sparse.csgraph import connected_components
 
 from ..engine.contacts import touching_pairs
 from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
-from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates, state_from_dataset
+from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates
+from ..io.state_file import state_from_dataset
 from .settings import AnalysisSettings
 
 DEFAULT_CONTACT_TOLERANCE = AnalysisSettings.contact_tolerance  # fraction of the smallest diameter

@@ -42,7 +42,7 @@ def _label(variable, fallback: str) -> str:
 
 
 def _save(fig, path: Path) -> Path:
-    from ...io.netcdf import atomic_path
+    from ...io.files import atomic_path
 
     with atomic_path(path) as tmp:   # a killed plot leaves no PNG that looks finished
         fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")

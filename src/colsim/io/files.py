@@ -1,0 +1,61 @@
+"""Writing files so that nothing half-written is taken for a result: a temporary name beside the
+target, renamed when complete (:func:`atomic_path`, :func:`write_all`), the checks that an output can
+be written, and :class:`InputError`, the one-line error of a bad input or output."""
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+
+class InputError(ValueError):
+    """An input file that is missing, unreadable or of the wrong kind."""
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside `path`; rename it to `path` only if the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def write_all(writers: dict) -> None:
+    """All or nothing: writers maps each output path to a callable that writes it to the path it is
+    given. Each writes to a temporary name beside its path (:func:`atomic_path`); the files are
+    renamed into place, in the dict's order, only once every one of them is complete, so a failure
+    leaves none of them new."""
+    with contextlib.ExitStack() as stack:   # exits last-entered first: enter in reverse order
+        temporaries = {path: stack.enter_context(atomic_path(path)) for path in reversed(list(writers))}
+        for path, write in writers.items():
+            write(temporaries[path])
+
+
+def check_writable(path, directory: bool = False) -> None:
+    """InputError (one line) unless a file `path` (or files in the directory `path`) can be written:
+    the nearest existing folder on the way must take a new file. Leaves nothing behind."""
+    path = Path(path)
+    if path.is_dir() != directory and path.exists():
+        raise InputError(f"cannot write {path}: it is {'not ' if directory else ''}a directory")
+    folder = path if directory else path.parent
+    while not folder.exists():
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"cannot write {path}: {folder} is not a directory")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+    except OSError as error:
+        raise InputError(f"cannot write {path}: {folder} takes no new files ({error.strerror})") from None
+    os.close(fd)
+    os.remove(probe)
