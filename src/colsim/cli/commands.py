@@ -81,8 +81,7 @@ def check_outputs(args) -> None:
 def _recorded(args, *stage_settings) -> dict:
     """What a stage's file records of how it was made: the command, its files and every setting it
     ran with (by name, defaults included), so that a run is reproduced from its file alone."""
-    files = {k: v for k, v in vars(args).items() if k in ("command", "settings", *INPUT_ARGUMENTS, *OUTPUT_ARGUMENTS)}
-    recorded = dict(files)
+    recorded = {k: v for k, v in vars(args).items() if k in ("command", "settings", *INPUT_ARGUMENTS, *OUTPUT_ARGUMENTS)}
     for each in stage_settings:
         recorded |= by_name(each)
     return recorded

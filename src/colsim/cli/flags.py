@@ -51,7 +51,7 @@ def positive_int(text):
     return value
 
 
-PARSERS = {"number": number, "positive": positive, "non_negative": non_negative, "integer": integer,
+PARSERS = {"positive": positive, "non_negative": non_negative, "integer": integer,
            "positive_int": positive_int}
 
 

@@ -215,7 +215,6 @@ class _Iteration:
     def __init__(self, G, T, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay=1.0, operator: ContactOperator | None = None):
         self.G, self.T, self.c, self.mu_s, self.mu_r_s, self.inv_mass = G, T, c, mu_s, mu_r_s, inv_mass
         self.scaling = scaling  # (m, 5) S: lam = S z
-        self.operator = operator
         self.geometry = None if operator is None else operator.geometry(scaling.ravel())
         hx = self.apply_T(x)
         self.x, self.hx = x.copy(), hx

@@ -20,7 +20,7 @@ from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, ContactLaw, FrictionLa
 from ..solvers import defaults
 
 #: the kinds of value a setting takes (colsim.cli.flags parses each)
-KINDS = ("number", "positive", "non_negative", "integer", "positive_int", "choice")
+KINDS = ("positive", "non_negative", "integer", "positive_int", "choice")
 
 LENGTH = "length"   # the particles' length unit (the paper: diameters 0.25-0.5)
 #: where APGD's iterations may run
