@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import record
-from colsim.stages.pack import LAYER_HEIGHT
+from colsim.stages.settings import PackSettings
 
 HERE = Path(__file__).resolve().parent
 CACHE = record.cache_dir()
@@ -130,7 +130,7 @@ def main(argv=None):
     parser.add_argument("--pack-solver", default="auto",
                         help="solver of `colsim pack` (default: %(default)s, as a user packs; clarabel: the reference)")
     parser.add_argument("--pack-dt", type=float, default=0.02)
-    parser.add_argument("--pack-layer-height", default=str(LAYER_HEIGHT),
+    parser.add_argument("--pack-layer-height", default=str(PackSettings.layer_height).lower(),
                         help="colsim pack --layer-height (default: %(default)s, one pour; 2.5: layers)")
     parser.add_argument("--threads", type=int, default=1, help="threads of the packing and of each run")
     parser.add_argument("--clarabel-100-up-to", type=float, default=3.0, metavar="R0",

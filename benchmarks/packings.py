@@ -52,7 +52,8 @@ import record as run_record
 from colsim.solvers import ClarabelSolver, Solver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
-from colsim.stages.pack import LATTICE_FACTOR, lattice_layer, starting_cloud
+from colsim.stages.pack import starting_cloud
+from colsim.stages.pour_geometry import LATTICE_FACTOR, lattice_layer
 
 CACHE = run_record.cache_dir()
 DIAMETER_RANGE = (0.25, 0.5)

@@ -28,6 +28,7 @@ from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls
 from colsim.engine.stepper import step
 from colsim.stages.pack import pack, starting_cloud
+from colsim.stages.settings import PackSettings
 from solver_cases import COLLAPSE, collapse_program, small_pile
 from helpers import COLLAPSE_LAW, DT, G, PACKING_R0, max_speed
 
@@ -97,7 +98,7 @@ def pile() -> Pile:
 def packing() -> ParticleState:
     """The stage tests' packing: ~450 spheres poured by the pack stage into a cylinder of radius
     1.5 (PACKING_R0), 3 high, with Clarabel (about 10 s)."""
-    return pack(PACKING_R0, 3.0, np.random.default_rng([7, 0]), ClarabelSolver())
+    return pack(PackSettings(r0=PACKING_R0, height=3.0), np.random.default_rng([7, 0]), ClarabelSolver())
 
 
 @pytest.fixture(scope="session")

@@ -45,6 +45,16 @@ def test_list_names_every_benchmark_with_a_description():
     assert all(len(line.split(maxsplit=1)) == 2 for line in lines), "a benchmark without a description"
 
 
+def test_every_benchmark_imports():
+    """Each benchmark module loads with this checkout's colsim (a name it imports that colsim no longer
+    has fails here, not hours into `all`)."""
+    code = "import importlib, sys; [importlib.import_module(name) for name in sys.argv[1:]]"
+    path = os.pathsep.join([str(REPOSITORY / "src"), str(REPOSITORY / "benchmarks"), os.environ.get("PYTHONPATH", "")])
+    done = subprocess.run([sys.executable, "-c", code, *NAMES], cwd=REPOSITORY, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": path}, timeout=600)
+    assert done.returncode == 0, done.stderr
+
+
 def test_unknown_benchmark_is_an_error():
     done = benchmarks("no_such_benchmark")
     assert done.returncode != 0 and "list" in done.stderr

@@ -44,3 +44,30 @@ def test_warm_start_survives_renumbering(solver_pile):
     assert compared > found_after.m // 2
     # pairs with a removed particle are gone
     assert warm.subset(keep).m < warm.m
+
+
+def test_forces_go_to_the_moving_spheres_numbering_and_back():
+    """A pour in layers steps only its moving spheres, on fixed supports: for_moving numbers the pairs
+    as that step does (moving in order, supports as fixed spheres j = -2 - k, walls as they are) and
+    drops those with a fixed sphere that is no support; in_whole numbers them back exactly; among
+    keeps the pairs of fixed spheres and walls alone. Five particles: 1 and 3 move, 0 and 4 are fixed
+    supports, 2 is fixed and no support."""
+    i = np.array([1, 3, 0, 1, 2, 3, 2])
+    j = np.array([3, 0, 4, -1, 4, 2, -1])
+    family = np.array([0, 0, 0, 1, 0, 0, 1])
+    force = np.arange(21.0).reshape(7, 3)
+    warm = WarmStart(i, j, family, force, -force)
+    moving, supports = np.array([1, 3]), np.array([0, 4])
+    local = warm.for_moving(moving, supports, 5)
+    # kept: (1, 3), (3, 0) and (1, wall); the others have a fixed particle first or a fixed non-support
+    np.testing.assert_array_equal(local.i, [0, 1, 0])
+    np.testing.assert_array_equal(local.j, [1, -2, -1])
+    np.testing.assert_array_equal(local.force, force[[0, 1, 3]])
+    back = local.in_whole(moving, supports)
+    for name in ("i", "j", "family", "force", "rolling"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(warm, name)[[0, 1, 3]])
+    fixed = np.array([True, False, True, False, True])
+    held = warm.among(fixed)
+    np.testing.assert_array_equal(held.i, [0, 2, 2])
+    np.testing.assert_array_equal(held.j, [4, 4, -1])
+    assert held.joined(back).m == 6

@@ -1,6 +1,8 @@
 """The packing stage (colsim.stages.pack): free fall into the cylinder, in one cloud or in layers."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -8,7 +10,9 @@ from colsim.engine.contacts import overlaps, touching_pairs
 from colsim.engine.state import ParticleState, Walls
 from colsim.io.checkpoint import CheckpointError
 from colsim.solvers import AutoSolver
-from colsim.stages.pack import column_height, pack, solid_fraction
+from colsim.stages.pack import pack
+from colsim.stages.pour_geometry import column_height, solid_fraction
+from colsim.stages.settings import PackSettings
 
 from helpers import PACKING_R0 as R0
 
@@ -30,7 +34,8 @@ def test_friction_while_filling_packs_looser():
     measured 0.576 and 0.534 (0.566 and 0.529 with the 180 spheres of clouds sized at 0.58).
     Friction holds grains where they first touch, so the solid fraction must drop; by at least
     0.02 (seeds 1-4 gave 0.566-0.571 without friction, 0.521-0.533 with)."""
-    fractions = [pack(1.0, 2.0, np.random.default_rng([1, 0]), AutoSolver(apgd={"tolerance": 1e-3}), mu=mu)
+    fractions = [pack(PackSettings(r0=1.0, height=2.0, mu=mu), np.random.default_rng([1, 0]),
+                        AutoSolver(apgd={"tolerance": 1e-3}))
                  .solid_fraction for mu in (0.0, 0.5)]
     assert fractions[1] < fractions[0] - 0.02
 
@@ -44,7 +49,8 @@ def test_filling_in_layers_fixes_the_buried_spheres_and_overlaps_nothing():
     spheres from when they last moved: the collapse's first step starts warm from them. The solid fraction lies in the range of the single pour's
     test above (0.52-0.66)."""
     solver = AutoSolver(apgd={"tolerance": 1e-3})
-    result = pack(R0, 3.5, np.random.default_rng([3, 0]), solver, layer_height=0.8, freeze_depth=0.5)
+    settings = PackSettings(r0=R0, height=3.5, layer_height=0.8, freeze_depth=0.5)
+    result = pack(settings, np.random.default_rng([3, 0]), solver)
     state = result.state
     assert result.clouds >= 4 and result.most_fixed > 100
     assert column_height(state) >= 3.5
@@ -89,17 +95,17 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
     forces by pair, the margin and the generator's state), also when run again with another
     checkpoint interval and a larger max_steps (issue 45.4: neither changes a step); a checkpoint of
     other settings is refused, not used nor replaced."""
-    options = {"layer_height": layers, "freeze_depth": 0.3, "dt": 0.04, "rest_energy": 0.05}
-    whole = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options)
+    settings = PackSettings(r0=1.0, height=1.2, layer_height=layers, freeze_depth=0.3, dt=0.04, rest_energy=0.05)
+    whole = pack(settings, np.random.default_rng(11), AutoSolver())
     checkpoint = tmp_path / "pack.checkpoint"
     with pytest.raises(_Killed):
-        pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
-             checkpoint_every=10, progress=_killed_after(23))
+        pack(replace(settings, checkpoint_every=10), np.random.default_rng(11), AutoSolver(),
+             checkpoint=checkpoint, progress=_killed_after(23))
     assert checkpoint.is_file()
     with np.load(checkpoint) as saved:
         first_wall, first_cpu = float(saved["elapsed"]), float(saved["cpu"])
-    resumed = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
-                   checkpoint_every=7, max_steps=9000)
+    resumed = pack(replace(settings, checkpoint_every=7, max_steps=9000), np.random.default_rng(11), AutoSolver(),
+                   checkpoint=checkpoint)
     assert resumed.steps == whole.steps and resumed.clouds == whole.clouds
     # the times cover both sittings: at least what the first had spent when it saved
     assert 0 < first_cpu <= resumed.cpu_time and 0 < first_wall <= resumed.wall_time
@@ -112,7 +118,7 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
     for name in ("time", "n_contacts", "kinetic_energy", "solver_iterations", "redone"):
         assert [getattr(d, name) for d in resumed.diagnostics] == [getattr(d, name) for d in whole.diagnostics]
     with pytest.raises(CheckpointError, match="another run"):
-        pack(1.0, 1.2, np.random.default_rng(12), AutoSolver(), **options, checkpoint=checkpoint)
+        pack(settings, np.random.default_rng(12), AutoSolver(), checkpoint=checkpoint)
 
 
 def test_a_slow_packing_writes_its_checkpoint_by_the_clock_too(tmp_path, monkeypatch):
@@ -121,16 +127,16 @@ def test_a_slow_packing_writes_its_checkpoint_by_the_clock_too(tmp_path, monkeyp
     steps resumes from it to the same packing as one never stopped."""
     from colsim.stages import stopwatch
 
-    options = {"dt": 0.04, "rest_energy": 0.05}
-    whole = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options)
+    settings = PackSettings(r0=1.0, height=1.2, dt=0.04, rest_energy=0.05)
+    whole = pack(settings, np.random.default_rng(11), AutoSolver())
     monkeypatch.setattr(stopwatch, "CHECKPOINT_INTERVAL_S", 0.0)
     checkpoint = tmp_path / "pack.checkpoint"
     with pytest.raises(_Killed):
-        pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
-             checkpoint_every=10**6, progress=_killed_after(23))
+        pack(replace(settings, checkpoint_every=10**6), np.random.default_rng(11), AutoSolver(),
+             checkpoint=checkpoint, progress=_killed_after(23))
     with np.load(checkpoint) as saved:
         assert int(saved["loop_steps"]) == 22     # the last step before the kill
-    resumed = pack(1.0, 1.2, np.random.default_rng(11), AutoSolver(), **options, checkpoint=checkpoint,
-                   checkpoint_every=10**6)
+    resumed = pack(replace(settings, checkpoint_every=10**6), np.random.default_rng(11), AutoSolver(),
+                   checkpoint=checkpoint)
     assert resumed.steps == whole.steps
     np.testing.assert_array_equal(resumed.state.position, whole.state.position)

@@ -19,7 +19,8 @@ from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
 from ..solvers.registry import make_solver
 from ..stages.collapse import collapse as run_collapse
-from ..stages.pack import pack_from, solid_fraction
+from ..stages import pack as packing
+from ..stages.pour_geometry import solid_fraction
 from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
                                by_name)
 from ..stages.trim import kept_by_trim
@@ -138,7 +139,7 @@ def pack(args):
     use_threads(solving.threads)
     solver = _pack_solver(solving)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    result = pack_from(settings, rng, solver, checkpoint=checkpoint)
+    result = packing.pack(settings, rng, solver, checkpoint=checkpoint)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_recorded(args, settings, solving), "solver_settings": solver.describe()},
                                  settings.seed)

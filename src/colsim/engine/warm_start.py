@@ -6,7 +6,9 @@ carries it: particle i, and particle j, a wall (j = -1 with the wall's family) o
 contacts are matched by pair and get the stored forces re-expressed in their own frames, projected
 onto their cones (zeros for new pairs). The pairs survive a change of the particle set: pouring
 more spheres keeps the indices, and trimming renumbers them (:meth:`WarmStart.subset`). So a packing's
-final forces can start the first step of its column's collapse.
+final forces can start the first step of its column's collapse. A pour in layers steps only its
+moving spheres, on fixed ones: :meth:`WarmStart.for_moving` and :meth:`WarmStart.in_whole` carry the
+forces between the whole packing's numbering and that step's.
 
 A plain record: the cone projection (numba) is loaded by :meth:`WarmStart.match` alone, so that reading
 a file's forces (:mod:`colsim.io`) loads no numerics.
@@ -17,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .state import fixed_code
 
 
 @dataclass
@@ -82,6 +85,39 @@ class WarmStart:
         j = np.where(self.j < 0, self.j, new_index[np.maximum(self.j, 0)])
         return WarmStart(new_index[self.i[stays]], j[stays], self.family[stays].copy(),
                          self.force[stays].copy(), self.rolling[stays].copy())
+
+    def for_moving(self, moving: np.ndarray, supports: np.ndarray, n: int) -> "WarmStart":
+        """The pairs (numbered as n particles) between a `moving` particle and a moving one, a wall
+        or one of the `supports`, numbered as a step of the moving particles alone numbers them:
+        moving ones in order, supports as fixed spheres (j = -2 - k). moving, supports: int indices."""
+        as_moving = np.full(n, -1, dtype=np.int64)
+        as_moving[moving] = np.arange(len(moving))
+        as_support = np.full(n, -1, dtype=np.int64)
+        as_support[supports] = np.arange(len(supports))
+        i = as_moving[self.i]
+        other = np.maximum(self.j, 0)
+        j = np.where(self.j < 0, self.j,
+                     np.where(as_moving[other] >= 0, as_moving[other], fixed_code(as_support[other])))
+        keep = (i >= 0) & ((self.j < 0) | (as_moving[other] >= 0) | (as_support[other] >= 0))
+        return WarmStart(i[keep], j[keep], self.family[keep], self.force[keep], self.rolling[keep])
+
+    def in_whole(self, moving: np.ndarray, supports: np.ndarray) -> "WarmStart":
+        """The inverse of :meth:`for_moving`: a step's forces in the numbering of the whole packing."""
+        j = self.j.copy()                       # walls keep -1
+        particle, fixed = self.j >= 0, self.j <= -2
+        j[particle] = moving[self.j[particle]]
+        j[fixed] = supports[fixed_code(self.j[fixed])]
+        return WarmStart(moving[self.i], j, self.family.copy(), self.force.copy(), self.rolling.copy())
+
+    def among(self, fixed: np.ndarray) -> "WarmStart":
+        """The pairs whose bodies are all `fixed` ((n,) bool) or walls."""
+        keep = fixed[self.i] & ((self.j == -1) | fixed[np.maximum(self.j, 0)])
+        return WarmStart(self.i[keep], self.j[keep], self.family[keep], self.force[keep], self.rolling[keep])
+
+    def joined(self, other: "WarmStart") -> "WarmStart":
+        """The pairs of both (no pair may be in both)."""
+        return WarmStart(*(np.concatenate([getattr(self, name), getattr(other, name)])
+                           for name in ("i", "j", "family", "force", "rolling")))
 
 
 def _pair_keys(i, j, family, n_particles: int) -> np.ndarray:

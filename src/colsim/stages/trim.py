@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.state import ParticleState
-from .pack import column_height
+from .pour_geometry import column_height
 
 
 def trim(state: ParticleState, h0: float) -> ParticleState:
