@@ -15,7 +15,7 @@ from colsim import io
 from colsim.cli import main
 from colsim.engine.state import FLOOR, PARTICLE, ParticleState
 from colsim.engine.warm_start import WarmStart
-from colsim.study.collect import run_flags
+from colsim.study.collect import run_status
 
 from helpers import cf_check_failures
 
@@ -116,7 +116,7 @@ def test_at_rest_is_a_flag_variable_in_every_output(outputs):
     assert list(values) == [NOT_CHECKED, STILL_MOVING, AT_REST] and meanings == list(io.AT_REST_FLAGS)
     assert variable.attrs["long_name"] and variable.attrs["units"] == "1"
     # the summary's flags read the variable: the run still moving is flagged, the missing one is not
-    moving = run_flags(summary)["moving"].values[..., 0]
+    moving = run_status(summary)["moving"].values[..., 0]
     np.testing.assert_array_equal(moving, [[False, False], [True, False]])
 
 

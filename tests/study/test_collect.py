@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 
 from colsim.study.experimental_laws import lube_height, lube_runout
-from colsim.study.collect import collect_analyses, one_row_per_run, run_flags
+from colsim.study.collect import collect_analyses, one_row_per_run, one_run, run_status
 from colsim.study.markdown import lube_markdown, lube_rst
 
 
@@ -143,17 +143,38 @@ def flag_summary():
 
 
 def test_runs_not_at_rest_or_with_a_fragment_for_main_mass_are_flagged():
-    flags = run_flags(flag_summary())
+    flags = run_status(flag_summary())
     assert flags["moving"].dims == ("aspect_ratio", "mu_r", "seed")
     assert flags["moving"].values.ravel().tolist() == [False, True, False, True, False, False]
     assert flags["fragment"].values.ravel().tolist() == [False, False, False, False, False, True]
     default = flag_summary()
     default.attrs["run_configs"] = "[]"                      # the collapse's default rest_energy, 1e-2
-    assert run_flags(default)["moving"].values.ravel().tolist() == [False, True, False, True, False, False]
+    assert run_status(default)["moving"].values.ravel().tolist() == [False, True, False, True, False, False]
     default["final_to_peak_kinetic_energy"][1, 0, 1] = 0.05
-    assert run_flags(default)["moving"].values[1, 0, 1]
+    assert run_status(default)["moving"].values[1, 0, 1]
     bare = flag_summary()[["h_inf_over_r0", "runout_over_r0"]]   # older summaries: nothing to flag by
-    assert not any(flag.any() for flag in run_flags(bare).values())
+    assert not any(flag.any() for flag in run_status(bare).values())
+
+
+def test_one_run_has_the_status_of_its_cell_in_the_summary():
+    """run_status of each run alone (its analysis, or its trajectory's step energies) is its cell's in
+    the summary: one rule for the tables, the figures' legends and the side views' titles."""
+    summary = flag_summary()
+    whole = run_status(summary)
+    for index in np.ndindex(summary.h_inf_over_r0.shape):
+        cell = summary.isel(dict(zip(summary.h_inf_over_r0.dims, index)))
+        analysis = cell.drop_vars("at_rest").assign_attrs(config=json.dumps(json.loads(summary.run_configs)[0]))
+        if np.isfinite(float(cell.at_rest)):
+            analysis["at_rest"] = cell.at_rest.astype(np.int8)
+        alone = run_status(one_run(analysis))
+        assert {name: bool(flag) for name, flag in alone.items()} == {name: bool(flag[index]) for name, flag in whole.items()}
+    # a trajectory: at rest not checked, its steps' energy (translation + rotation) ends at 0.3 of its peak
+    trajectory = xr.Dataset({"step_kinetic_energy": ("step", [1.0, 4.0, 1.0]), "step_rotational_energy": ("step", [0.0, 1.0, 0.5])},
+                            attrs={"config": json.dumps({"command": "collapse", "rest_energy": 0.25})})
+    assert float(one_run(trajectory).final_to_peak_kinetic_energy) == 0.3
+    assert bool(run_status(one_run(trajectory))["moving"])
+    trajectory.attrs["config"] = json.dumps({"command": "collapse", "rest_energy": 0.5})
+    assert not bool(run_status(one_run(trajectory))["moving"])
 
 
 def test_lube_table_flags_runs_and_says_why():

@@ -1,4 +1,6 @@
 """colsim.study.figures on small synthetic datasets shaped like colsim's files (no simulation needed)."""
+import json
+
 import matplotlib
 import numpy as np
 import pytest
@@ -361,3 +363,22 @@ def test_a_negative_run_out_stays_in_the_frame(tmp_path):
     ax = _drawn_figures(tmp_path, data, [], [])["runout"].axes[0]
     assert ax.get_ylim()[0] < -0.28
     assert ax.get_ylim()[0] == pytest.approx(1.1 * -0.28)
+
+
+def test_the_side_views_name_the_last_frame_as_run_status_calls_the_run():
+    """The side view's last panel: "deposit" at rest, "end (still moving)" for a run moving at its end
+    (flag 0, or rest not checked and the energy left above rest_energy of its peak), "end" when
+    neither the flag nor the step energies tell."""
+    from colsim.study.figures.runs import _end_name
+
+    def trajectory(at_rest=None, energy=None):
+        data = {} if energy is None else {"step_kinetic_energy": ("step", energy)}
+        if at_rest is not None:
+            data["at_rest"] = xr.DataArray(np.int8(at_rest))
+        return xr.Dataset(data, attrs={"config": json.dumps({"command": "collapse", "rest_energy": 0.01})})
+
+    assert _end_name(trajectory(1)) == "deposit"
+    assert _end_name(trajectory(0)) == "end (still moving)"
+    assert _end_name(trajectory(-1)) == "end"
+    assert _end_name(trajectory(-1, [1.0, 0.5])) == "end (still moving)"
+    assert _end_name(trajectory(None, [1.0, 0.001])) == "deposit"

@@ -1,6 +1,6 @@
 """A study's runs in one xarray Dataset over (aspect_ratio, mu_r, seed), from their collapse
-analyses; the means per column size (:func:`means_per_size`), the flags of runs that did not settle
-(:func:`run_flags`) and the runs under both friction laws side by side. Its tables in Markdown:
+analyses; the means per column size (:func:`means_per_size`), the status of runs that did not settle
+(:func:`run_status`: the one place a run is called moving or a fragment, for tables and figures) and the runs under both friction laws side by side. Its tables in Markdown:
 :mod:`colsim.study.markdown`."""
 from __future__ import annotations
 
@@ -203,7 +203,7 @@ MAIN_MASS_SHARE = 0.5
 """A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:
 its h_inf and r_inf do not describe the deposit."""
 FLAGS = {"moving": "still moving", "fragment": "main mass < half the grains"}
-"""The flags of :func:`run_flags` -> how tables and figures name them."""
+"""The flags of :func:`run_status` -> how tables and figures name them."""
 
 
 def rest_energy(configs) -> float:
@@ -222,31 +222,48 @@ def rest_energy_of(summary) -> float:
     return rest_energy(json.loads(summary.attrs.get("run_configs", "[]")))
 
 
-def run_flags(summary) -> dict:
-    """{flag: bool DataArray shaped like h_inf_over_r0} for the runs whose numbers do not describe a
-    deposit at rest (False where a run is missing or the summary lacks what the flag needs):
+def run_status(runs) -> dict:
+    """{flag: bool DataArray} of the runs whose numbers do not describe a deposit at rest: the one
+    rule the tables and the figures read. runs: a summary (shaped like its h_inf_over_r0; False
+    where a run is missing or the summary lacks what the flag needs) or one run (:func:`one_run`).
 
     - "moving": still moving at the end: at_rest is 0 (the run reached max_duration moving), or, where
       rest was not checked (a fixed end time: at_rest -1, or in older summaries NaN or absent), its
-      kinetic energy at the end is above the collapse's rest_energy (1e-2 unless the run
-      configurations say otherwise) of its peak;
+      kinetic energy at the end is above the collapse's rest_energy (its run configurations', else
+      the default's) of its peak;
     - "fragment": the main mass, the largest connected cluster, holds less than half the grains.
     """
-    ran = np.isfinite(summary.h_inf_over_r0)
+    ran = np.isfinite(runs.h_inf_over_r0) if "h_inf_over_r0" in runs else xr.DataArray(True)
     none = xr.zeros_like(ran, dtype=bool)
     checked = none
     moving = none
-    if "at_rest" in summary:
-        at_rest = summary.at_rest.astype(float)
+    if "at_rest" in runs:
+        at_rest = runs.at_rest.astype(float)
         checked = (at_rest == 0) | (at_rest == 1)
         moving = at_rest == 0
-    if "final_to_peak_kinetic_energy" in summary:
-        energy = summary.final_to_peak_kinetic_energy
-        moving = moving | (~checked & (energy > rest_energy_of(summary)))
+    if "final_to_peak_kinetic_energy" in runs:
+        energy = runs.final_to_peak_kinetic_energy
+        moving = moving | (~checked & (energy > rest_energy_of(runs)))
     fragment = none
-    if "n_main_mass" in summary and "n_particles" in summary:
-        fragment = summary.n_main_mass < MAIN_MASS_SHARE * summary.n_particles
+    if "n_main_mass" in runs and "n_particles" in runs:
+        fragment = runs.n_main_mass < MAIN_MASS_SHARE * runs.n_particles
     return {"moving": (moving & ran).transpose(*ran.dims), "fragment": (fragment & ran).transpose(*ran.dims)}
+
+
+def one_run(run) -> xr.Dataset:
+    """One run's analysis or trajectory as :func:`run_status` reads it: its at_rest flag, its kinetic
+    energy at the end over its peak (from a trajectory's steps, translation and rotation, as the
+    analysis computes it), its main mass and particle count when it has them, and its configuration."""
+    names = ("h_inf_over_r0", "final_to_peak_kinetic_energy", "n_main_mass", "n_particles")
+    data = {name: run[name] for name in names if name in run.variables}
+    if "final_to_peak_kinetic_energy" not in data and "step_kinetic_energy" in run.variables:
+        energy = run["step_kinetic_energy"].values
+        if "step_rotational_energy" in run.variables:
+            energy = energy + run["step_rotational_energy"].values
+        if energy.size:
+            data["final_to_peak_kinetic_energy"] = xr.DataArray(energy[-1] / max(energy.max(), 1e-300))
+    data["at_rest"] = xr.DataArray(at_rest_flag(run))
+    return xr.Dataset(data, attrs={"run_configs": json.dumps([json.loads(run.attrs.get("config", "{}"))])})
 
 
 def friction_law_comparison(summaries) -> xr.Dataset:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_flags
+from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_status
 from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 
@@ -64,9 +64,9 @@ def _flag_cell(flags, seeds) -> str:
 def lube_markdown(summary) -> str:
     """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and
     a, with the error against Lajeunesse et al. beside (its height law as the paper prints it), and a
-    flags column naming the seeds whose runs :func:`run_flags` flags (explained under the tables)."""
+    flags column naming the seeds whose runs :func:`run_status` flags (explained under the tables)."""
     lines = []
-    flags = run_flags(summary)
+    flags = run_status(summary)
     seed_values = summary.seed.values if "seed" in summary.coords else [0]
     for m in summary.mu_r.values:
         part = summary.sel(mu_r=m)
@@ -133,10 +133,10 @@ def lube_rst(summary, mu_r: float) -> str:
     """reStructuredText of the report's landing page: a sentence on the column size
     (:func:`size_caveat`), then a list-table at the swept mu_r nearest `mu_r`, per a, of the mean over
     seeds of h_inf/r0 and the run-out with Lube's values, the errors and the flags of the runs that
-    are still moving or a fragment (:func:`colsim.study.collect.run_flags`)."""
+    are still moving or a fragment (:func:`colsim.study.collect.run_status`)."""
     m = summary.mu_r.values[np.argmin(np.abs(summary.mu_r.values - mu_r))]
     part = summary.sel(mu_r=m)
-    flags = run_flags(summary)
+    flags = run_status(summary)
     seed_values = summary.seed.values if "seed" in summary.coords else [0]
     rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error", "flags"]]
     for a in part.aspect_ratio.values:

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...io.netcdf import AT_REST_FLAGS, at_rest_flag
+from ...io.netcdf import AT_REST_FLAGS
 from ...stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
-from ..collect import FLAGS, run_flags
+from ..collect import FLAGS, one_run, run_status
 from .style import _by_key, _colours, _empty, _grid, _pyplot, _save
 
 
@@ -24,26 +24,10 @@ def _bin_edges(centres) -> np.ndarray:
     return np.r_[centres - width / 2, centres[-1:] + width / 2]
 
 
-def _analysis_flags(run) -> dict:
-    """{flag: bool} of one analysis, as :func:`colsim.study.collect.run_flags` flags a run ({} when the
-    analysis lacks h_inf_over_r0)."""
-    import json
-
-    import xarray as xr
-
-    if "h_inf_over_r0" not in run:
-        return {}
-    names = ("h_inf_over_r0", "final_to_peak_kinetic_energy", "n_main_mass", "n_particles")
-    one = xr.Dataset({name: run[name] for name in names if name in run},
-                     attrs={"run_configs": json.dumps([json.loads(run.attrs.get("config", "{}"))])})
-    one["at_rest"] = at_rest_flag(run)
-    return {name: bool(flag) for name, flag in run_flags(one).items()}
-
-
 def deposit_profile_figure(analyses, path: Path) -> Path:
     """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed; each
     bin drawn over its whole width, from the first (at the axis) to the last; a run that
-    :func:`colsim.study.collect.run_flags` flags is dashed and its legend entry says why."""
+    :func:`colsim.study.collect.run_status` flags is dashed and its legend entry says why."""
     plt = _pyplot()
     runs = _by_key(analyses)
     ratios = sorted({a for a, _, _ in runs}) or [np.nan]
@@ -58,7 +42,7 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
             r0 = float(run.attrs["r0"])
             edges = _bin_edges(run["radial_bin"].values)
             height = run["deposit_height"].values
-            flagged = [FLAGS[name] for name, flag in _analysis_flags(run).items() if flag]
+            flagged = [FLAGS[name] for name, flag in run_status(one_run(run)).items() if flag]
             ax.step(edges / r0, np.r_[height, height[-1:]] / r0, where="post", ls="--" if flagged else "-",
                     label=f"$\\mu_r$ = {m:g}" + (f" ({', '.join(flagged)})" if flagged else ""))
         ax.axhline(a, color="0.6", lw=0.8, ls=":")
@@ -84,23 +68,13 @@ def _slab(run, frame):
 
 
 def _end_name(trajectory) -> str:
-    """"deposit" for the last frame of a run at rest, "end (still moving)" otherwise (as
-    :func:`colsim.study.collect.run_flags` decides: at_rest 0, or with a fixed end time, no at_rest, the
-    kinetic energy at the end above the run's rest_energy of its peak); "end" when it cannot tell."""
-    import json
-
-    from ..collect import rest_energy
-
-    flag = at_rest_flag(trajectory)
-    if flag != AT_REST_FLAGS["not_checked"]:
-        return "deposit" if flag == AT_REST_FLAGS["at_rest"] else "end (still moving)"
-    if "step_kinetic_energy" not in trajectory:
+    """"deposit" for the last frame of a run at rest, "end (still moving)" for one that
+    :func:`colsim.study.collect.run_status` calls moving; "end" when it cannot tell (rest not checked
+    and no step energies)."""
+    run = one_run(trajectory)
+    if int(run.at_rest) == AT_REST_FLAGS["not_checked"] and "final_to_peak_kinetic_energy" not in run:
         return "end"
-    energy = trajectory["step_kinetic_energy"].values
-    if "step_rotational_energy" in trajectory:
-        energy = energy + trajectory["step_rotational_energy"].values
-    limit = rest_energy([json.loads(trajectory.attrs.get("config", "{}"))])
-    return "end (still moving)" if energy.size and energy[-1] > limit * np.max(energy) else "deposit"
+    return "end (still moving)" if bool(run_status(run)["moving"]) else "deposit"
 
 
 def side_view_figure(trajectories, path: Path) -> Path:

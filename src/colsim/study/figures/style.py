@@ -1,5 +1,5 @@
 """What the study's figures share: matplotlib loaded on demand (Agg), the file written atomically,
-the seeds' spread and its error bars, the markers of flagged runs (:func:`colsim.study.collect.run_flags`:
+the seeds' spread and its error bars, the markers of flagged runs (:func:`colsim.study.collect.run_status`:
 an open marker where a seed was still moving at the end, a black cross where a seed's main mass holds
 less than half the grains), colours, empty panels and grids of panels."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..collect import FLAGS, run_flags
+from ..collect import FLAGS, run_status
 
 
 log = logging.getLogger(__name__)
@@ -102,7 +102,7 @@ def _bar_note(kind: str, fewest: int, most: int) -> str:
 
 def _flags_of(summary) -> dict:
     """{flag: bool array over the summary's other dimensions}: any seed of the point flagged."""
-    return {name: flag.any("seed") if "seed" in flag.dims else flag for name, flag in run_flags(summary).items()}
+    return {name: flag.any("seed") if "seed" in flag.dims else flag for name, flag in run_status(summary).items()}
 
 
 def _draw_flags(ax, x, y, flags: dict, colour, marker: str, ms: float = 6) -> None:
