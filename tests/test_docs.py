@@ -126,3 +126,16 @@ def test_every_validation_page_names_its_lever_commit_and_config(page):
     assert "lever" in text.lower(), "no rolling lever named"
     assert re.search(r"commit[^.]*\b[0-9a-f]{7,40}\b", text, flags=re.I), "no commit named"
     assert re.search(r"config", text, flags=re.I), "no configuration named"
+
+
+DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+
+
+def test_the_code_carries_no_dates():
+    """Issue 47.5: a date belongs beside its measurement in docs/ (with its commit and machine), not in
+    a docstring or comment of the package or the workflow, where it goes stale unseen."""
+    files = [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
+             *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml"]
+    dated = [f"{path.relative_to(ROOT)}:{n}" for path in files
+             for n, line in enumerate(path.read_text().splitlines(), 1) if DATE.search(line)]
+    assert not dated, dated

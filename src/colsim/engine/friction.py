@@ -20,28 +20,13 @@ two iterates (the spurious opening the fixed point leaves, on average over the c
 `tolerance` times the mean particle diameter; then no contact is off by more than sqrt(m) times
 that. A fixed point not reached in `max_iter` solves is a :class:`SolverError` naming the step.
 
-Why the mean and not the largest change: in the fast flow of the r0 = 2, a = 5 columns (8,000
-contacts) the largest change wanders between 1e-4 and 1.5e-3 d after 15-20 solves, on a few
-contacts, different ones each time, while the mean settles at 2e-6 to 1e-5 d (the associated law's
-mean dilation there: 5e-4 d a step). A rule on the largest change at 1e-4 d stopped all three seeds
-(steps 21, 28 and 40), and at 3e-4 d one of them at step 270. The default, 1e-5 d, is 2 % of the
-associated law's mean dilation in the fast flow, and it bounds every contact by 1e-3 d there.
-
-Damping: the secant steps are halved (:class:`_Secant`). Undamped, one of those three columns
-(seed 1, step 296, mid-collapse) cycled at 2e-5 to 1.5e-4 d rms for 150 programs, and so it did
-with APGD at 1e-7 instead of 1e-5 and with Clarabel for every solve (40 programs): the cycle is the
-fixed-point map's, not the solver's. On that step the halved secant converged in 26 programs,
-the halved plain step in 42, a damping halved after each 5 programs without progress (down to
-1/64) in 135; over the first 150 steps of that column the halved secant took 18.9 programs a step
-(37 at most) against 16.4 (25) undamped, 11 % more CPU.
-
-Whole solves, not a correction folded into the APGD iteration, by measurement: on the first warm
-step of that column, APGD with s updated every 10, 50 or 100 iterations (plain or secant updates,
-with or without a momentum restart, or only once the iterate met 10x the tolerance) left the
-relative residuals at 5e-4 to 2e-2 after 20,000 iterations; whole solves took 6,400 APGD
-iterations in all (15 programs) on average over the first 100 steps. Starting s from the previous
-step's correction (matched by pair) instead of 0 took more solves, not fewer: 23.5 a step (47 at
-most) over the first 60 steps of an a = 5 column at 1e-4 d.
+Why the mean and not the largest change: in the fast flow of a column the largest change wanders
+on a few contacts, different ones each time, and a rule on it stopped whole collapses, while the
+mean settles well below the associated law's dilation a step. Why the secant steps are halved
+(:class:`_Secant`): undamped, the fixed-point map itself (not the solver) cycled on one step of
+one column. Why whole solves and not a correction folded into the APGD iteration, and why s starts
+from 0 and not from the previous step's correction: both converged worse. The measurements behind
+each: docs/validation/friction-law.md.
 """
 from __future__ import annotations
 

@@ -166,7 +166,7 @@ class ContactLaw:
 # disc's own radius: between spheres L = 2 R_i R_j / (R_i + R_j), each radius when they are equal.
 # "effective": R_eff = R_i R_j / (R_i + R_j), half of it between equal spheres. At a wall both are R_i.
 ROLLING_LEVERS = ("paper", "effective")
-#: the lever of the files written before the option existed (colsim used R_eff until 2026-11-25)
+#: the lever of the files written before the option existed (colsim used R_eff then; docs/validation/rolling-lever.md)
 LEVER_OF_OLDER_FILES = "effective"
 
 

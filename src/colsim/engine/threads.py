@@ -8,8 +8,8 @@ thread gives exactly the serial sums.
 
 A job whose threads are as many as the CPUs it may run on (a whole machine, or a cluster job's
 allocation) has them pinned one to a CPU (OpenMP's OMP_PROC_BIND=true), unless the user set
-OpenMP's binding: on the project's 2-core machine that took 2-thread collapses from 27.5-52.6 s of
-wall to 27.6-34.2 s (r0 = 2, a = 5, docs/performance.md, "Threads").
+OpenMP's binding: unpinned, two threads on two cores lost up to half their speed to moves between
+the cores (docs/performance.md, "Threads").
 
 The threads run on numba's OpenMP layer where it has one (:mod:`colsim.engine.compiled` chooses it,
 not numba's TBB-first default); :func:`threading_layer` says which, once they have started.

@@ -20,11 +20,11 @@ APGD_MAX_ITER = 20_000
 ADMM_TOLERANCE = 1e-3
 ADMM_MAX_ITER = 5000
 
-#: auto hands a step to APGD (warm-started, or cold from zero forces) up to this dt / sqrt(h0/g) (Clarabel above: larger steps
-#: were not measured; at 0.04 warm-started APGD took 0.15 s a step against Clarabel's 0.79 s, r0 = 2)
+#: auto hands a step to APGD (warm-started, or cold from zero forces) up to this dt / sqrt(h0/g), the largest
+#: step measured; Clarabel above (docs/solvers.md, "the auto rule")
 AUTO_APGD_BELOW = 0.04
-#: auto's APGD iteration cap; a step that reaches it is solved again by Clarabel (a cold
-#: 16,000-sphere step took APGD 10,400 iterations, about 50 s, and Clarabel 816 s)
+#: auto's APGD iteration cap; a step that reaches it is solved again by Clarabel (docs/solvers.md,
+#: "the auto rule": no measured step came within a third of it)
 AUTO_MAX_ITER = 20_000
 #: APGD's tolerance under auto, from the tolerance study (docs/solvers.md, "APGD's tolerance")
 AUTO_APGD_TOLERANCE = 1e-5

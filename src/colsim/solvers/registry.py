@@ -47,19 +47,8 @@ class AutoSolver(Solver):
     Larger steps go to Clarabel. The solution's `backend` says which back-end solved the step:
     'apgd', 'clarabel', or 'clarabel-fallback' (APGD reached its cap).
 
-    Cold steps (issue 30, `python -m benchmarks cold_step`, one thread): the first step of a
-    resting a = 5 column without its forces took Clarabel 8.3 s and APGD 0.25 s (440 iterations)
-    at 2,474 spheres, 75 s and 2.1 s (760 iterations) at 8,447; earlier, 816 s and 22 s at 16,000.
-    APGD's answer meets its stopping rule (largest cone violation 2e-5 to 6e-5 d, under the
-    overlap tolerance 1e-4 d). Until 2026-11-25 cold steps went to Clarabel.
-
-    Measured (r0 = 2, whole collapses to t/sqrt(h0/g) = 4, benchmarks/crossover.py and
-    tolerance.py): at the paper's step, 0.04, warm-started APGD cost 0.15 s a step against
-    Clarabel's 0.79 s (a = 2) and 0.62 s against 4.5 s (a = 5) at its tolerance 1e-5, and less at
-    smaller steps; larger steps were not measured, so they stay Clarabel's (apgd_below = 0.04). The cap: a cold first step of a
-    16,000-sphere column took APGD 10,400 iterations (about 50 s) and Clarabel 816 s; at r0 = 2,
-    20,000 iterations cost about 9 s, twice a Clarabel step, and no step of the measured
-    collapses came near it.
+    Why APGD up to the paper's step and no further, why cold steps too, and why the cap: the
+    measurements are in docs/solvers.md ("Why APGD, and where: the auto rule").
 
     scaled_time_step: None when the stage has no such scale (then only the warm start decides).
     apgd, clarabel: options of the two back-ends (:class:`ApgdSolver`, :class:`ClarabelSolver`).

@@ -102,7 +102,7 @@ def is_at_rest(result, gravity: float, rest_energy: float, rest_fraction: float 
 #: rest_energy: speeds 10x those of rest. Only the last cloud must come to rest.
 LANDED_ENERGY_FACTOR = 100.0
 #: a packing logs its progress every 50 steps, and at least this often (seconds): the steps of a big
-#: pour's impact take 5-15 s each, and 50 of them left the log silent for over ten minutes
+#: pour's impact take seconds each, and 50 of them would leave the log silent for many minutes
 LOG_INTERVAL_S = 60.0
 
 

@@ -118,13 +118,13 @@ class PackSettings:
     #: one cloud by default: the layers' deposits at a = 5 are not yet the pour's
     #: (docs/validation/packing-layers.md)
     layer_height: float | None = setting(None, "fill in clouds that each add about this settled thickness "
-                                         "(2.5 measured: a third of the CPU at r0 = 3); none: one cloud for "
-                                         "the whole height", unit=LENGTH, optional=True)
+                                         "(docs/validation/packing-layers.md measures 2.5); none: one cloud "
+                                         "for the whole height", unit=LENGTH, optional=True)
     freeze_depth: float = setting(3.5, "while filling in layers, spheres at rest more than this below the "
                                   "settled surface are fixed and leave the program", unit=LENGTH,
                                   kind="non_negative")
-    #: an r0 = 4 pour's steps take 3-4 s of CPU, so at most about 100 s of work is lost to a killed
-    #: job; and a checkpoint after 10 minutes without one (stopwatch.CHECKPOINT_INTERVAL_S)
+    #: a killed job loses at most this many steps of work, or 10 minutes of it
+    #: (stopwatch.CHECKPOINT_INTERVAL_S), whichever is less
     checkpoint_every: int = setting(25, "checkpoint every k steps", kind="positive_int")
 
     def __post_init__(self):

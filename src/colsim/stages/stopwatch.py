@@ -10,8 +10,8 @@ import time
 
 #: a run also writes its checkpoint once this much wall time (s) has passed since its last one (or
 #: since its sitting began), whatever its checkpoint_every: a sitting cut off then loses at most this
-#: much work. An r0 = 6 pour's settling steps take up to a minute each, so 25 of them were up to 25
-#: minutes; writing its checkpoint (70,000 spheres) takes 0.06 s.
+#: much work: a large pour's settling steps can take a minute each, so its checkpoint_every steps
+#: can be many minutes.
 CHECKPOINT_INTERVAL_S = 600.0
 
 

@@ -5,16 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 
-#: Cluster sizing by the column's spheres, from one-thread jobs on this project's 2-core machine
-#: (docs/performance.md): the r0 = 4, a = 5 collapse to rest (20,400 spheres) 623 s of CPU, growing
-#: N^1.43; the one-cloud r0 = 4 pour for a = 5 (22,022 spheres) 2,190 s of wall, growing about N^2
-#: from r0 = 3 (9,477 spheres, 360-378 s); its peak memory at most 1,561 MB for 22,330 spheres.
-#: Times are doubled for slower cores and memory for safety. A job that runs out of time resumes
-#: from its checkpoint (the SLURM profile's retries); none asks for more than LONGEST_RUNTIME.
-#: Measured since, in the column-size study (paper's lever, one thread): the r0 = 4 pours 1,757-1,881 s
-#: of CPU (N^1.92 from r0 = 3), the a = 5 collapses to rest 1,084-1,214 s (N^1.89). The 120-minute base
-#: is 6x those collapses, so at N^1.43 it still covers their N^1.89 up to r0 = 8 (2,530 minutes
-#: asked against 2,170-2,300 estimated with the factor 2); the pour's 2,190 s at N^2 stays above both.
+#: Cluster sizing by the column's spheres: reference sizes, times, growth exponents and memory of
+#: measured one-thread jobs, doubled for slower cores (docs/slurm.md, "Resources", which gives the
+#: measurements and why the requests still cover the column-size study's larger columns). A job that
+#: runs out of time resumes from its checkpoint (the SLURM profile's retries); none asks for more than
+#: LONGEST_RUNTIME.
 COLLAPSE_REFERENCE_SPHERES, COLLAPSE_GROWTH = 20_400, 1.43
 PACK_REFERENCE_SPHERES, PACK_REFERENCE_S, PACK_GROWTH = 22_000, 2_190.0, 2.0
 PACK_MB_PER_SPHERE = 2 * 1_561 / 22_330
@@ -24,12 +19,11 @@ LONGEST_RUNTIME = 2880   # minutes: 48 hours, a common partition's limit
 
 def collapse_runtime(run: dict, study_length: tuple[int, float], spheres: float = 0.0) -> int:
     """A collapse's time limit on a cluster (minutes; SLURM's runtime), from its settings, the
-    study's (steps, end time) and about how many spheres its column holds, by config/paper.yaml's
-    measured jobs (r0 = 4, docs/validation/paper-scale.md): 623 s to rest at a = 5 and 773 s at
-    mu_r = 0 (t/sqrt(h0/g) = 12), so 120 at the study's length; 300 for more steps or a later end
-    (a convergence study's 2,000 steps cost twice); 1440 under the Coulomb law (8-18x the CPU);
-    each times (spheres / 20,400)^1.43 for a column larger than r0 = 4, a = 5's (at most 48 h). A
-    collapse that runs out of time resumes from its checkpoint (the profile's retries)."""
+    study's (steps, end time) and about how many spheres its column holds: 120 at the study's
+    length; 300 for more steps or a later end; 1440 under the Coulomb law; each times
+    (spheres / COLLAPSE_REFERENCE_SPHERES)^COLLAPSE_GROWTH for a larger column than the reference,
+    at most LONGEST_RUNTIME (docs/slurm.md gives the measured jobs behind these). A collapse that
+    runs out of time resumes from its checkpoint (the profile's retries)."""
     if run["friction_law"] == "coulomb":
         base = 1440
     else:
@@ -49,9 +43,9 @@ def spheres_of(r0: float, height: float, diameter_range) -> float:
 
 def pack_resources(spheres: float) -> dict:
     """A packing's time limit (minutes) and memory (MB) on a cluster for a pour of about `spheres`
-    (colsim.stages.pour_geometry.expected_spheres): twice the r0 = 4 pour's 2,190 s grown as N^2, at least
-    120 minutes and at most 48 hours; twice its 70 kB a sphere, at least 4,000 MB. r0 = 6, a = 5
-    (about 73,000 spheres): 807 minutes, 10,226 MB."""
+    (colsim.stages.pour_geometry.expected_spheres): twice the reference pour's time grown as
+    N^PACK_GROWTH, at least 120 minutes and at most LONGEST_RUNTIME; twice its memory a sphere, at
+    least 4,000 MB (docs/slurm.md gives the reference and the requests of r0 = 4-8)."""
     seconds = SLOWER_CORES * PACK_REFERENCE_S * (spheres / PACK_REFERENCE_SPHERES) ** PACK_GROWTH
     runtime = min(LONGEST_RUNTIME, max(120, int(np.ceil(seconds / 60))))
     return {"runtime": runtime, "mem_mb": max(4000, int(np.ceil(PACK_MB_PER_SPHERE * spheres)))}
