@@ -1,6 +1,12 @@
 """The workflow's settings files are what `colsim STAGE --settings` runs with, and the rules'
 command lines name no setting that changes a result (issue 47)."""
 import re
+from dataclasses import dataclass
+
+import pytest
+import yaml
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import validate
 
 from colsim.cli import build_parser
 from colsim.cli.flags import stage_settings
@@ -8,7 +14,7 @@ from colsim.stages import settings as stage
 from colsim.study.workflow import plan as plan_module
 from colsim.study.workflow.plan import StudyPlan, settings_text
 from helpers import ROOT
-from test_study_plan import study_config
+from test_study_plan import SCHEMA, study_config
 
 FILES = {"pack": ["--output", "p.nc"], "collapse": ["--input", "c.nc", "--output", "o.nc"],
          "analyse": ["--input", "o.nc", "--output", "a.nc"]}
@@ -62,8 +68,7 @@ def test_the_rules_command_lines_name_no_setting_that_changes_a_result():
 #: settings in config.yaml that do not decide a result, so no key hashes them: plan.NOT_IDENTITY's
 #: and the collapse's checkpoints and threads
 NOT_IDENTITY = set(plan_module.NOT_IDENTITY) | {"checkpoint_every", "threads", "device"}
-#: top-level settings of one stage only (the schema says so)
-ONE_STAGE = {"solver_overlap_tolerance": "collapse"}
+ONE_STAGE = plan_module.ONE_STAGE
 
 
 def _names(settings: dict) -> set:
@@ -102,3 +107,39 @@ def test_the_cli_defaults_make_the_default_study_s_packing(tmp_path):
     by_hand = stage_settings(build_parser().parse_args(["pack", "--height", "15", "--seed", "1", "--output", "p.nc"]),
                              stage.PackSettings, stage.SolverSettings)
     assert _read("pack", path) == by_hand
+
+
+def test_a_setting_added_to_its_dataclass_the_schema_and_config_yaml_reaches_the_key_the_file_and_the_stage(
+        tmp_path, monkeypatch):
+    """Issue 47.1: a collapse setting declared in its dataclass (here a subclass of CollapseSettings with
+    one more field), the schema and config.yaml, and nowhere else. The schema refuses it until it is
+    declared there; then the run's key and settings.yaml hold it (another value: another folder), and
+    `colsim collapse` has its flag and reads it from the settings file: the plan, the rules and the
+    CLI needed no change."""
+    @dataclass
+    class Extended(stage.CollapseSettings):
+        grain_roughness: float = stage.setting(1.0, "a setting this test adds", kind="non_negative")
+
+    monkeypatch.setitem(stage.STAGES, "collapse", Extended)
+    config = study_config()
+    config["collapse"]["grain_roughness"] = 0.5            # config.yaml
+    with pytest.raises(WorkflowError, match="grain_roughness"):
+        validate(config, str(SCHEMA))
+    schema = yaml.safe_load(SCHEMA.read_text())            # the schema
+    schema["properties"]["collapse"]["properties"]["grain_roughness"] = {
+        "type": "number", "minimum": 0, "default": 1.0, "description": "a setting this test adds"}
+    extended = tmp_path / "schema.yaml"
+    extended.write_text(yaml.safe_dump(schema))
+    validate(config, str(extended))
+    plan = StudyPlan(config)
+    run = plan.run_settings(0.12, 100, 4.0, "associated")
+    assert run["grain_roughness"] == 0.5
+    config["collapse"]["grain_roughness"] = 1.0
+    assert plan_module.settings_key(StudyPlan(config).run_settings(0.12, 100, 4.0, "associated")) != \
+        plan_module.settings_key(run)
+    path = tmp_path / "settings.yaml"
+    path.write_text(settings_text(run) + "\n")
+    made, _ = _read("collapse", path)
+    assert isinstance(made, Extended) and made.grain_roughness == 0.5
+    flags = build_parser().parse_args(["collapse", *FILES["collapse"], "--grain-roughness", "0.25"])
+    assert stage_settings(flags, Extended, stage.SolverSettings)[0].grain_roughness == 0.25

@@ -2,11 +2,12 @@
 
 A run's identity is every setting that changes its result. Its folder names the swept values for a
 reader (r0, seed, a, mu_r) and a key: the first ten hex digits of the SHA-256 of its settings
-(settings_key), written out beside it as settings.yaml. A packing's key covers its height, seeds,
-diameters, density, gravity, pack.* but NOT_IDENTITY, and the solver; a collapse's covers mu, mu_r,
-the rolling lever, the friction law, steps, end time, the rest settings, the solver and frame_every
-(not checkpoint_every, which does not change a result). Two studies share a file only when it is the
-same computation; the key of a setting changed means a new folder, never an overwrite.
+(settings_key), written out beside it as settings.yaml. The settings come from the stages'
+dataclasses (colsim.stages.settings): every declared setting of the stage and of its solver that
+the configuration holds (in the stage's section, else at the top level), but NOT_IDENTITY, which
+does not change a result. So a setting added to a dataclass, the schema and config.yaml reaches
+the key and settings.yaml with no change here. Two studies share a file only when it is the same
+computation; the key of a setting changed means a new folder, never an overwrite.
 
 Values travel as numbers: a folder's name is written from a value (fmt), and a rule reads the value
 back from the settings its folder's key names (packing_of, column_of, run_of), never by parsing the
@@ -17,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 
+from ...stages.settings import STAGES, SOLVING_STAGES, SolverSettings, declared, external_name
 
 RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
@@ -26,11 +28,49 @@ RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
 #: that changed settings (a new key, a new input) rerun the analyses and what follows them
 ANALYSIS_SETTINGS = RESULTS + "/analysis_settings/{analysis}.yaml"
 
-#: pack.* settings that do not change a packing
-NOT_IDENTITY = ("max_spheres", "threads")
+#: settings that do not change a result (threads: by rounding only), so no key holds them
+NOT_IDENTITY = ("max_spheres", "threads", "checkpoint_every", "device")
 #: ... nor do the layers' settings of a packing poured in one cloud (layer_height null), which so
 #: keeps the folder it had before layers existed
 ONE_CLOUD_NOT_IDENTITY = NOT_IDENTITY + ("layer_height", "freeze_depth")
+#: the collapse's settings that its key holds as one group, "rest", and only for a run that goes on to rest
+REST_SETTINGS = ("max_duration", "rest_window", "rest_tolerance", "rest_energy")
+#: the section of the configuration that holds each stage's own settings
+SECTIONS = {"pack": "pack", "collapse": "collapse", "analyse": "analysis"}
+#: top-level settings of the configuration that are one stage's alone (the schema says so): the
+#: others' keep their own default
+ONE_STAGE = {"solver_overlap_tolerance": "collapse"}
+
+
+def configured(config, stage: str, given: dict, skip=NOT_IDENTITY) -> tuple[dict, dict]:
+    """The settings of `stage` (and of its solver) as the configuration holds them:
+    ({name: value} from the stage's section, {name: value} from the top level), each value as its
+    setting's kind has it (integers int, numbers float, lists lists); `given` values (a sweep's,
+    a folder's) come first, in the top level; names in `skip` are left out."""
+    section = config.get(SECTIONS[stage]) or {}
+    classes = (STAGES[stage], SolverSettings) if stage in SOLVING_STAGES else (STAGES[stage],)
+    own, top = {}, {}
+    for item in (item for cls in classes for item in declared(cls)):
+        name = external_name(item)
+        if name in skip:
+            continue
+        if name in given:
+            top[name] = _as_kind(item, given[name])
+        elif name in section:
+            own[name] = _as_kind(item, section[name])
+        elif name in config and ONE_STAGE.get(name, stage) == stage:
+            top[name] = _as_kind(item, config[name])
+    return own, top
+
+
+def _as_kind(item, value):
+    """A configured value as its setting declares it: None, int, float, a list of floats, or as is (a choice)."""
+    kind = item.metadata["kind"]
+    if value is None or kind == "choice":
+        return value
+    if item.metadata["many"]:
+        return [float(v) for v in value]
+    return int(value) if kind in ("integer", "positive_int") else float(value)
 
 
 def fmt(value) -> str:
@@ -116,14 +156,13 @@ class StudyPlan:
         return self.pack_aspect_ratio * r0
 
     def packing_settings(self, r0: float, seed: int) -> dict:
-        """Everything `colsim pack` is given for the packing of (r0, seed): its identity."""
+        """Everything `colsim pack` is given for the packing of (r0, seed): its identity, the pack
+        section's settings under "pack" (as the configuration writes them), the others at the top."""
         config = self.config
         not_identity = NOT_IDENTITY if config["pack"]["layer_height"] is not None else ONE_CLOUD_NOT_IDENTITY
-        return {"r0": float(r0), "seed": int(seed), "height": float(self.pack_height(r0, seed)),
-                "root_seed": config["root_seed"], "diameter_min": float(config["diameter_min"]),
-                "diameter_max": float(config["diameter_max"]), "density": float(config["density"]),
-                "gravity": float(config["gravity"]), "solver": config["solver"],
-                "pack": {key: value for key, value in config["pack"].items() if key not in not_identity}}
+        given = {"r0": r0, "seed": seed, "height": self.pack_height(r0, seed)}
+        own, top = configured(config, "pack", given, not_identity)
+        return {**top, "pack": {key: config["pack"][key] for key in own}}
 
     def packing_key(self, r0: float, seed: int) -> str:
         """The key of the packing of (r0, seed) under this study's settings (registered)."""
@@ -145,16 +184,14 @@ class StudyPlan:
 
     def run_settings(self, mu_r: float, steps: int, duration: float, law: str) -> dict:
         """Everything `colsim collapse` is given for one run of a column (its identity, with the column)."""
-        config = self.config
-        collapse = config["collapse"]
-        rest = None
-        if self.goes_to_rest(steps, duration):
-            rest = {key: float(collapse[key]) for key in ("max_duration", "rest_window", "rest_tolerance", "rest_energy")}
-        return {"mu": float(config["mu"]), "mu_r": float(mu_r), "rolling_lever": config["rolling_lever"],
-                "friction_law": law, "friction_tolerance": config["friction_tolerance"] if law == "coulomb" else None,
-                "steps": int(steps), "duration": float(duration), "rest": rest, "solver": config["solver"],
-                "solver_overlap_tolerance": config["solver_overlap_tolerance"],
-                "frame_every": int(collapse["frame_every"])}
+        given = {"mu_r": mu_r, "steps": steps, "duration": duration, "friction_law": law}
+        own, top = configured(self.config, "collapse", given)
+        settings = {**own, **top}
+        rest = {key: settings.pop(key) for key in REST_SETTINGS if key in settings}
+        settings["rest"] = rest if self.goes_to_rest(steps, duration) else None
+        if law != "coulomb":   # only the Coulomb law's fixed point has a tolerance
+            settings["friction_tolerance"] = None
+        return settings
 
     def run_path(self, name: str, r0: float, seed: int, a: float, mu_r: float,
                  steps=None, duration=None, law=None) -> str:
@@ -246,10 +283,8 @@ class StudyPlan:
 
     def analysis_settings(self) -> dict:
         """Everything `colsim analyse` is given besides its run: the study's analysis settings."""
-        analysis = self.config["analysis"]
-        return {"contact_tolerance": float(analysis["contact_tolerance"]),
-                "check_tolerances": [float(t) for t in analysis["check_tolerances"]],
-                "mass_shares": [float(m) for m in analysis["mass_shares"]]}
+        own, top = configured(self.config, "analyse", {})
+        return {**top, **own}
 
     def analysis_settings_path(self) -> str:
         """The file that names this study's analysis settings by key (an input of every analysis)."""
