@@ -310,9 +310,9 @@ class _Iteration:
         return theta, lip, bt, rs
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """a . b without BLAS (a threaded BLAS dot oversubscribes a busy machine badly)."""
-    return float(np.einsum("i,i->", a, b))
+def _dot(u: np.ndarray, v: np.ndarray) -> float:
+    """u . v without BLAS (a threaded BLAS dot oversubscribes a busy machine badly)."""
+    return float(np.einsum("i,i->", u, v))
 
 
 class ApgdSolver(Solver):

@@ -150,6 +150,12 @@ class TrimSettings:
 SMALLEST_SCALED_STEP = 1e-9
 
 
+def scaled_step(duration, n_steps):
+    """The collapse's step dt / sqrt(h0/g): its end time t / sqrt(h0/g) over its equal steps (numbers
+    or arrays)."""
+    return duration / n_steps
+
+
 @dataclass
 class CollapseSettings:
     """The collapse's physics and numerics (SPEC section 3). Times are dimensionless (t / sqrt(h0/g)).
@@ -211,7 +217,7 @@ class CollapseSettings:
     @property
     def scaled_step(self) -> float:
         """The step dt / sqrt(h0/g)."""
-        return self.duration / self.n_steps
+        return scaled_step(self.duration, self.n_steps)
 
     def friction(self) -> FrictionLaw:
         return FrictionLaw(self.friction_law, self.friction_tolerance)

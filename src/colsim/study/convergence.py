@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..stages.settings import scaled_step
 from .collect import means_per_size
 
 SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
@@ -49,7 +50,7 @@ def runs_table(groups: dict, default_end: float) -> "xarray.Dataset":  # noqa: F
         "duration": [float(a.attrs["duration"]) for _, a in rows],
         "r0_over_mean_diameter": [float(a.attrs["r0"]) / float(a["mean_diameter"]) for _, a in rows],
     }
-    coords["scaled_dt"] = list(np.array(coords["duration"]) / np.array(coords["n_steps"]))
+    coords["scaled_dt"] = list(scaled_step(np.array(coords["duration"]), np.array(coords["n_steps"])))
     long_names = {"study": "convergence sub-study", "r0": "cylinder radius", "aspect_ratio": "aspect ratio h0/r0",
                   "mu_r": "rolling resistance coefficient", "seed": "packing seed",
                   "n_steps": "number of time steps", "duration": "end time over sqrt(h0/g)",
