@@ -28,17 +28,22 @@ DIAMETER = 0.375
 SPACING = 0.376
 
 
-def lattice_contacts(spheres: int, seed: int = 0) -> tuple[Contacts, int]:
-    """(contacts, n): a jittered lattice column of about `spheres` spheres, aspect ratio 5, contacts
-    with the +x, +y, +z lattice neighbours."""
+def lattice_positions(spheres: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (n, 3), the lattice's shape (3,)): a jittered cubic lattice of spacing SPACING,
+    about `spheres` sites, aspect ratio 5."""
     side = max(2, round((spheres / 5) ** (1 / 3)))
     shape = np.array([side, side, 5 * side])
     n = int(np.prod(shape))
-    rng = np.random.default_rng(seed)
-    index = np.arange(n).reshape(shape)
     lattice = np.stack(np.meshgrid(*(np.arange(k) for k in shape), indexing="ij"), axis=-1).reshape(n, 3)
-    position = lattice * SPACING
-    position = position + rng.uniform(-0.002, 0.002, (n, 3))
+    return lattice * SPACING + np.random.default_rng(seed).uniform(-0.002, 0.002, (n, 3)), shape
+
+
+def lattice_contacts(spheres: int, seed: int = 0) -> tuple[Contacts, int]:
+    """(contacts, n): the column of :func:`lattice_positions`, contacts with the +x, +y, +z lattice
+    neighbours."""
+    position, shape = lattice_positions(spheres, seed)
+    n = len(position)
+    index = np.arange(n).reshape(shape)
     first, second = [], []
     for axis in range(3):
         lead = [slice(None)] * 3

@@ -6,6 +6,11 @@ as a solve makes it.
     python -m benchmarks gpu --spheres 73000 704000 2000000 --iterations 60
     python -m benchmarks gpu --spheres --columns r0_3_a5.nc r0_6_a5.nc --steps 20
 
+Then the swept pairs of contact detection on the same lattice, every sphere moving up to 0.01 of its
+diameter in a random direction (a collapse step's): the CPU's (a k-d tree, the swept test on numba's
+threads) against the GPU's (a uniform grid, colsim.engine.cuda_contacts; the copies to and from the
+device included), best of three, and whether the two lists are the same.
+
 With --columns (`colsim trim` files), also the first --steps steps of each column's collapse (the
 default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
 packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`: detection and the
@@ -31,8 +36,10 @@ import time
 import numpy as np
 
 import record
-from cuda_operator import lattice_contacts
+from cuda_operator import DIAMETER, lattice_contacts, lattice_positions
 from colsim.engine.cones import scales_of_diagonal
+from colsim.engine.contacts import swept_pairs
+from colsim.engine.state import ParticleState
 from colsim.engine.operator import ContactOperator
 from colsim.engine.threads import threads
 from colsim.solvers.apgd import _Iteration
@@ -67,6 +74,28 @@ def timed(run, iterations: int, mu, mu_r, synchronise=lambda: None) -> float:
         run.residuals(mu, mu_r, 1.0, 1e-12)
         done += step
     synchronise()
+    return time.perf_counter() - begin
+
+
+def detection(spheres: int, repeat: int = 3) -> dict:
+    """Best-of-`repeat` seconds of the swept pairs of the lattice of about `spheres` on the CPU and on
+    the GPU (the first call of each compiles), the pairs found, and whether both found the same."""
+    from colsim.engine.cuda_contacts import swept_pairs_on_device
+
+    position, _ = lattice_positions(spheres)
+    state = ParticleState.at_rest(position, np.full(len(position), DIAMETER / 2))
+    predicted = np.random.default_rng(1).uniform(-0.01, 0.01, position.shape) * DIAMETER
+    found, best = {}, {}
+    for name, find in (("cpu", swept_pairs), ("gpu", swept_pairs_on_device)):
+        found[name] = find(state, predicted, 0.02 * DIAMETER, 0.5)
+        best[name] = min(_seconds(find, state, predicted) for _ in range(repeat))
+    same = all(np.array_equal(a, b) for a, b in zip(found["cpu"], found["gpu"]))
+    return {"spheres": state.n, "pairs": len(found["cpu"][0]), "cpu_s": best["cpu"], "gpu_s": best["gpu"], "same": same}
+
+
+def _seconds(find, state, predicted) -> float:
+    begin = time.perf_counter()
+    find(state, predicted, 0.02 * DIAMETER, 0.5)
     return time.perf_counter() - begin
 
 
@@ -128,6 +157,14 @@ def main(argv=None):
                         "gpu_ms": 1e3 * per_gpu, "cpu_threads": threads(), "device": device,
                         "simulator": bool(numba_config.ENABLE_CUDASIM), "iterations": args.iterations,
                         "relative_difference": difference})
+    if args.spheres:
+        found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",
+                              "GPU vs CPU", "same pairs"], title="the swept pairs of contact detection")
+    for spheres in args.spheres:
+        d = detection(spheres)
+        found.row(d["spheres"], d["pairs"], f"{1e3 * d['cpu_s']:.1f}", f"{1e3 * d['gpu_s']:.1f}",
+                  f"{d['cpu_s'] / d['gpu_s']:.1f}", "yes" if d["same"] else "NO",
+                  data={**d, "device": device, "cpu_threads": threads(), "simulator": bool(numba_config.ENABLE_CUDASIM)})
     if not args.columns:
         return
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",

@@ -185,7 +185,7 @@ def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndar
 
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
-           most_recovered: float = np.inf) -> Contacts:
+           most_recovered: float = np.inf, device: str = "cpu") -> Contacts:
     """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
 
     margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
@@ -199,8 +199,15 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     most_recovered (length): the most of an overlap present at the start that the step removes; the
     gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
+    device: where the swept pairs are found, 'cpu' (a k-d tree) or 'cuda' (a grid on the GPU,
+    :mod:`colsim.engine.cuda_contacts`: the same pairs).
     """
-    pi, pj = swept_pairs(state, predicted, margin, slack)
+    if device == "cuda":
+        from .cuda_contacts import swept_pairs_on_device
+
+        pi, pj = swept_pairs_on_device(state, predicted, margin, slack)
+    else:
+        pi, pj = swept_pairs(state, predicted, margin, slack)
     d = state.position[pj] - state.position[pi]
     pair_normal = d / np.linalg.norm(d, axis=1)[:, None]
     if renormal is not None:

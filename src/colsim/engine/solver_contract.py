@@ -54,6 +54,11 @@ class Solver:
     #: whether solve() uses `warm_start` (the stepper then passes the previous step's forces)
     uses_warm_start = False
 
+    @property
+    def device(self) -> str:
+        """Where the back-end's iterations run, 'cpu' or 'cuda': the step's contact detection runs there too."""
+        return "cpu"
+
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None) -> ConeSolution:
         raise NotImplementedError

@@ -100,7 +100,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         t0 = time.perf_counter()
         found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
                                          settings.detection_slack, cylinder_margin, renormal,
-                                         most_recovered)
+                                         most_recovered, solver.device)
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()

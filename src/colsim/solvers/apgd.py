@@ -371,6 +371,10 @@ class ApgdSolver(Solver):
         self.overlap_tolerance = float(overlap_tolerance)
         self.verbose = verbose
 
+    @property
+    def device(self) -> str:
+        return "cuda" if self.kernel == "cuda" else "cpu"
+
     def describe(self) -> dict:
         """The settings; the overlap tolerance only when it is on, so that runs made before it
         existed (and the packings, which do not use it) compare equal to those made after."""

@@ -74,6 +74,11 @@ class AutoSolver(Solver):
                                   "length_floor": lengths * self.APGD_LENGTH_FLOOR,
                                   "overlap_tolerance": lengths * self.APGD_OVERLAP_TOLERANCE, **(apgd or {})})
 
+    @property
+    def device(self) -> str:
+        """Its APGD's: where the steps it solves run."""
+        return self.apgd.device
+
     def length_scale(self) -> float:
         """The factor on APGD's length floor and overlap tolerance: 1 at steps of at least
         defaults.AUTO_APGD_LENGTHS_AT, the step over it below (so they bound a velocity error)."""

@@ -1,0 +1,178 @@
+"""The swept particle pairs of contact detection on one GPU (issue 46, item 3): the pairs of
+:func:`colsim.engine.contacts.swept_pairs` from a uniform grid instead of a k-d tree, in numba.cuda
+kernels.
+
+Each particle's swept segment is binned by its midpoint x + u/2 into cubic cells at least as wide
+as the k-d tree's reach, so that every candidate pair lies in neighbouring cells:
+
+1. one thread a particle finds its cell; the cells' counts (an atomic add each) become their
+   starts (a prefix sum) and the particles are listed cell by cell (a counting sort);
+2. one thread a particle scans the 27 cells around its own, and keeps each partner j > i whose
+   midpoint lies within the reach (the k-d tree's test) and whose relative segment comes within
+   margin + slack |u_j - u_i| of contact (:func:`colsim.engine.contacts._swept_keep`'s test, the
+   same arithmetic): a first pass counts them, a prefix sum gives each particle its place, a
+   second pass writes them there and sorts them by j.
+
+So the pairs come out sorted by (i, j) as the CPU's do, and the same every run: no order depends on
+the atomic adds. The prefix sums run on the host (one copy of the counts each way). Without a GPU
+the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), where the tests compare the
+pairs with the CPU's.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .cuda_operator import THREADS, blocks_for, cuda
+
+#: the grid has at most this many cells a particle: a sparse cloud gets wider cells (any width at
+#: least the reach finds the same pairs), not an array of empty ones
+CELLS_PER_PARTICLE = 4
+
+
+def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: float):
+    """(i, j) int64 (m,): the pairs of :func:`colsim.engine.contacts.swept_pairs`, sorted by (i, j),
+    found on the GPU. state: a ParticleState (n particles); predicted: (n, 3) length."""
+    n = state.n
+    if n < 2:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    position = np.ascontiguousarray(state.position, dtype=float)
+    predicted = np.ascontiguousarray(predicted, dtype=float)
+    radius = np.ascontiguousarray(state.radius, dtype=float)
+    half = 0.5 * np.linalg.norm(predicted, axis=1)
+    reach = 2.0 * float(np.max(radius + half * (1.0 + slack))) + margin
+    midpoint = position + 0.5 * predicted
+    lower, dims, width = _grid(midpoint, reach)
+    d_position, d_predicted, d_radius = cuda.to_device(position), cuda.to_device(predicted), cuda.to_device(radius)
+    start, listed = _cell_lists(cuda.to_device(midpoint), lower, dims, width)
+    args = (d_position, d_predicted, d_radius, cuda.to_device(midpoint), start, listed, lower, dims, width,
+            reach * reach, float(margin), float(slack))
+    counts = cuda.to_device(np.zeros(n, dtype=np.int64))
+    _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
+    found = counts.copy_to_host()
+    offsets = np.concatenate([[0], np.cumsum(found)])
+    partners = cuda.to_device(np.zeros(max(int(offsets[-1]), 1), dtype=np.int64))
+    _pairs_kernel[blocks_for(n), THREADS](*args, counts, cuda.to_device(offsets), partners, True)
+    j = partners.copy_to_host()[:offsets[-1]]
+    return np.repeat(np.arange(n, dtype=np.int64), found), j
+
+
+def _grid(midpoint: np.ndarray, reach: float):
+    """(lower corner (3,), cells along x, y, z (3,) int64, cell width): cubes at least `reach`
+    wide over the midpoints, at most CELLS_PER_PARTICLE of them a particle."""
+    lower = midpoint.min(axis=0)
+    extent = midpoint.max(axis=0) - lower
+    width = max(reach, 1e-300)
+    while True:
+        dims = np.floor(extent / width).astype(np.int64) + 1
+        if np.prod(dims.astype(float)) <= CELLS_PER_PARTICLE * len(midpoint):
+            return lower, dims, width
+        width *= 2.0
+
+
+def _cell_lists(midpoint, lower, dims, width):
+    """(start (cells + 1,), listed (n,)) on the device: the particles of cell c are
+    listed[start[c]:start[c + 1]]."""
+    n, cells = midpoint.shape[0], int(np.prod(dims))
+    cell = cuda.device_array(n, dtype=np.int64)
+    count = cuda.to_device(np.zeros(cells, dtype=np.int64))
+    _cell_kernel[blocks_for(n), THREADS](midpoint, lower, dims, width, cell, count)
+    start = np.concatenate([[0], np.cumsum(count.copy_to_host())])
+    d_start = cuda.to_device(start)
+    filled = cuda.to_device(np.zeros(cells, dtype=np.int64))
+    listed = cuda.device_array(n, dtype=np.int64)
+    _list_kernel[blocks_for(n), THREADS](cell, d_start, filled, listed)
+    return d_start, listed
+
+
+@cuda.jit(device=True)
+def _cell_coordinate(x, lower, width, count):
+    """The cell index of coordinate x along one axis of `count` cells."""
+    c = int(math.floor((x - lower) / width))
+    return min(max(c, 0), count - 1)
+
+
+@cuda.jit
+def _cell_kernel(midpoint, lower, dims, width, cell, count):
+    """cell[i] = particle i's cell (x fastest); count[c] += 1 (atomic)."""
+    i = cuda.grid(1)
+    if i >= midpoint.shape[0]:
+        return
+    cx = _cell_coordinate(midpoint[i, 0], lower[0], width, dims[0])
+    cy = _cell_coordinate(midpoint[i, 1], lower[1], width, dims[1])
+    cz = _cell_coordinate(midpoint[i, 2], lower[2], width, dims[2])
+    c = cx + dims[0] * (cy + dims[1] * cz)
+    cell[i] = c
+    cuda.atomic.add(count, c, 1)
+
+
+@cuda.jit
+def _list_kernel(cell, start, filled, listed):
+    """listed[start[c] + slot] = i for particle i of cell c (slot: an atomic count; the order within
+    a cell is any)."""
+    i = cuda.grid(1)
+    if i >= cell.shape[0]:
+        return
+    c = cell[i]
+    listed[start[c] + cuda.atomic.add(filled, c, 1)] = i
+
+
+@cuda.jit(device=True)
+def _swept_close(position, predicted, radius, a, b, margin, slack):
+    """Whether the pair (a, b) comes within margin + slack |u_b - u_a| of contact over the step
+    (colsim.engine.contacts._swept_keep, the same arithmetic)."""
+    d0u = 0.0
+    du2 = 0.0
+    for d in range(3):
+        du = predicted[b, d] - predicted[a, d]
+        d0u += (position[b, d] - position[a, d]) * du
+        du2 += du * du
+    tau = min(max(-d0u / max(du2, 1e-300), 0.0), 1.0)
+    c2 = 0.0
+    for d in range(3):
+        c = position[b, d] - position[a, d] + tau * (predicted[b, d] - predicted[a, d])
+        c2 += c * c
+    return math.sqrt(c2) - radius[a] - radius[b] < margin + slack * math.sqrt(du2)
+
+
+@cuda.jit
+def _pairs_kernel(position, predicted, radius, midpoint, start, listed, lower, dims, width, reach2, margin,
+                  slack, counts, offsets, partners, write):
+    """Particle i's partners j > i: midpoints within the reach (reach2 its square) and the swept test.
+    write False: counts[i] = how many; True: partners[offsets[i]:offsets[i + 1]] = them, sorted."""
+    i = cuda.grid(1)
+    if i >= midpoint.shape[0]:
+        return
+    cx = _cell_coordinate(midpoint[i, 0], lower[0], width, dims[0])
+    cy = _cell_coordinate(midpoint[i, 1], lower[1], width, dims[1])
+    cz = _cell_coordinate(midpoint[i, 2], lower[2], width, dims[2])
+    found = 0
+    for z in range(max(cz - 1, 0), min(cz + 2, dims[2])):
+        for y in range(max(cy - 1, 0), min(cy + 2, dims[1])):
+            for x in range(max(cx - 1, 0), min(cx + 2, dims[0])):
+                c = x + dims[0] * (y + dims[1] * z)
+                for slot in range(start[c], start[c + 1]):
+                    j = listed[slot]
+                    if j <= i:
+                        continue
+                    r2 = 0.0
+                    for d in range(3):
+                        e = midpoint[j, d] - midpoint[i, d]
+                        r2 += e * e
+                    if r2 <= reach2 and _swept_close(position, predicted, radius, i, j, margin, slack):
+                        if write:
+                            partners[offsets[i] + found] = j
+                        found += 1
+    if not write:
+        counts[i] = found
+        return
+    first = offsets[i]
+    for k in range(first + 1, first + found):   # insertion sort: a particle has a dozen partners or so
+        j = partners[k]
+        m = k - 1
+        while m >= first and partners[m] > j:
+            partners[m + 1] = partners[m]
+            m -= 1
+        partners[m + 1] = j

@@ -1,0 +1,75 @@
+"""The swept pairs found on the GPU (colsim.engine.cuda_contacts, issue 46.3) are the CPU's
+(colsim.engine.contacts.swept_pairs), pair for pair and in the same (i, j) order. The kernels run on
+numba's CUDA simulator here (conftest sets NUMBA_ENABLE_CUDASIM=1 unless told otherwise).
+
+Exact equality: both keep a pair by the same two tests (midpoints within the reach, then the same
+swept arithmetic); only a pair within a rounding of either bound could differ, and the clouds below
+have none."""
+import numpy as np
+import pytest
+
+from colsim.engine.contacts import swept_pairs
+from colsim.engine.state import ParticleState
+from colsim.stages.pack import starting_cloud
+
+cuda_contacts = pytest.importorskip("colsim.engine.cuda_contacts", reason="numba.cuda is not importable")
+
+
+def _moving(state: ParticleState, scale: float, seed: int) -> np.ndarray:
+    """(n, 3) predicted displacements up to `scale` (length) in random directions."""
+    return np.random.default_rng(seed).uniform(-scale, scale, (state.n, 3))
+
+
+@pytest.mark.parametrize("scale", [0.0, 0.02, 0.2], ids=["at-rest", "a-step", "an-impact"])
+def test_the_gpu_finds_the_cpu_s_swept_pairs(scale):
+    """A 60-sphere cloud (the pack stage's lattice, diameters 0.25-0.5, cylinder radius 1), settled
+    closer by halving its heights, its spheres at rest, moving a step's worth or an impact's."""
+    state = starting_cloud(60, 1.0, seed=3)
+    state.position[:, 2] *= 0.5
+    predicted = _moving(state, scale, seed=4)
+    i, j = cuda_contacts.swept_pairs_on_device(state, predicted, 0.05, 0.5)
+    cpu_i, cpu_j = swept_pairs(state, predicted, 0.05, 0.5)
+    assert len(cpu_i) >= 50   # the at-rest cloud has 60; the moving ones more
+    np.testing.assert_array_equal(i, cpu_i)
+    np.testing.assert_array_equal(j, cpu_j)
+
+
+def test_a_sparse_cloud_gets_wider_cells_and_the_same_pairs():
+    """Two tight clusters far apart (a grid of reach-wide cells would hold millions): the cells widen
+    to CELLS_PER_PARTICLE a particle, and the pairs are still the CPU's."""
+    cluster = starting_cloud(20, 0.8, seed=5)
+    cluster.position[:, 2] *= 0.5
+    position = np.vstack([cluster.position, cluster.position + [0.0, 0.0, 500.0]])
+    state = ParticleState.at_rest(position, np.concatenate([cluster.radius, cluster.radius]))
+    predicted = _moving(state, 0.05, seed=6)
+    _, dims, _ = cuda_contacts._grid(state.position + 0.5 * predicted, 1.0)
+    assert np.prod(dims) <= cuda_contacts.CELLS_PER_PARTICLE * state.n
+    i, j = cuda_contacts.swept_pairs_on_device(state, predicted, 0.02, 0.5)
+    cpu_i, cpu_j = swept_pairs(state, predicted, 0.02, 0.5)
+    assert len(cpu_i) > 20 and np.all(j[i < 20] < 20)
+    np.testing.assert_array_equal(i, cpu_i)
+    np.testing.assert_array_equal(j, cpu_j)
+
+
+def test_one_sphere_has_no_pairs():
+    state = ParticleState.at_rest([[0.0, 0.0, 0.5]], [0.25])
+    i, j = cuda_contacts.swept_pairs_on_device(state, np.zeros((1, 3)), 0.05, 0.5)
+    assert i.size == j.size == 0
+
+
+def test_detect_on_the_gpu_gives_the_cpu_s_contacts():
+    """detect(device='cuda') (what the stepper asks for when APGD runs on the GPU) lists the same
+    contacts, pairs, walls and all, with the same frames and gaps, in the same order."""
+    from colsim.engine.contacts import detect
+    from colsim.engine.state import ContactLaw, Walls
+
+    state = starting_cloud(60, 1.0, seed=3)
+    state.position[:, 2] *= 0.5
+    state.position[:, 2] -= (state.position[:, 2] - state.radius).min() - 0.01   # the bottom layer on the floor
+    predicted = _moving(state, 0.02, seed=8)
+    walls, law = Walls(floor=True, cylinder_radius=1.0), ContactLaw.uniform(0.5, 0.1)
+    gpu = detect(state, walls, law, predicted, 0.05, device="cuda")
+    cpu = detect(state, walls, law, predicted, 0.05)
+    assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
+    for name in ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "lever", "mu", "mu_r"):
+        np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name))
