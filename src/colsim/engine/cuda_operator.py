@@ -26,10 +26,15 @@ if not hasattr(np, "row_stack"):   # numba-cuda 0.30.4 calls np.row_stack, which
 
 from numba import cuda  # noqa: E402 (after the alias)
 
+from .cones import project_point
 from .operator import ContactGeometry, body_contacts
 
 #: threads a block; a power of two (the dot product's tree halves it)
 THREADS = 128
+
+
+#: one thread's projection onto a contact's coupled cone (the CPU's scalar code, compiled for the GPU)
+project_point_on_device = cuda.jit(device=True)(getattr(project_point, "py_func", project_point))
 
 
 def blocks_for(count: int) -> int:

@@ -104,7 +104,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
-        guess = None if start_from is None else start_from.match(found, state.n)
+        guess = None if start_from is None else start_from.match(found, state.n, solver.device)
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance)

@@ -52,8 +52,13 @@ class WarmStart:
         """Whether any stored pair pushes (a start worth warming from)."""
         return bool(np.any(np.einsum("ij,ij->i", self.force, self.force) > 0.0))
 
-    def match(self, contacts, n_particles: int) -> np.ndarray:
-        """(m, 5) the stored forces of the pairs in `contacts`, in their frames; zeros for new pairs."""
+    def match(self, contacts, n_particles: int, device: str = "cpu") -> np.ndarray:
+        """(m, 5) the stored forces of the pairs in `contacts`, in their frames, projected onto their
+        cones; zeros for new pairs. device 'cuda': matched on the GPU (:mod:`colsim.engine.cuda_warm_start`)."""
+        if device == "cuda":
+            from .cuda_warm_start import match_on_device
+
+            return match_on_device(self, contacts, n_particles)
         from .cones import project_coupled_cone
         from .program import ROWS_PER_CONTACT
 

@@ -18,12 +18,10 @@ import math
 import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for, cuda,
-                                    gradient_on_device, transpose_on_device)   # first: numba.cuda on numpy 2.5
-from ..engine.cones import combine_residuals, project_point
+                                    gradient_on_device, project_point_on_device,
+                                    transpose_on_device)   # first: numba.cuda on numpy 2.5
+from ..engine.cones import combine_residuals
 from .apgd import apgd_iterations
-
-_project_point = cuda.jit(device=True)(getattr(project_point, "py_func", project_point))
-
 
 @cuda.jit
 def _project_kernel(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts):
@@ -42,8 +40,8 @@ def _project_kernel(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts):
         y2 = x[o + 2] + beta * (x[o + 2] - x_prev[o + 2])
         y3 = x[o + 3] + beta * (x[o + 3] - x_prev[o + 3])
         y4 = x[o + 4] + beta * (x[o + 4] - x_prev[o + 4])
-        p, q1, q2, r1, r2 = _project_point(y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
-                                           y3 - step * g[o + 3], y4 - step * g[o + 4], mu_s[k], mu_r_s[k])
+        p, q1, q2, r1, r2 = project_point_on_device(y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
+                                                    y3 - step * g[o + 3], y4 - step * g[o + 4], mu_s[k], mu_r_s[k])
         x_new[o], x_new[o + 1], x_new[o + 2], x_new[o + 3], x_new[o + 4] = p, q1, q2, r1, r2
         moved[t] = ((p - y0) * (p - y0) + (q1 - y1) * (q1 - y1) + (q2 - y2) * (q2 - y2)
                     + (r1 - y3) * (r1 - y3) + (r2 - y4) * (r2 - y4))
