@@ -9,7 +9,10 @@ as a solve makes it.
 Then the swept pairs of contact detection on the same lattice, every sphere moving up to 0.01 of its
 diameter in a random direction (a collapse step's): the CPU's (a k-d tree, the swept test on numba's
 threads) against the GPU's (a uniform grid, colsim.engine.cuda_contacts; the copies to and from the
-device included), best of three, and whether the two lists are the same.
+device included), best of three, and whether the two lists are the same; and the warm start's
+matching of forces stored for every lattice contact to those contacts (WarmStart.match on the host,
+a sorted array; on the GPU, a hash table: colsim.engine.cuda_warm_start), best of three, and the
+largest difference over the largest force.
 
 With --columns (`colsim trim` files), also the first --steps steps of each column's collapse (the
 default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
@@ -88,14 +91,31 @@ def detection(spheres: int, repeat: int = 3) -> dict:
     found, best = {}, {}
     for name, find in (("cpu", swept_pairs), ("gpu", swept_pairs_on_device)):
         found[name] = find(state, predicted, 0.02 * DIAMETER, 0.5)
-        best[name] = min(_seconds(find, state, predicted) for _ in range(repeat))
+        best[name] = min(_timed_call(find, state, predicted, 0.02 * DIAMETER, 0.5) for _ in range(repeat))
     same = all(np.array_equal(a, b) for a, b in zip(found["cpu"], found["gpu"]))
     return {"spheres": state.n, "pairs": len(found["cpu"][0]), "cpu_s": best["cpu"], "gpu_s": best["gpu"], "same": same}
 
 
-def _seconds(find, state, predicted) -> float:
+def matching(spheres: int, repeat: int = 3) -> dict:
+    """Best-of-`repeat` seconds of the warm start's matching on the lattice of about `spheres`, every
+    contact's force stored (in its cone), on the host and on the GPU, and their largest difference."""
+    from colsim.engine.warm_start import WarmStart
+
+    contacts, n = lattice_contacts(spheres)
+    forces = np.random.default_rng(2).uniform(0.0, 1.0, (contacts.m, 5)) * [1.0, 0.3, 0.3, 0.05, 0.05]
+    warm = WarmStart.from_step(contacts, forces)
+    found, best = {}, {}
+    for device in ("cpu", "cuda"):
+        found[device] = warm.match(contacts, n, device)
+        best[device] = min(_timed_call(warm.match, contacts, n, device) for _ in range(repeat))
+    difference = float(np.abs(found["cuda"] - found["cpu"]).max() / np.abs(found["cpu"]).max())
+    return {"spheres": n, "contacts": contacts.m, "cpu_s": best["cpu"], "gpu_s": best["cuda"], "difference": difference}
+
+
+def _timed_call(call, *args) -> float:
+    """Wall seconds of call(*args)."""
     begin = time.perf_counter()
-    find(state, predicted, 0.02 * DIAMETER, 0.5)
+    call(*args)
     return time.perf_counter() - begin
 
 
@@ -165,6 +185,14 @@ def main(argv=None):
         found.row(d["spheres"], d["pairs"], f"{1e3 * d['cpu_s']:.1f}", f"{1e3 * d['gpu_s']:.1f}",
                   f"{d['cpu_s'] / d['gpu_s']:.1f}", "yes" if d["same"] else "NO",
                   data={**d, "device": device, "cpu_threads": threads(), "simulator": bool(numba_config.ENABLE_CUDASIM)})
+    if args.spheres:
+        matched = record.table(["spheres", "contacts", "CPU ms (host)", f"GPU ms ({device})", "GPU vs CPU",
+                                "difference / largest"], title="the warm start's matching")
+    for spheres in args.spheres:
+        d = matching(spheres)
+        matched.row(d["spheres"], d["contacts"], f"{1e3 * d['cpu_s']:.1f}", f"{1e3 * d['gpu_s']:.1f}",
+                    f"{d['cpu_s'] / d['gpu_s']:.1f}", f"{d['difference']:.1e}",
+                    data={**d, "device": device, "simulator": bool(numba_config.ENABLE_CUDASIM)})
     if not args.columns:
         return
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
