@@ -50,6 +50,16 @@ def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
     assert '"device": "cuda"' in gpu.attrs["config"] and '"kernel": "cuda"' in gpu.attrs["config"]
 
 
+def test_device_auto_runs_a_small_column_on_the_cpu_and_records_it(column):
+    """--device auto (issue 46.5) on a 27-sphere column, far below GPU_FROM_SPHERES: APGD's compiled
+    CPU kernels, and the file records the device that ran, cpu."""
+    done = colsim("collapse", "--input", "column.nc", "--steps", "2", "--duration", "0.008", "--device", "auto",
+                  "--output", "auto.nc", cwd=column)
+    assert done.returncode == 0, done.stderr[-2000:]
+    config = xr.load_dataset(column / "auto.nc").attrs["config"]
+    assert '"device": "cpu"' in config and '"kernel": "numba"' in config
+
+
 @pytest.mark.parametrize("extra, simulator, words", [
     (["--solver", "clarabel", "--device", "cuda"], True, ["--device cuda", "APGD's", "--solver clarabel"]),
     (["--device", "cuda"], False, ["needs a CUDA GPU", "NUMBA_ENABLE_CUDASIM"]),

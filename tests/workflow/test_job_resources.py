@@ -47,3 +47,15 @@ def test_a_big_columns_jobs_ask_for_time_and_memory_by_its_size():
     assert collapse_runtime(run, length, 10_000) == 120
     assert collapse_runtime(run, length, 2 * 20_400) == pytest.approx(120 * 2**1.43, abs=1)
     assert collapse_runtime(plan.run_settings(0.12, 100, 4.0, "coulomb"), length, 1e7) == 2880
+
+
+def test_a_job_asks_for_a_gpu_on_cuda_and_on_auto_for_a_large_column_where_one_is(monkeypatch, tmp_path):
+    from colsim.solvers.defaults import GPU_FROM_SPHERES
+    from colsim.study.workflow import job_resources
+
+    assert job_resources.gpus_a_job("cuda", 10) == 1 and job_resources.gpus_a_job("cpu", 10**7) == 0
+    monkeypatch.setattr(job_resources, "NVIDIA_CONTROL", tmp_path / "nvidiactl")   # no GPU
+    assert job_resources.gpus_a_job("auto", 10**7) == 0
+    (tmp_path / "nvidiactl").touch()                                            # a GPU
+    assert job_resources.gpus_a_job("auto", GPU_FROM_SPHERES) == 1
+    assert job_resources.gpus_a_job("auto", GPU_FROM_SPHERES - 1) == 0

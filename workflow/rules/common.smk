@@ -69,24 +69,35 @@ friction_law_outputs = PLAN.friction_law_outputs
 calibration_outputs = PLAN.calibration_outputs
 
 
-#: GPUs a pack or collapse job asks for: one where APGD runs on a GPU (device: cuda)
-GPUS_A_JOB = 1 if config["device"] == "cuda" else 0
-
-
 DIAMETERS = (config["diameter_min"], config["diameter_max"])
+
+
+def column_spheres(wildcards):
+    """About how many spheres a column holds (job_resources.py)."""
+    return job_resources.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
 
 
 def collapse_runtime(wildcards):
     """A collapse's time limit on a cluster (minutes), from its run's settings and its column's
     size (job_resources.py)."""
-    spheres = job_resources.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
-    return job_resources.collapse_runtime(run_of(wildcards), PLAN.length, spheres)
+    return job_resources.collapse_runtime(run_of(wildcards), PLAN.length, column_spheres(wildcards))
 
 
 def pack_spheres(wildcards):
     """About how many spheres a packing's pour holds (job_resources.py)."""
     packing = packing_of(wildcards)
     return job_resources.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+
+
+def pack_gpus(wildcards):
+    """GPUs a pour asks for: one where APGD runs on a GPU (device: cuda, or auto for a large pour on
+    a machine with a GPU; job_resources.py)."""
+    return job_resources.gpus_a_job(config["device"], pack_spheres(wildcards))
+
+
+def collapse_gpus(wildcards):
+    """GPUs a collapse asks for, as a pour's (pack_gpus), from its column's size."""
+    return job_resources.gpus_a_job(config["device"], column_spheres(wildcards))
 
 
 def pack_resource(name):

@@ -4,8 +4,8 @@
 # colsim.study.workflow.plan), read by `colsim STAGE --settings`, never parsed back from the folder's
 # name, so a changed setting is a new folder and never an overwrite. The command lines add only
 # what does not change a result: threads, the device, checkpoints, the packing's size bound. A job
-# on a GPU asks for resources gpu=1 (profiles/default: one GPU, so such jobs run one at a time;
-# SLURM: a GPU request).
+# on a GPU (device cuda, or auto for a large column where a GPU is) asks for resources gpu=1
+# (profiles/default: one GPU, so such jobs run one at a time; SLURM: a GPU request).
 
 
 # A packing's and a run's settings, readable beside its files (one line of JSON, which is YAML;
@@ -45,7 +45,7 @@ rule pack:
     resources:
         mem_mb=pack_resource("mem_mb"),
         runtime=pack_resource("runtime"),
-        gpu=GPUS_A_JOB,
+        gpu=pack_gpus,
     params:
         max_spheres=config["pack"]["max_spheres"],
         device=config["device"],
@@ -90,7 +90,7 @@ rule collapse:
     resources:
         mem_mb=4000,
         runtime=collapse_runtime,
-        gpu=GPUS_A_JOB,
+        gpu=collapse_gpus,
     params:
         checkpoint_every=config["collapse"]["checkpoint_every"],
         device=config["device"],

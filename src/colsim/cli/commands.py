@@ -17,10 +17,10 @@ from ..io.checkpoint import check_checkpoint_path
 from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
-from ..solvers.registry import make_solver
+from ..solvers.registry import device_for, make_solver
 from ..stages.collapse import collapse as run_collapse
 from ..stages import pack as packing
-from ..stages.pour_geometry import solid_fraction
+from ..stages.pour_geometry import expected_spheres, solid_fraction
 from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
                                by_name)
 from ..stages.trim import kept_by_trim
@@ -135,6 +135,8 @@ def _pack_solver(solver: SolverSettings):
 
 def pack(args):
     settings, solving = stage_settings(args, PackSettings, SolverSettings)
+    spheres = expected_spheres(settings.r0, settings.height, (settings.diameter_min, settings.diameter_max))
+    solving = replace(solving, device=device_for(solving.device, spheres, solving.solver))   # auto: which
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
     solver = _pack_solver(solving)
@@ -185,6 +187,7 @@ def collapse(args):
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
     settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
+    solving = replace(solving, device=device_for(solving.device, column.n, solving.solver))   # auto: which
     use_threads(solving.threads)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"

@@ -49,3 +49,8 @@ AUTO_APGD_LENGTHS_AT = 0.004
 PACK_APGD_TOLERANCE = 1e-3
 #: APGD's overlap tolerance under auto in a packing: none (its tolerance is already as loose)
 PACK_APGD_OVERLAP_TOLERANCE = 0.0
+
+#: device auto takes a visible GPU for a pour or a column of at least this many spheres: the smallest
+#: size at which the GPU's APGD iteration was measured faster than a node's CPU threads (issue 46's
+#: table, docs/performance.md "One GPU"); below it no crossover is measured, so the CPU
+GPU_FROM_SPHERES = 73_000

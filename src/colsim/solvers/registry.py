@@ -25,6 +25,28 @@ SOLVERS = defaults.SOLVERS
 log = logging.getLogger(__name__)
 
 
+def device_for(device: str, spheres: float, solver: str = "auto") -> str:
+    """'cpu' or 'cuda' for a pour or collapse of about `spheres` spheres solved by `solver`: `device`
+    itself, or for 'auto' the GPU where APGD solves (auto, apgd), a GPU is visible (numba's
+    simulator is none) and spheres >= GPU_FROM_SPHERES; else the CPU."""
+    if device != "auto":
+        return device
+    if solver not in ("auto", "apgd") or spheres < defaults.GPU_FROM_SPHERES:
+        return "cpu"
+    return "cuda" if gpu_visible() else "cpu"
+
+
+def gpu_visible() -> bool:
+    """Whether numba.cuda sees a CUDA GPU (False on numba's simulator, or without numba)."""
+    try:
+        from numba.core import config
+
+        from ..engine.cuda_operator import cuda   # numba.cuda behind the numpy 2.5 guard
+    except ImportError:
+        return False
+    return not config.ENABLE_CUDASIM and cuda.is_available()
+
+
 def make_solver(name: str = "clarabel", **options) -> Solver:
     """A back-end by name (one of SOLVERS): 'clarabel' (displacement form), 'clarabel-force',
     'apgd' (first-order, :mod:`colsim.solvers.apgd`), 'admm' (operator splitting on the displacement form,

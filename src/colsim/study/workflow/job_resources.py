@@ -2,7 +2,11 @@
 or a run's settings (plan.py) and about how many spheres it holds."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+
+from ...solvers.defaults import GPU_FROM_SPHERES
 
 
 #: Cluster sizing by the column's spheres: reference sizes, times, growth exponents and memory of
@@ -69,3 +73,16 @@ def collapse_priority(a: float, run: dict, study_length: tuple[int, float]) -> i
     """Scheduling priority of the collapse of a column of aspect ratio `a`: 10 a (times its steps
     over the study's), so that the costliest columns run first."""
     return int(round(10 * a * run["steps"] / study_length[0]))
+
+
+#: present where the machine has an NVIDIA GPU and its driver (read without loading numba: planning stays light)
+NVIDIA_CONTROL = Path("/dev/nvidiactl")
+
+
+def gpus_a_job(device: str, spheres: float) -> int:
+    """GPUs a pour or a collapse of about `spheres` spheres asks for: 1 on device cuda; on auto, 1
+    when it is large enough for auto to take a GPU (GPU_FROM_SPHERES) and the machine planning the
+    study has one; else 0."""
+    if device == "cuda":
+        return 1
+    return int(device == "auto" and spheres >= GPU_FROM_SPHERES and NVIDIA_CONTROL.exists())
