@@ -9,6 +9,7 @@ listed when its predicted relative motion within the step brings it within a mar
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,27 +104,33 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     return i[order], j[order]
 
 
+def swept_close(position, predicted, radius, a, b, margin, slack):
+    """Whether the pair (a, b) comes within margin + slack |u_b - u_a| of contact (length) as its
+    relative segment d0 + tau (u_b - u_a), tau in [0, 1], is swept (scalar code: compiled by numba
+    when installed, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
+    d0u = du2 = 0.0
+    for d in range(3):
+        du = predicted[b, d] - predicted[a, d]
+        d0u += (position[b, d] - position[a, d]) * du
+        du2 += du * du
+    tau = min(max(-d0u / max(du2, 1e-300), 0.0), 1.0)
+    c2 = 0.0
+    for d in range(3):
+        c = position[b, d] - position[a, d] + tau * (predicted[b, d] - predicted[a, d])
+        c2 += c * c
+    return math.sqrt(c2) - radius[a] - radius[b] < margin + slack * math.sqrt(du2)
+
+
 def _swept_keep(i, j, position, predicted, radius, margin, slack, keep):
-    """keep[k] (bool (m,), out) = whether candidate pair (i[k], j[k]) comes within margin + slack
-    |u_j - u_i| of contact (length) as its relative segment d0 + tau (u_j - u_i), tau in [0, 1], is
-    swept. A loop over the candidates (a million a step in a pour's impacts, and in numpy the
-    detection's largest cost), on numba's threads where it is installed."""
+    """keep[k] (bool (m,), out) = :func:`swept_close` of candidate pair (i[k], j[k]). A loop over the
+    candidates (a million a step in a pour's impacts, and in numpy the detection's largest cost), on
+    numba's threads where it is installed."""
     for k in prange(len(i)):
-        a, b = i[k], j[k]
-        d0u = du2 = 0.0
-        for d in range(3):
-            du = predicted[b, d] - predicted[a, d]
-            d0u += (position[b, d] - position[a, d]) * du
-            du2 += du * du
-        tau = min(max(-d0u / max(du2, 1e-300), 0.0), 1.0)
-        c2 = 0.0
-        for d in range(3):
-            c = position[b, d] - position[a, d] + tau * (predicted[b, d] - predicted[a, d])
-            c2 += c * c
-        keep[k] = np.sqrt(c2) - radius[a] - radius[b] < margin + slack * np.sqrt(du2)
+        keep[k] = swept_close(position, predicted, radius, i[k], j[k], margin, slack)
 
 
 if HAVE_NUMBA:
+    swept_close = numba.njit(cache=True, inline="always")(swept_close)
     _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
 
 

@@ -9,8 +9,8 @@ as the k-d tree's reach, so that every candidate pair lies in neighbouring cells
    starts (a prefix sum) and the particles are listed cell by cell (a counting sort);
 2. one thread a particle scans the 27 cells around its own, and keeps each partner j > i whose
    midpoint lies within the reach (the k-d tree's test) and whose relative segment comes within
-   margin + slack |u_j - u_i| of contact (:func:`colsim.engine.contacts._swept_keep`'s test, the
-   same arithmetic): a first pass counts them, a prefix sum gives each particle its place, a
+   margin + slack |u_j - u_i| of contact (the CPU's :func:`colsim.engine.contacts.swept_close`,
+   compiled for the GPU): a first pass counts them, a prefix sum gives each particle its place, a
    second pass writes them there and sorts them by j.
 
 So the pairs come out sorted by (i, j) as the CPU's do, and the same every run: no order depends on
@@ -24,7 +24,11 @@ import math
 
 import numpy as np
 
+from .contacts import swept_close
 from .cuda_operator import THREADS, blocks_for, cuda
+
+#: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
+_swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
 
 #: the grid has at most this many cells a particle: a sparse cloud gets wider cells (any width at
 #: least the reach finds the same pairs), not an array of empty ones
@@ -94,15 +98,21 @@ def _cell_coordinate(x, lower, width, count):
     return min(max(c, 0), count - 1)
 
 
+@cuda.jit(device=True)
+def _cell_of(midpoint, i, lower, width, dims):
+    """(x, y, z) cell indices of particle i's midpoint."""
+    return (_cell_coordinate(midpoint[i, 0], lower[0], width, dims[0]),
+            _cell_coordinate(midpoint[i, 1], lower[1], width, dims[1]),
+            _cell_coordinate(midpoint[i, 2], lower[2], width, dims[2]))
+
+
 @cuda.jit
 def _cell_kernel(midpoint, lower, dims, width, cell, count):
     """cell[i] = particle i's cell (x fastest); count[c] += 1 (atomic)."""
     i = cuda.grid(1)
     if i >= midpoint.shape[0]:
         return
-    cx = _cell_coordinate(midpoint[i, 0], lower[0], width, dims[0])
-    cy = _cell_coordinate(midpoint[i, 1], lower[1], width, dims[1])
-    cz = _cell_coordinate(midpoint[i, 2], lower[2], width, dims[2])
+    cx, cy, cz = _cell_of(midpoint, i, lower, width, dims)
     c = cx + dims[0] * (cy + dims[1] * cz)
     cell[i] = c
     cuda.atomic.add(count, c, 1)
@@ -119,24 +129,6 @@ def _list_kernel(cell, start, filled, listed):
     listed[start[c] + cuda.atomic.add(filled, c, 1)] = i
 
 
-@cuda.jit(device=True)
-def _swept_close(position, predicted, radius, a, b, margin, slack):
-    """Whether the pair (a, b) comes within margin + slack |u_b - u_a| of contact over the step
-    (colsim.engine.contacts._swept_keep, the same arithmetic)."""
-    d0u = 0.0
-    du2 = 0.0
-    for d in range(3):
-        du = predicted[b, d] - predicted[a, d]
-        d0u += (position[b, d] - position[a, d]) * du
-        du2 += du * du
-    tau = min(max(-d0u / max(du2, 1e-300), 0.0), 1.0)
-    c2 = 0.0
-    for d in range(3):
-        c = position[b, d] - position[a, d] + tau * (predicted[b, d] - predicted[a, d])
-        c2 += c * c
-    return math.sqrt(c2) - radius[a] - radius[b] < margin + slack * math.sqrt(du2)
-
-
 @cuda.jit
 def _pairs_kernel(position, predicted, radius, midpoint, start, listed, lower, dims, width, reach2, margin,
                   slack, counts, offsets, partners, write):
@@ -145,9 +137,7 @@ def _pairs_kernel(position, predicted, radius, midpoint, start, listed, lower, d
     i = cuda.grid(1)
     if i >= midpoint.shape[0]:
         return
-    cx = _cell_coordinate(midpoint[i, 0], lower[0], width, dims[0])
-    cy = _cell_coordinate(midpoint[i, 1], lower[1], width, dims[1])
-    cz = _cell_coordinate(midpoint[i, 2], lower[2], width, dims[2])
+    cx, cy, cz = _cell_of(midpoint, i, lower, width, dims)
     found = 0
     for z in range(max(cz - 1, 0), min(cz + 2, dims[2])):
         for y in range(max(cy - 1, 0), min(cy + 2, dims[1])):
