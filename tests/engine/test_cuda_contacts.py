@@ -73,3 +73,23 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts():
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
     for name in ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "lever", "mu", "mu_r"):
         np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name))
+
+
+def test_the_gpu_measures_the_cpu_s_overlaps():
+    """overlaps(device='cuda') (the stepper's check after a step on the GPU): the same overlapping
+    pairs (the CPU's, which come in the k-d tree's order, sorted here), the same normals and largest
+    overlaps, on the cloud pressed together so that about half its neighbours overlap."""
+    from colsim.engine.contacts import overlaps
+    from colsim.engine.state import Walls
+
+    state = starting_cloud(60, 1.0, seed=3)
+    state.position[:, 2] *= 0.45
+    walls = Walls(floor=True, cylinder_radius=1.0)
+    gpu, cpu = overlaps(state, walls, 1e-3, "cuda"), overlaps(state, walls, 1e-3)
+    order = np.lexsort((cpu.pairs[1], cpu.pairs[0]))
+    assert len(order) >= 20
+    for ours, theirs in zip(gpu.pairs, cpu.pairs):
+        np.testing.assert_array_equal(ours, theirs[order])
+    assert (gpu.largest_pair, gpu.largest_floor, gpu.largest_fixed) == (cpu.largest_pair, cpu.largest_floor,
+                                                                        cpu.largest_fixed)
+    np.testing.assert_array_equal(gpu.cylinder, cpu.cylinder)

@@ -274,9 +274,17 @@ class Overlaps:
                    float(self.cylinder.max(initial=0.0)))
 
 
-def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0) -> Overlaps:
-    """Measure every overlap of `state` (see :class:`Overlaps`)."""
-    pi, pj, d = particle_pairs(state, 0.0)
+def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu") -> Overlaps:
+    """Measure every overlap of `state` (see :class:`Overlaps`). device 'cuda': the overlapping
+    pairs found on the GPU (:func:`colsim.engine.cuda_contacts.swept_pairs_on_device` at rest with
+    no margin: the same pairs, sorted by (i, j))."""
+    if device == "cuda":
+        from .cuda_contacts import swept_pairs_on_device
+
+        pi, pj = swept_pairs_on_device(state, np.zeros_like(state.position), 0.0, 0.0)
+        d = state.position[pj] - state.position[pi]
+    else:
+        pi, pj, d = particle_pairs(state, 0.0)
     dist = np.linalg.norm(d, axis=1)
     overlap = state.radius[pi] + state.radius[pj] - dist
     bad = overlap > tolerance

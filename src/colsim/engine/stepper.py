@@ -107,7 +107,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         guess = None if start_from is None else start_from.match(found, state.n, solver.device)
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
-        overlap = contact_detection.overlaps(new_state, settings.walls, tolerance)
+        overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device)
         if overlap.largest <= tolerance:
             break
         log.debug("step %d: overlap %.3g exceeds %.3g (%d pairs); redoing",
