@@ -78,11 +78,11 @@ class SolverSettings:
         kind="non_negative", optional=True)
     threads: int = setting(1, "threads of APGD's loops over contacts and bodies (results differ between "
                            "counts by rounding only, far below the tolerance)", kind="positive_int")
-    device: str = setting("cpu", "where APGD's iterations, the swept pairs and the warm start's matching run: "
-                          "cpu (numba's threads), cuda (one GPU, numba.cuda; the rest of a step stays on the "
-                          f"CPU for now) or auto (cuda for {defaults.GPU_FROM_SPHERES:,} spheres or more where a GPU is "
-                          "visible, else cpu); results differ between devices by rounding only",
-                          kind="choice", choices=DEVICES)
+    device: str = setting("cpu", "where APGD's iterations, the swept pairs, the warm start's matching and the "
+                          "overlap check run: cpu (numba's threads), cuda (one GPU, numba.cuda; the rest of a "
+                          "step stays on the CPU for now) or auto (cuda for "
+                          f"{defaults.GPU_FROM_SPHERES:,} spheres or more where a GPU is visible, else cpu); "
+                          "results differ between devices by rounding only", kind="choice", choices=DEVICES)
 
 
 #: the pour's step over sqrt(d_min / g), the time to fall about a diameter, must lie in this range:
