@@ -313,7 +313,7 @@ def compare_laws(args):
     summaries = {}
     for law in FRICTION_LAWS:
         analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in getattr(args, law)]
-        found = {a.attrs.get("friction_law", "associated") for a in analyses}
+        found = {run.attrs.get("friction_law", "associated") for run in analyses}
         if found != {law}:
             raise io.InputError(f"--{law} got runs of the {', '.join(sorted(found))} law")
         summaries[law] = collect_analyses(analyses)

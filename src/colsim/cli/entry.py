@@ -149,7 +149,8 @@ def build_parser() -> argparse.ArgumentParser:
     for subparser in sub.choices.values():
         _verbosity_arguments(subparser, argparse.SUPPRESS)
         if subparser.description is None:   # each subcommand's help line heads its own --help
-            subparser.description = next(a.help for a in sub._choices_actions if a.dest == subparser.prog.split()[-1])
+            subparser.description = next(action.help for action in sub._choices_actions
+                                         if action.dest == subparser.prog.split()[-1])
     return parser
 
 

@@ -4,8 +4,8 @@ HAVE_NUMBA, the module itself or None, and prange (numba's parallel range, or ra
 The threading layer is chosen here, on import, before numba can start its threads: OpenMP where
 numba has it, else its own workqueue, and Intel TBB last (LAYER_PRIORITY). numba's own order puts TBB
 first, so merely installing a package that brings libtbb switched colsim's threads to TBB, where two
-threads on the project's 2-core machine took turns (19,542 sched_yield calls in 3 s) and a collapse
-ran 10-30x slower than on one thread (issue 50). A user who sets NUMBA_THREADING_LAYER or
+threads took turns and a collapse ran many times slower than on one thread (issue 50;
+docs/performance.md, "Threads"). A user who sets NUMBA_THREADING_LAYER or
 NUMBA_THREADING_LAYER_PRIORITY keeps that choice. Which layer a job ran on is logged at its start and
 kept in its file (colsim.engine.threads.threading_layer)."""
 from __future__ import annotations

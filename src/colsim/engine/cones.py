@@ -43,22 +43,22 @@ def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> n
     p0 = lam[:, 0]
     nq = np.sqrt(lam[:, 1] ** 2 + lam[:, 2] ** 2)
     nr = np.sqrt(lam[:, 3] ** 2 + lam[:, 4] ** 2)
-    a = np.broadcast_to(np.asarray(mu, dtype=float), p0.shape)
-    b = np.broadcast_to(np.asarray(mu_r, dtype=float), p0.shape)
+    mu_k = np.broadcast_to(np.asarray(mu, dtype=float), p0.shape)
+    mu_r_k = np.broadcast_to(np.asarray(mu_r, dtype=float), p0.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
-        bq = np.where(a > 0, nq / np.where(a > 0, a, 1.0), np.inf)  # q clipped iff p < bq
-        br = np.where(b > 0, nr / np.where(b > 0, b, 1.0), np.inf)
+        bq = np.where(mu_k > 0, nq / np.where(mu_k > 0, mu_k, 1.0), np.inf)  # q clipped iff p < bq
+        br = np.where(mu_r_k > 0, nr / np.where(mu_r_k > 0, mu_r_k, 1.0), np.inf)
     q_first = bq <= br
     t1 = np.where(q_first, bq, br)
     t2 = np.where(q_first, br, bq)
-    c2 = np.where(q_first, b, a)          # the term whose breakpoint is t2: coefficient, norm
+    c2 = np.where(q_first, mu_r_k, mu_k)          # the term whose breakpoint is t2: coefficient, norm
     n2 = np.where(q_first, nr, nq)
     finite1, finite2 = np.isfinite(t1), np.isfinite(t2)
     t1f, t2f = np.where(finite1, t1, 0.0), np.where(finite2, t2, 0.0)
     # phi'/2 at t1 (only the t2 term active) and at t2 (none active)
     slope1 = t1f - p0 - c2 * np.maximum(n2 - c2 * t1f, 0.0)
     slope2 = t2f - p0
-    p_both = np.clip((p0 + a * nq + b * nr) / (1.0 + a * a + b * b), 0.0, t1)
+    p_both = np.clip((p0 + mu_k * nq + mu_r_k * nr) / (1.0 + mu_k * mu_k + mu_r_k * mu_r_k), 0.0, t1)
     p_mid = np.clip((p0 + c2 * n2) / (1.0 + c2 * c2), t1f, t2)
     p = np.where(~finite1 | (slope1 >= 0), p_both,
                  np.where(~finite2 | (slope2 >= 0), p_mid, np.maximum(p0, t2f)))
@@ -66,8 +66,8 @@ def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> n
     out = np.empty_like(lam)
     out[:, 0] = p
     with np.errstate(divide="ignore", invalid="ignore"):
-        fq = np.where(nq > a * p, a * p / np.where(nq > 0, nq, 1.0), 1.0)
-        fr = np.where(nr > b * p, b * p / np.where(nr > 0, nr, 1.0), 1.0)
+        fq = np.where(nq > mu_k * p, mu_k * p / np.where(nq > 0, nq, 1.0), 1.0)
+        fr = np.where(nr > mu_r_k * p, mu_r_k * p / np.where(nr > 0, nr, 1.0), 1.0)
     out[:, 1:3] = lam[:, 1:3] * fq[:, None]
     out[:, 3:5] = lam[:, 3:5] * fr[:, None]
     return out

@@ -86,7 +86,8 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     within margin + slack |u_j - u_i| of contact (length). Candidates come from a k-d tree on the
     segments' midpoints with the swept spheres' radii R + |u|/2. The pairs come sorted by (i, j):
     the solver's kernels then find a contact's bodies near those of the contacts before it in
-    memory (the tree's own order made an APGD iteration 1.4x slower at 70,000 contacts).
+    memory (the tree's own order made an APGD iteration slower: docs/performance.md, "Contacts in
+    memory order").
     """
     if state.n < 2:
         empty = np.zeros(0, dtype=np.int64)

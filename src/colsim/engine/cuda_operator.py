@@ -152,23 +152,23 @@ def block_reduce(cache, t, largest):
 
 
 @cuda.jit
-def _block_dot_kernel(a, b, partial):
-    """partial[block] = sum of a[i] b[i] over the block's slice, by a fixed tree in shared memory."""
+def _block_dot_kernel(u, v, partial):
+    """partial[block] = sum of u[i] v[i] over the block's slice, by a fixed tree in shared memory."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
     i = cuda.grid(1)
     t = cuda.threadIdx.x
-    cache[t] = a[i] * b[i] if i < a.shape[0] else 0.0
+    cache[t] = u[i] * v[i] if i < u.shape[0] else 0.0
     block_reduce(cache, t, False)
     if t == 0:
         partial[cuda.blockIdx.x] = cache[0]
 
 
-def dot(a, b) -> float:
-    """a . b of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
+def dot(u, v) -> float:
+    """u . v of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
     block order, so the result is the same every run."""
-    blocks = blocks_for(a.shape[0])
+    blocks = blocks_for(u.shape[0])
     partial = cuda.device_array(blocks, dtype=np.float64)
-    _block_dot_kernel[blocks, THREADS](a, b, partial)
+    _block_dot_kernel[blocks, THREADS](u, v, partial)
     return float(np.sum(partial.copy_to_host()))
 
 

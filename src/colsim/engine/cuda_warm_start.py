@@ -34,9 +34,9 @@ def match_on_device(warm: WarmStart, contacts, n_particles: int) -> np.ndarray:
     _insert_kernel[blocks_for(warm.m), THREADS](cuda.to_device(stored), table_key, table_row)
     keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
     d_out = cuda.to_device(out)
-    frames = [cuda.to_device(np.ascontiguousarray(a, dtype=float))
-              for a in (contacts.normal, contacts.tangent1, contacts.tangent2, contacts.mu, contacts.mu_r)]
-    forces = [cuda.to_device(np.ascontiguousarray(a, dtype=float)) for a in (warm.force, warm.rolling)]
+    frames = [cuda.to_device(np.ascontiguousarray(array, dtype=float))
+              for array in (contacts.normal, contacts.tangent1, contacts.tangent2, contacts.mu, contacts.mu_r)]
+    forces = [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (warm.force, warm.rolling)]
     _match_kernel[blocks_for(contacts.m), THREADS](cuda.to_device(keys), table_key, table_row, *forces, *frames, d_out)
     return d_out.copy_to_host()
 

@@ -92,11 +92,9 @@ class _Secant:
     plain iteration s <- s + f overshoots); elsewhere it moves `relaxation` of the plain step.
     Clipped to s >= 0 (a dilation).
 
-    Measured on a released 968-sphere column (r0 = 2, a = 2, dt/sqrt(h0/g) = 0.004, 100 steps): the
-    plain iteration and Anderson acceleration (memory 5) both stalled in two-cycles (a contact
-    carrying load one iterate and not the next; 2e-5 to 3e-4 mean diameters wide) within the first
-    66 steps; the undamped secant reached 1e-4 d (largest change) on every step in 15 cone
-    programs a step on average (21 at most). The damping: see the module docstring.
+    Why a secant step: the plain iteration and Anderson acceleration both stalled in two-cycles (a
+    contact carrying load one iterate and not the next) where the secant went through
+    (docs/validation/friction-law.md). The damping: see the module docstring.
     """
 
     relaxation = 0.5

@@ -11,12 +11,12 @@ changes of the step). After the step the largest overlap is measured. A step who
 the tolerance is redone: missed pairs are added, linearised about their end-of-attempt normal, the
 margin grows (2x by default) and cylinder gaps are tightened by the overlap the attempt made; a
 solver that takes a warm start starts the redo from the attempt's forces (the missed pairs at
-zero), not from the previous step's. A pour's impact steps are redone about once each, so this makes
-a pour's steps 25 % cheaper (r0 = 2, three seeds, docs/performance.md "Packings"). A step that
+zero), not from the previous step's: a pour's impact steps are redone about once each, so this makes
+its steps cheaper (docs/performance.md, "Packings"). A step that
 still overlaps after `max_redo` redos fails with an :class:`OverlapError` naming the step.
 The next step starts from the margin that caught a missed contact (at most 4x the base), halved
-after each clean step (:func:`next_margin`): in the fast phase of a tall column's collapse (r0 = 2,
-a = 5) this cut the time of the first 24 steps by 27 %.
+after each clean step (:func:`next_margin`): the fast phase of a tall column's collapse redoes fewer
+steps (docs/performance.md, "Wall times with Clarabel").
 """
 from __future__ import annotations
 

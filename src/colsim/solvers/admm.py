@@ -34,14 +34,10 @@ after 300 iterations), refactorising at most `max_refactor` times per step. With
 the factor is OSQP's rule, sqrt(primal residual / dual residual), applied when it changes rho by
 more than `adapt_factor`; here that rule lowered rho and slowed convergence.
 
-Measured (benchmarks/solvers.py, 2-core machine shared with one simulation; default settings):
-on settled 1k spheres (3.3k contacts) 2,900-3,200 iterations at 2-3 ms (8.8 s release, 6.1 s mid,
-5.4 s warm) against Clarabel's 3.4-3.9 s; on 4k (13k contacts) 2,860 iterations at 12 ms (35 s)
-against Clarabel's 12 s. The increments agree with Clarabel to 4e-4 or better. Not faster: the
-iteration count does not shrink with a warm start or with size, and 80% of the time is the two
-triangular solves per iteration. The u-iterate reaches 1e-3 of Clarabel's increments in
-~1,500 iterations; what takes longer is the forces, which a hyperstatic packing leaves nearly
-indeterminate (OSQP's adaptive rule lowers rho, which is slower here; hence the fixed increase).
+Not faster than Clarabel at any size measured: its iteration count shrinks neither with a warm start
+nor with size, and most of an iteration is the two triangular solves; the forces, which a
+hyperstatic packing leaves nearly indeterminate, converge last (docs/performance.md, "One cold
+step", has the measurements).
 
 Warm start: forces (m, 5) (the stepper passes the previous step's forces matched by contact pair,
 :class:`colsim.solvers.WarmStart`): w = -D^-1 lam / rho and z = Proj_C^(D (B u(lam) + g e_n) + w).

@@ -38,14 +38,13 @@ AUTO_APGD_OVERLAP_TOLERANCE = 1e-4
 
 #: the dt / sqrt(h0/g) at which auto's APGD length floor and overlap tolerance hold as given (the
 #: default collapse step); at a smaller step both shrink in proportion to it, so the velocity error
-#: they admit (a length over dt) does not grow as the step shrinks (issue 45: at 1/16 of the default
-#: step they let the kinetic energy at t/sqrt(h0/g) = 0.04 exceed Clarabel's by 25 %)
+#: they admit (a length over dt) does not grow as the step shrinks (issue 45; docs/method.md,
+#: "Overlaps a step starts with")
 AUTO_APGD_LENGTHS_AT = 0.004
 
-#: APGD's tolerance when `colsim pack` runs under auto. Measured (r0 = 2, height 10, seed 1, dt 0.02;
-#: docs/solvers.md, "Packing under auto"): the same rest criterion, solid fraction and step count as
-#: Clarabel in a third of the time; a settled packing is an initial condition, where 1e-3 of the
-#: step's free fall (g dt^2) is 1e-5 of a diameter
+#: APGD's tolerance when `colsim pack` runs under auto: a settled packing is an initial condition,
+#: where 1e-3 of the step's free fall (g dt^2) is 1e-5 of a diameter (docs/solvers.md, "Packing under
+#: auto", compares it with Clarabel)
 PACK_APGD_TOLERANCE = 1e-3
 #: APGD's overlap tolerance under auto in a packing: none (its tolerance is already as loose)
 PACK_APGD_OVERLAP_TOLERANCE = 0.0

@@ -14,8 +14,8 @@ From runs over (mu_r, a, r0, seed), to rest:
 4. Its uncertainty, by a bootstrap that resamples the packing seeds within every r0 (the same pick
    for every mu_r and a, since they share the packings) and repeats 1-3: the percentile interval,
    widened about the estimate by sqrt(n/(n - 1)) for n seeds a size (a resample of n values has
-   (n - 1)/n of their variance; with 3 seeds the plain percentile interval held the true mu_r in
-   78 % of synthetic studies at a nominal 95 %, tests/study/test_calibration.py).
+   (n - 1)/n of their variance; with 3 seeds the plain percentile interval covers the true mu_r
+   too rarely: docs/validation/calibration.md, tests/study/test_calibration.py).
 5. Which mu_r fit every a within a tolerance (10 % by default): per mu_r and a, whether both limits
    are within it of the law, and the range of mu_r on the grid where every a fits.
 
