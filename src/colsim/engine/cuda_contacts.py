@@ -50,8 +50,9 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
     midpoint = position + 0.5 * predicted
     lower, dims, width = _grid(midpoint, reach)
     d_position, d_predicted, d_radius = cuda.to_device(position), cuda.to_device(predicted), cuda.to_device(radius)
-    start, listed = _cell_lists(cuda.to_device(midpoint), lower, dims, width)
-    args = (d_position, d_predicted, d_radius, cuda.to_device(midpoint), start, listed, lower, dims, width,
+    d_midpoint = cuda.to_device(midpoint)
+    start, listed = _cell_lists(d_midpoint, lower, dims, width)
+    args = (d_position, d_predicted, d_radius, d_midpoint, start, listed, lower, dims, width,
             reach * reach, float(margin), float(slack))
     counts = cuda.to_device(np.zeros(n, dtype=np.int64))
     _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
