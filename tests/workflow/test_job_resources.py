@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from colsim.study.workflow.job_resources import (PACK_PRIORITY, PACK_REFERENCE_S, PACK_REFERENCE_SPHERES,
-                                                 SETTINGS_PRIORITY, collapse_priority, collapse_runtime,
-                                                 pack_priority, pack_resources, spheres_of)
+from colsim.study.workflow.job_resources import (ANALYSIS_PRIORITY, PACK_PRIORITY, PACK_REFERENCE_S,
+                                                 PACK_REFERENCE_SPHERES, SETTINGS_PRIORITY, collapse_priority,
+                                                 collapse_runtime, pack_priority, pack_resources, spheres_of)
 from test_study_plan import study_config
 from colsim.study.workflow.plan import StudyPlan
 
@@ -24,12 +24,13 @@ def test_a_runs_time_limit_and_priority_come_from_its_settings():
 def test_settings_then_the_largest_pours_then_collapses_run_first():
     """The scheduler's order: a settings file before the job it gates, pours before collapses (a
     column's collapses wait for its pour anyway, and a long pour left for last would run alone),
-    the r0 = 6 pour before the r0 = 5 one."""
+    the r0 = 6 pour before the r0 = 5 one, and an analysis before any collapse (seconds, and its
+    run's numbers readable at once)."""
     plan = StudyPlan(study_config())
     r5, r6 = (pack_priority(spheres_of(r0, 5 * r0, (0.25, 0.5))) for r0 in (5, 6))
     longest_collapse = collapse_priority(5.0, plan.run_settings(0.12, 2 * plan.length[0], 4.0, "associated"),
                                          plan.length)
-    assert SETTINGS_PRIORITY > r6 > r5 > PACK_PRIORITY > longest_collapse
+    assert SETTINGS_PRIORITY > r6 > r5 > PACK_PRIORITY > ANALYSIS_PRIORITY > longest_collapse
 
 
 def test_a_big_columns_jobs_ask_for_time_and_memory_by_its_size():

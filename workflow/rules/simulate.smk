@@ -121,6 +121,7 @@ rule analyse:
         settings=PLAN.analysis_settings_path(),   # changed analysis settings: a new input, and a rerun
     output:
         f"{RUN_DIR}/analysis.nc",
+    priority: job_resources.ANALYSIS_PRIORITY
     log:
         logged(f"{RUN_DIR}/analyse.log"),
     benchmark:

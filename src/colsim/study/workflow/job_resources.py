@@ -57,10 +57,14 @@ def pack_resources(spheres: float) -> dict:
 
 #: Scheduling priorities (Snakemake runs the ready job of highest priority first): a settings file,
 #: written in a moment, before the job it gates; a pour before any collapse, the largest first
-#: (:func:`pack_priority`); then collapses by cost (:func:`collapse_priority`). Without them an
-#: r0 = 6 pour waited for its settings behind every ready collapse, to run alone for hours at the end.
+#: (:func:`pack_priority`); an analysis as soon as it can; then collapses by cost
+#: (:func:`collapse_priority`). Without them an r0 = 6 pour waited for its settings behind every
+#: ready collapse, to run alone for hours at the end.
 SETTINGS_PRIORITY = 10_000
 PACK_PRIORITY = 1_000
+#: an analysis (seconds) runs as soon as its collapse ends, before the next collapse: a long study's
+#: results can be read, and calibrated, as they come in, not only once every collapse is done
+ANALYSIS_PRIORITY = 900
 
 
 def pack_priority(spheres: float) -> int:
