@@ -92,9 +92,8 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     if state.n < 2:
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty
-    half = 0.5 * np.linalg.norm(predicted, axis=1)
-    reach = 2.0 * float(np.max(state.radius + half * (1.0 + slack))) + margin
-    pairs = cKDTree(state.position + 0.5 * predicted).query_pairs(reach, output_type="ndarray")
+    midpoint, reach = swept_midpoints(state, predicted, margin, slack)
+    pairs = cKDTree(midpoint).query_pairs(reach, output_type="ndarray")
     i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
     keep = np.empty(len(i), dtype=np.bool_)
     _swept_keep(i, j, np.ascontiguousarray(state.position, dtype=float),
@@ -103,6 +102,14 @@ def swept_pairs(state: ParticleState, predicted: np.ndarray, margin: float, slac
     i, j = i[keep], j[keep]
     order = np.lexsort((j, i))
     return i[order], j[order]
+
+
+def swept_midpoints(state: ParticleState, predicted: np.ndarray, margin: float, slack: float):
+    """(midpoints x + u/2 (n, 3), reach): the swept segments' midpoints and the distance (length)
+    within which two of them must lie for the pair to be a candidate of :func:`swept_pairs`."""
+    half = 0.5 * np.linalg.norm(predicted, axis=1)
+    reach = 2.0 * float(np.max(state.radius + half * (1.0 + slack))) + margin
+    return state.position + 0.5 * predicted, reach
 
 
 def swept_close(position, predicted, radius, a, b, margin, slack):

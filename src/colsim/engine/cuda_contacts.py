@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .contacts import swept_close
+from .contacts import swept_close, swept_midpoints
 from .cuda_operator import THREADS, blocks_for, cuda
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
@@ -45,9 +45,7 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
     position = np.ascontiguousarray(state.position, dtype=float)
     predicted = np.ascontiguousarray(predicted, dtype=float)
     radius = np.ascontiguousarray(state.radius, dtype=float)
-    half = 0.5 * np.linalg.norm(predicted, axis=1)
-    reach = 2.0 * float(np.max(radius + half * (1.0 + slack))) + margin
-    midpoint = position + 0.5 * predicted
+    midpoint, reach = swept_midpoints(state, predicted, margin, slack)
     lower, dims, width = _grid(midpoint, reach)
     d_position, d_predicted, d_radius = cuda.to_device(position), cuda.to_device(predicted), cuda.to_device(radius)
     d_midpoint = cuda.to_device(midpoint)
