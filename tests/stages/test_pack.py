@@ -140,3 +140,30 @@ def test_a_slow_packing_writes_its_checkpoint_by_the_clock_too(tmp_path, monkeyp
                    checkpoint=checkpoint)
     assert resumed.steps == whole.steps
     np.testing.assert_array_equal(resumed.state.position, whole.state.position)
+
+
+@pytest.mark.slow
+def test_a_pour_on_the_gpu_takes_the_cpu_s_steps():
+    """`colsim pack --device cuda` (issue 46.4): the pour's first 9 steps (76 spheres falling into
+    r0 = 0.8; the first contact at step 7, 30 APGD iterations: the simulator takes seconds an
+    iteration) with APGD's iterations on the GPU, here numba's CUDA simulator, against its compiled
+    CPU kernels, with the CLI's settings (auto, the packing's tolerance). The rest of a step is the
+    CPU's, so both take the same steps: the same iterations a step, and positions within 1e-9 of a
+    diameter (the GPU's sums differ from the CPU's by rounding only). max_steps stops the pour there."""
+    from colsim.cli.commands import _pack_solver
+    from colsim.stages.settings import SolverSettings
+
+    settings = PackSettings(r0=0.8, height=0.8, max_steps=9)
+    runs = {}
+    for device in ("cpu", "cuda"):
+        steps = []
+        with pytest.raises(RuntimeError, match="not at rest after 9 steps"):
+            pack(settings, np.random.default_rng([1, 2024]), _pack_solver(SolverSettings(device=device)),
+                 progress=lambda diagnostics, state: steps.append((diagnostics, state.position.copy())))
+        runs[device] = steps
+    cpu, gpu = runs["cpu"], runs["cuda"]
+    assert len(cpu) == len(gpu) == 9
+    assert sum(d.solver_iterations for d, _ in cpu) > 0 and cpu[-1][0].n_contacts > 0
+    assert [d.solver_iterations for d, _ in gpu] == [d.solver_iterations for d, _ in cpu]
+    diameter = 2 * 0.25
+    assert np.abs(gpu[-1][1] - cpu[-1][1]).max() <= 1e-9 * diameter
