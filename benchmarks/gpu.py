@@ -18,7 +18,9 @@ With --columns (`colsim trim` files), also the first --steps steps of each colum
 default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
 packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`: detection and the
 rest of a step on the CPU): seconds a step, APGD's share of them, iterations a step, and how far the
-two end positions are apart over a mean diameter (one step of each first, to compile the kernels).
+two end positions are apart over a mean diameter (one step of each first, to compile the kernels),
+and where the GPU's step spends the rest (detection, assembly, the solver's setup); with --profile
+FOLDER, cProfile's statistics of each column's steps on each device.
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
 spheres of unit mass and inertia, loaded by gravity over one step (dt 1e-3): c = S (B u_free + gap),
@@ -27,14 +29,22 @@ with the same Lipschitz estimate. Reported: milliseconds an iteration (the whole
 iterations, wall time, the GPU synchronised), their ratio, the iterate's largest difference over its
 largest entry after the run, and the restarts and backtracks of each (the same on both when the
 rounding of their sums does not flip a decision). The GPU's one host round trip an iteration (the
-trial step's sums) is inside its time. Run the CPU baseline on the same machine, in the same call.
+trial step's sums) is inside its time. Beside them: the bytes an iteration must move
+(:func:`iteration_bytes`, counted from the kernels' arrays at the run's backtracks and checks) and
+how many times the time to move them the GPU took, at the card's nominal bandwidth and at that of a
+1 GiB device-to-device copy. Run the CPU baseline on the same machine, in the same call.
 Without a GPU the kernels run on numba's simulator (NUMBA_ENABLE_CUDASIM=1): only to check the
 script, at a hundred spheres and a few iterations; its times mean nothing.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import cProfile
+import math
 import time
+
+from pathlib import Path
 
 import numpy as np
 
@@ -48,6 +58,48 @@ from colsim.engine.threads import threads
 from colsim.solvers.apgd import _Iteration
 
 GRAVITY, DT = 9.81, 1e-3
+#: bytes of a float64 or an int64, the kernels' only element types
+WORD = 8
+
+
+def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: int, checks: int) -> int:
+    """The bytes APGD's CUDA kernels (colsim.solvers.apgd_cuda, colsim.engine.cuda_operator) must move
+    over `iterations` iterations made of `trial_steps` trial steps (the backtracks' repeats included)
+    and `checks` residual checks, for m contacts among n bodies with `entries` (body, contact) entries:
+    every array element a kernel reads or writes, counted once (a gathered entry read by several
+    threads once too): a lower bound on the traffic to the GPU's memory.
+
+    A trial step: the projection reads x, x_prev, g and the two scaled coefficients and writes x_new
+    (22m); the wrenches read x_new, s, the frame and the three lengths and write 9 a contact (31m);
+    the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 + entries +
+    9m); the descent test's sum reads h_new, hy and inv_mass (18n). Then each iteration extrapolates
+    (18n) and takes the gradient (h and inv_mass 12n; s, i, j, the frame, the lengths and c read, g
+    written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m)."""
+    trial = 22 * m + 31 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
+    gradient = 12 * n + 29 * m
+    check = gradient + 17 * m
+    return WORD * (trial_steps * trial + iterations * (18 * n + gradient) + checks * check)
+
+
+def bandwidth(cuda, gib: float = 1.0, repeat: int = 5) -> tuple[float | None, float]:
+    """(the device's nominal memory bandwidth from its memory clock and bus width, or None where the
+    driver does not say (the simulator); the best of `repeat` device-to-device copies of `gib` GiB,
+    bytes read plus written over the time), both in GB/s."""
+    try:   # the clock in kHz, double data rate
+        device = cuda.get_current_device()
+        nominal = 2.0 * device.MEMORY_CLOCK_RATE * 1e3 * device.GLOBAL_MEMORY_BUS_WIDTH / 8 / 1e9
+    except Exception:
+        nominal = None
+    size = max(1, int(gib * 2**30) // WORD)
+    source, target = cuda.to_device(np.ones(size)), cuda.device_array(size)
+    best = math.inf
+    for _ in range(repeat):
+        cuda.synchronize()
+        begin = time.perf_counter()
+        target.copy_to_device(source)
+        cuda.synchronize()
+        best = min(best, time.perf_counter() - begin)
+    return nominal, 2 * size * WORD / best / 1e9
 
 
 def start_of(spheres: int) -> tuple[_Iteration, ContactOperator, np.ndarray, np.ndarray]:
@@ -119,9 +171,11 @@ def _timed_call(call, *args) -> float:
     return time.perf_counter() - begin
 
 
-def collapse_steps(column: str, steps: int, device: str) -> dict:
+def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
-    solve's share, iterations a step, the end positions."""
+    shares of the wall time of detection, assembly, the solver's setup and its solve (the rest: the
+    warm start's matching, the overlap check, redone attempts, the bookkeeping), iterations a step,
+    the end positions; profile: a file for cProfile's statistics of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
     from colsim.stages.collapse import collapse
@@ -132,13 +186,31 @@ def collapse_steps(column: str, steps: int, device: str) -> dict:
     solver = make_solver("auto", scaled_time_step=settings.scaled_step,
                          apgd={"kernel": "cuda"} if device == "cuda" else {})
     start = time.perf_counter()
-    run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
-                   stop_after=steps)
+    with _profiled(profile):
+        run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
+                       stop_after=steps)
     wall = time.perf_counter() - start
     d = run.diagnostics
-    return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": sum(x.solve_time for x in d) / wall,
+    shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall
+              for name in ("detection", "assembly", "setup", "solve")}
+    return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
             "iterations": float(np.mean([x.solver_iterations for x in d])), "end": run.frames[-1][1].position,
             "diameter": 2 * float(state.radius.mean())}
+
+
+@contextlib.contextmanager
+def _profiled(path: str | None):
+    """cProfile the block into `path` (pstats), or nothing when None."""
+    if path is None:
+        yield
+        return
+    profile = cProfile.Profile()
+    profile.enable()
+    try:
+        yield
+    finally:
+        profile.disable()
+        profile.dump_stats(path)
 
 
 def main(argv=None):
@@ -147,6 +219,8 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--columns", nargs="*", default=[], help="column files (colsim trim) to collapse")
     parser.add_argument("--steps", type=int, default=20, help="steps of each column's collapse")
+    parser.add_argument("--profile", default=None, help="a folder for cProfile's statistics of each column's "
+                        "collapse steps on each device (COLUMN-DEVICE.pstats)")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
@@ -156,9 +230,15 @@ def main(argv=None):
     device = "simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name
     device = device.decode() if isinstance(device, bytes) else str(device)
     record.note("device", device)
+    nominal, copied = bandwidth(cuda, 1e-4 if numba_config.ENABLE_CUDASIM else 1.0) if args.spheres else (None, None)
+    if args.spheres:
+        record.note("bandwidth", {"nominal_gb_s": nominal, "copy_gb_s": copied})
+        print(f"memory bandwidth: nominal {'unknown' if nominal is None else f'{nominal:.0f} GB/s'}, "
+              f"a device-to-device copy {copied:.0f} GB/s")
     table = record.table(["spheres", "contacts", f"CPU ms an iteration ({threads()} threads)",
                           f"GPU ms an iteration ({device})", "GPU vs CPU", "iterate difference / largest",
-                          "restarts, backtracks (CPU; GPU)"])
+                          "restarts, backtracks (CPU; GPU)", "GB an iteration (counted)",
+                          "GPU over the bound (copy bandwidth; nominal)"])
     for spheres in args.spheres:   # none with `--spheres` alone
         for warm_up in range(2):   # the first compiles both kernel sets; both start again from the same point
             cpu, operator, mu, mu_r = start_of(spheres)
@@ -171,12 +251,17 @@ def main(argv=None):
         x = cpu.host_x()
         difference = float(np.max(np.abs(gpu.host_x() - x)) / max(np.max(np.abs(x)), 1e-300))
         per_cpu, per_gpu = cpu_s / args.iterations, gpu_s / args.iterations
+        moved = iteration_bytes(operator.m, operator.n, len(operator.entry), args.iterations + gpu.backtracks,
+                                args.iterations, math.ceil(args.iterations / 10)) / args.iterations
+        over = [per_gpu / (moved / (1e9 * rate)) if rate else None for rate in (copied, nominal)]
         table.row(operator.n, operator.m, f"{1e3 * per_cpu:.2f}", f"{1e3 * per_gpu:.2f}", f"{per_cpu / per_gpu:.1f}",
                   f"{difference:.1e}", f"{cpu.restarts}, {cpu.backtracks}; {gpu.restarts}, {gpu.backtracks}",
+                  f"{moved / 1e9:.3f}", "; ".join("-" if x is None else f"{x:.1f}" for x in over),
                   data={"spheres": operator.n, "contacts": operator.m, "cpu_ms": 1e3 * per_cpu,
                         "gpu_ms": 1e3 * per_gpu, "cpu_threads": threads(), "device": device,
                         "simulator": bool(numba_config.ENABLE_CUDASIM), "iterations": args.iterations,
-                        "relative_difference": difference})
+                        "relative_difference": difference, "bytes_an_iteration": moved,
+                        "over_copy_bound": over[0], "over_nominal_bound": over[1]})
     if args.spheres:
         found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",
                               "GPU vs CPU", "same pairs"], title="the swept pairs of contact detection")
@@ -197,20 +282,27 @@ def main(argv=None):
         return
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
                           f"GPU s a step ({device})", "APGD share (GPU)", "GPU vs CPU", "iterations a step (CPU; GPU)",
-                          "end positions apart / mean diameter"], title=f"the first {args.steps} collapse steps")
+                          "end positions apart / mean diameter",
+                          "GPU's detection, assembly, setup, rest (shares)"], title=f"the first {args.steps} collapse steps")
+    if args.profile:
+        Path(args.profile).mkdir(parents=True, exist_ok=True)
     for column in args.columns:
         for where in ("cpu", "cuda"):   # compiles each kernel set (numba's and the GPU's) before timing
             collapse_steps(column, 1, where)
-        cpu, gpu = (collapse_steps(column, args.steps, where) for where in ("cpu", "cuda"))
+        cpu, gpu = (collapse_steps(column, args.steps, where, args.profile and str(
+            Path(args.profile) / f"{Path(column).stem}-{where}.pstats")) for where in ("cpu", "cuda"))
+        shares = gpu["shares"]
+        rest = 1.0 - sum(shares.values())
         apart = float(np.abs(cpu["end"] - gpu["end"]).max() / cpu["diameter"])
         steps.row(column, cpu["spheres"], f"{cpu['s_a_step']:.3f}", f"{cpu['solve_share']:.0%}", f"{gpu['s_a_step']:.3f}",
                   f"{gpu['solve_share']:.0%}", f"{cpu['s_a_step'] / gpu['s_a_step']:.1f}",
                   f"{cpu['iterations']:.0f}; {gpu['iterations']:.0f}", f"{apart:.1e}",
+                  ", ".join(f"{x:.0%}" for x in (shares["detection"], shares["assembly"], shares["setup"], rest)),
                   data={"column": column, "spheres": cpu["spheres"], "steps": args.steps, "device": device,
                         "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
                         "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
-                        "apart_over_diameter": apart})
+                        "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares})
 
 
 if __name__ == "__main__":

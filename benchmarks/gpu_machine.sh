@@ -15,6 +15,7 @@ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>/dev/null
 echo "CPUs: $(nproc); python: $(python3 --version); numpy: $(python3 -c 'import numpy; print(numpy.__version__)')"
 if [ $# -eq 0 ]; then
     columns=(.gpu/*.nc)
-    set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20
+    set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
+        --profile "${OUT:-results/benchmarks}/profiles"
 fi
 python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@"
