@@ -146,10 +146,7 @@ def scales_of_diagonal(diag: np.ndarray) -> np.ndarray:
     s[:, 0] = diag[:, 0]
     s[:, 1:3] = 0.5 * (diag[:, 1] + diag[:, 2])[:, None]
     s[:, 3:5] = 0.5 * (diag[:, 3] + diag[:, 4])[:, None]
-    positive = s > 0
-    s[positive] = 1.0 / np.sqrt(s[positive])
-    s[~positive] = 1.0
-    return s
+    return 1.0 / np.sqrt(np.where(s > 0, s, 1.0))   # a row B never moves (0): scale 1
 
 
 def scaled_coefficients(program: ConeProgram, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
