@@ -24,8 +24,8 @@ FOLDER, cProfile's statistics of each column's steps on each device.
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
 spheres of unit mass and inertia, loaded by gravity over one step (dt 1e-3): c = S (B u_free + gap),
-preconditioned as APGD does (colsim.engine.cones.scales_of_diagonal). Both start from zero forces
-with the same Lipschitz estimate. Reported: milliseconds an iteration (the whole run over the
+preconditioned as APGD does (colsim.engine.cones.scales_of_diagonal). Both start from zero forces,
+each with its own Lipschitz estimate (the same power iteration, on its own kernels: equal to rounding). Reported: milliseconds an iteration (the whole run over the
 iterations, wall time, the GPU synchronised), their ratio, the iterate's largest difference over its
 largest entry after the run, and the restarts and backtracks of each (the same on both when the
 rounding of their sums does not flip a decision). The GPU's one host round trip an iteration (the
@@ -242,7 +242,7 @@ def main(argv=None):
     for spheres in args.spheres:   # none with `--spheres` alone
         for warm_up in range(2):   # the first compiles both kernel sets; both start again from the same point
             cpu, operator, mu, mu_r = start_of(spheres)
-            gpu = CudaIteration(cpu, operator, mu, mu_r)
+            gpu = CudaIteration.like(cpu, operator, mu, mu_r)
             if not warm_up:
                 timed(cpu, 1, mu, mu_r)
                 timed(gpu, 1, mu, mu_r, cuda.synchronize)

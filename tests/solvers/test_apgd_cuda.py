@@ -35,6 +35,24 @@ def program(solver_pile):
     return program
 
 
+@pytest.mark.parametrize("start", ["warm", "cold"])
+def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
+    """Everything ApgdSolver.prepare makes, made on the device: the row scales, the scaled
+    coefficients, c, the first iterate (a warm start's forces projected onto the scaled cones, or
+    zero), T x, the first gradient and the Lipschitz estimate (12 power iterations on the kernels):
+    the CPU's to 1e-12 (sums in another order); the forces S z to 1e-12 too."""
+    warm = ApgdSolver(kernel="numba").solve(program).forces if start == "warm" else None
+    cpu = ApgdSolver(kernel="numba").prepare(program, warm)
+    gpu = ApgdSolver(kernel="cuda").prepare(program, warm)
+    assert gpu.is_warm() == cpu.is_warm() == (start == "warm")
+    assert gpu.lip == pytest.approx(cpu.lip, rel=1e-12) and (gpu.theta, gpu.beta) == (cpu.theta, cpu.beta)
+    for device, host in ((gpu.geometry.s, cpu.scaling.ravel()), (gpu.mu_s, cpu.mu_s), (gpu.mu_r_s, cpu.mu_r_s),
+                         (gpu.c, cpu.c), (gpu.x, cpu.x), (gpu.x_prev, cpu.x_prev), (gpu.hx, cpu.hx),
+                         (gpu.hy, cpu.hy), (gpu.g, cpu.g)):
+        np.testing.assert_allclose(device.copy_to_host(), host, rtol=0, atol=1e-12 * max(np.abs(host).max(), 1e-300))
+    np.testing.assert_allclose(gpu.forces(), cpu.forces(), rtol=0, atol=1e-12 * np.abs(cpu.forces()).max() + 1e-300)
+
+
 def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
     cpu = ApgdSolver(kernel="numba").prepare(program)
     gpu = ApgdSolver(kernel="cuda").prepare(program)

@@ -260,8 +260,12 @@ class CudaContactOperator:
 
     def diagonal(self, inv_mass) -> np.ndarray:
         """(m, 5) the diagonal of B Mbar^-1 B' (inv_mass: (6n,) the diagonal of Mbar^-1)."""
+        return self.diagonal_on_device(cuda.to_device(np.ascontiguousarray(inv_mass, dtype=float))).copy_to_host()[
+            : self.m]
+
+    def diagonal_on_device(self, inv_mass):
+        """(max(m, 1), 5) device array: the diagonal of B Mbar^-1 B' (inv_mass: (6n,) on the device)."""
         out = cuda.device_array((max(self.m, 1), 5), dtype=np.float64)
         if self.m:
-            _diagonal_kernel[blocks_for(self.m), THREADS](cuda.to_device(np.ascontiguousarray(inv_mass, dtype=float)),
-                                                      *self._frames(), out)
-        return out.copy_to_host()[: self.m]
+            _diagonal_kernel[blocks_for(self.m), THREADS](inv_mass, *self._frames(), out)
+        return out

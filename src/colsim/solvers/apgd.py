@@ -241,18 +241,11 @@ class _Iteration:
         gradient_of(self.geometry, h, self.inv_mass, c, out)
         return out
 
-    def lipschitz_estimate(self, iterations: int = 12) -> float:
-        """The largest eigenvalue of S W S = G T, from below, by power iteration from a fixed random
-        start (reproducible); the backtracking in the iteration keeps the step safe."""
-        v = np.random.default_rng(0).standard_normal(len(self.c))
+    def lipschitz_estimate(self) -> float:
+        """:func:`lipschitz_estimate` with this iteration's G and T."""
         zero = np.zeros_like(self.c)
-        lip = 1.0
-        for _ in range(iterations):
-            v /= np.sqrt(_dot(v, v))
-            wv = self.apply_G(self.apply_T(v), zero)
-            lip = _dot(v, wv)
-            v = wv
-        return max(lip, 1e-12)
+        return lipschitz_estimate(power_start(len(self.c)), lambda v: self.apply_G(self.apply_T(v), zero), _dot,
+                                  lambda v, norm: np.divide(v, norm, out=v))
 
     def gradient_at_x(self) -> np.ndarray:
         """G hx + c: the scaled end-of-step gaps S (B u + g e_n) at the iterate."""
@@ -265,6 +258,14 @@ class _Iteration:
     def host_x(self) -> np.ndarray:
         """(5m,) the scaled iterate z."""
         return self.x
+
+    def is_warm(self) -> bool:
+        """Does the first iterate hold a force (a warm start)? Asked before iterating."""
+        return bool(np.any(self.x))
+
+    def forces(self) -> np.ndarray:
+        """(m, 5) the contact forces S z of the iterate."""
+        return (self.scaling.ravel() * self.x).reshape(-1, 5)
 
     def iterate(self, n: int):
         if self.geometry is not None:
@@ -308,6 +309,25 @@ class _Iteration:
             g = self.G @ hy + self.c
         self.x, self.x_prev, self.beta, self.hx, self.hy, self.g = x, x_prev, beta, hx, hy, g
         return theta, lip, bt, rs
+
+
+def power_start(size: int) -> np.ndarray:
+    """(size,) the power iteration's fixed random start (reproducible)."""
+    return np.random.default_rng(0).standard_normal(size)
+
+
+def lipschitz_estimate(v, apply_GT, dot, divide, iterations: int = 12) -> float:
+    """The largest eigenvalue of S W S = G T, from below, by power iteration from v (overwritten),
+    with a kernel set's operations (the CPU's or the GPU's): apply_GT(v) returns G T v, dot(u, v) the
+    scalar product, divide(v, norm) divides v in place. The backtracking in the iteration keeps the
+    step safe."""
+    lip = 1.0
+    for _ in range(iterations):
+        divide(v, math.sqrt(dot(v, v)))
+        wv = apply_GT(v)
+        lip = dot(v, wv)
+        v = wv
+    return max(lip, 1e-12)
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> float:
@@ -388,8 +408,12 @@ class ApgdSolver(Solver):
         """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""
         m = program.m
         inv_mass = 1.0 / program.mass
+        if self.kernel == "cuda":   # the scaling, the start and the iterations, all on the device
+            from .apgd_cuda import CudaIteration
+
+            return CudaIteration.of_program(program, inv_mass, warm_start, self.precondition, self.lipschitz_decay)
         # the compiled kernels apply B and B' from the contacts' frames and never form B
-        operator = program.operator if self.kernel in ("numba", "cuda") else None
+        operator = program.operator if self.kernel == "numba" else None
         B = None if operator is not None else program.jacobian.tocsr()
         if not self.precondition:
             s = np.ones((m, 5))
@@ -410,12 +434,7 @@ class ApgdSolver(Solver):
         else:
             x = np.zeros(5 * m)
         if operator is not None:
-            start = _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay, operator=operator)
-            if self.kernel == "cuda":
-                from .apgd_cuda import CudaIteration
-
-                return CudaIteration(start, operator, program.mu, program.mu_r)
-            return start
+            return _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay, operator=operator)
         SB = sp.diags(s.ravel()) @ B
         G = (SB @ sp.diags(inv_mass)).tocsr()
         return _Iteration(G, SB.T.tocsr(), c, mu_s, mu_r_s, inv_mass, x, s, self.lipschitz_decay)
@@ -441,8 +460,7 @@ class ApgdSolver(Solver):
         m = program.m
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         run = self.prepare(program, warm_start)
-        s_flat = run.scaling.ravel()
-        started = "warm" if np.any(run.host_x()) else "cold"
+        started = "warm" if run.is_warm() else "cold"
         scale, floor, primal_tolerance = self.stopping_scales(program)
         setup_time = time.perf_counter() - start
 
@@ -461,7 +479,7 @@ class ApgdSolver(Solver):
                 converged = True
                 break
         solve_time = time.perf_counter() - start - setup_time
-        forces = (s_flat * run.host_x()).reshape(m, 5)
+        forces = run.forces()
         info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:

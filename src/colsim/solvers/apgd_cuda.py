@@ -7,7 +7,9 @@ or one body a thread. Sums over contacts or bodies are taken per block by a fixe
 memory, then added on the host in block order: the same bits every run on one device (they differ
 from the CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's two sums)
 costs one copy of its partial sums to the host, the only host round trip of an iteration; a residual
-check costs one more. theta, beta and the Lipschitz estimate live on the host (scalars).
+check costs one more. theta, beta and the Lipschitz estimate live on the host (scalars). A solve's
+start is made on the device as well: the scaled problem and the first iterate go there once, and
+T x, the first gradient and the Lipschitz estimate's power iteration run on the kernels.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), as in the tests.
 """
@@ -17,11 +19,11 @@ import math
 
 import numpy as np
 
-from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for, cuda,
+from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for, cuda, dot,
                                     gradient_on_device, project_point_on_device,
                                     transpose_on_device)   # first: numba.cuda on numpy 2.5
 from ..engine.cones import combine_residuals
-from .apgd import apgd_iterations
+from .apgd import apgd_iterations, lipschitz_estimate, power_start
 
 @cuda.jit
 def _project_kernel(x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts):
@@ -123,6 +125,87 @@ def trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_
     return float(sums[0]), float(sums[1]), float(sums[2])
 
 
+@cuda.jit
+def _scales_kernel(diag, precondition, mu, mu_r, s, mu_s, mu_r_s):
+    """Contact k's row scales s (5m,) from diag (m, 5) = diag(B Mbar^-1 B') (1 where a row's is not
+    positive; all 1 without `precondition`) and its scaled coefficients mu_s, mu_r_s
+    (colsim.engine.cones.scales_of_diagonal, scaled_coefficients)."""
+    k = cuda.grid(1)
+    if k >= mu.shape[0]:
+        return
+    o = 5 * k
+    normal, sliding, rolling = 1.0, 1.0, 1.0
+    if precondition:
+        normal, sliding, rolling = diag[k, 0], 0.5 * (diag[k, 1] + diag[k, 2]), 0.5 * (diag[k, 3] + diag[k, 4])
+        normal = 1.0 / math.sqrt(normal if normal > 0 else 1.0)
+        sliding = 1.0 / math.sqrt(sliding if sliding > 0 else 1.0)
+        rolling = 1.0 / math.sqrt(rolling if rolling > 0 else 1.0)
+    s[o], s[o + 1], s[o + 2], s[o + 3], s[o + 4] = normal, sliding, sliding, rolling, rolling
+    mu_s[k] = mu[k] * normal / sliding
+    mu_r_s[k] = mu_r[k] * normal / rolling
+
+
+@cuda.jit
+def _offset_kernel(c, gap, s):
+    """c (5m,) = S (B u_free + gap e_n) from c = B u_free, in place (the CPU's order: gap, then S)."""
+    k = cuda.grid(1)
+    if k >= gap.shape[0]:
+        return
+    o = 5 * k
+    c[o] = (c[o] + gap[k]) * s[o]
+    for r in range(1, 5):
+        c[o + r] *= s[o + r]
+
+
+@cuda.jit
+def _first_iterate_kernel(warm, s, mu_s, mu_r_s, x, nonzero):
+    """x (5m,): the warm start's forces (m, 5) over S, projected onto the scaled cones (the CPU's
+    project_compiled); nonzero[0] counts the contacts whose x is not zero (an atomic add)."""
+    k = cuda.grid(1)
+    if k >= mu_s.shape[0]:
+        return
+    o = 5 * k
+    p, q1, q2, r1, r2 = project_point_on_device(warm[k, 0] / s[o], warm[k, 1] / s[o + 1], warm[k, 2] / s[o + 2],
+                                                warm[k, 3] / s[o + 3], warm[k, 4] / s[o + 4], mu_s[k], mu_r_s[k])
+    x[o], x[o + 1], x[o + 2], x[o + 3], x[o + 4] = p, q1, q2, r1, r2
+    if p != 0.0 or q1 != 0.0 or q2 != 0.0 or r1 != 0.0 or r2 != 0.0:
+        cuda.atomic.add(nonzero, 0, 1)
+
+
+@cuda.jit
+def _forces_kernel(s, x, forces):
+    """forces (5m,) = S x."""
+    i = cuda.grid(1)
+    if i < x.shape[0]:
+        forces[i] = s[i] * x[i]
+
+
+@cuda.jit
+def _divide_kernel(v, norm):
+    """v /= norm, one entry a thread."""
+    i = cuda.grid(1)
+    if i < v.shape[0]:
+        v[i] /= norm
+
+
+def _divide(v, norm: float) -> None:
+    _divide_kernel[blocks_for(v.shape[0]), THREADS](v, norm)
+
+
+def _to_device(array):
+    """A float64 copy of a host array on the device; a device array as it is."""
+    if hasattr(array, "copy_to_host"):
+        return array
+    return cuda.to_device(np.ascontiguousarray(array, dtype=float))
+
+
+def _copy(device_array):
+    """A copy of a device array, on the device."""
+    out = cuda.device_array_like(device_array)
+    out.copy_to_device(device_array)
+    return out
+
+
 def extrapolate(hy, h_new, hx, beta):
     _extrapolate_kernel[blocks_for(hy.shape[0]), THREADS](hy, h_new, hx, beta)
 
@@ -136,25 +219,83 @@ iterate = apgd_iterations(trial_step, extrapolate, gradient)
 
 
 class CudaIteration:
-    """The APGD state on the device, from its start on the host (a :class:`colsim.solvers.apgd._Iteration`
-    built on the program's CPU operator: the scaling, the first iterate and the Lipschitz estimate):
-    the same fields, as device arrays, and the same methods the solver calls."""
+    """The APGD state on the device: the fields and methods of :class:`colsim.solvers.apgd._Iteration`,
+    as device arrays, made there from the same arguments: the scaled problem (c, mu_s, mu_r_s (m,),
+    inv_mass (6n,), the scaling (m, 5)) and the first iterate x (5m,) come from the host once; hx = T x,
+    the gradient g and the Lipschitz estimate (the same power iteration, :func:`lipschitz_estimate`)
+    are made on the device. operator: the program's CPU operator (its frames are copied); mu, mu_r:
+    the program's coefficients, for the residual check."""
 
-    def __init__(self, start, operator, mu, mu_r):
-        self.scaling = start.scaling
-        self.m = len(start.mu_s)
-        device = CudaContactOperator.from_operator(operator)
-        self.geometry = device.geometry(cuda.to_device(np.ascontiguousarray(start.scaling.ravel())))
-        for name in ("x", "x_prev", "hx", "hy", "g", "x_new", "h_new", "c", "mu_s", "mu_r_s", "inv_mass"):
-            setattr(self, name, cuda.to_device(np.ascontiguousarray(getattr(start, name), dtype=float)))
-        self.mu = cuda.to_device(np.ascontiguousarray(mu, dtype=float))
-        self.mu_r = cuda.to_device(np.ascontiguousarray(mu_r, dtype=float))
-        self.beta, self.theta, self.lip, self.lip_decay = start.beta, start.theta, start.lip, start.lip_decay
+    def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None):
+        self.m = len(mu_s)
+        device = operator if isinstance(operator, CudaContactOperator) else CudaContactOperator.from_operator(operator)
+        self.geometry = device.geometry(_to_device(scaling).reshape(5 * self.m))
+        self.warm = warm
+        for name, array in (("c", c), ("mu_s", mu_s), ("mu_r_s", mu_r_s), ("inv_mass", inv_mass), ("x", x),
+                            ("mu", mu), ("mu_r", mu_r)):
+            setattr(self, name, _to_device(array))
+        self.hx = cuda.device_array(len(inv_mass), dtype=np.float64)
+        transpose_on_device(self.geometry, self.x, self.hx)
+        self.x_prev, self.hy = _copy(self.x), _copy(self.hx)   # y = x + beta (x - x_prev) = x
+        self.g = cuda.device_array(5 * self.m, dtype=np.float64)
+        gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)
+        self.x_new, self.h_new = cuda.device_array_like(self.x), cuda.device_array_like(self.hx)
+        self.beta, self.theta, self.lip_decay = 0.0, 1.0, float(lip_decay)
+        self.lip = self._lipschitz_estimate()
         self.backtracks = self.restarts = 0
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
-        self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(start.hx))))))
+        self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass))))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
         self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
+
+    @classmethod
+    def of_program(cls, program, inv_mass: np.ndarray, warm_start, precondition: bool,
+                   lip_decay: float) -> "CudaIteration":
+        """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
+        contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
+        scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
+        (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic; only the
+        frames, the masses, the free forces, the gaps, the coefficients and the warm start go there."""
+        m = program.m
+        device = CudaContactOperator.from_operator(program.operator)
+        d_inv_mass, mu, mu_r = (_to_device(array) for array in (inv_mass, program.mu, program.mu_r))
+        diagonal = device.diagonal_on_device(d_inv_mass)
+        s = cuda.device_array(5 * m, dtype=np.float64)
+        mu_s, mu_r_s = cuda.device_array(m, dtype=np.float64), cuda.device_array(m, dtype=np.float64)
+        _scales_kernel[blocks_for(m), THREADS](diagonal, bool(precondition), mu, mu_r, s, mu_s, mu_r_s)
+        c = cuda.device_array(5 * m, dtype=np.float64)
+        gradient_on_device(device.geometry(_to_device(np.ones(5 * m))), _to_device(program.fbar), d_inv_mass,
+                           _to_device(np.zeros(5 * m)), c)
+        _offset_kernel[blocks_for(m), THREADS](c, _to_device(program.gap), s)
+        x = cuda.to_device(np.zeros(5 * m))
+        nonzero = cuda.to_device(np.zeros(1, dtype=np.int64))
+        if warm_start is not None and np.shape(warm_start) == (m, 5):
+            _first_iterate_kernel[blocks_for(m), THREADS](_to_device(warm_start), s, mu_s, mu_r_s, x, nonzero)
+        return cls(c, mu_s, mu_r_s, d_inv_mass, x, s, lip_decay, device, mu, mu_r,
+                   warm=bool(nonzero.copy_to_host()[0]))
+
+    @classmethod
+    def like(cls, start, operator, mu, mu_r) -> "CudaIteration":
+        """The device's iteration from the same arguments as the CPU's `start` (an unstarted
+        :class:`colsim.solvers.apgd._Iteration`): both begin at the same point."""
+        return cls(start.c, start.mu_s, start.mu_r_s, start.inv_mass, start.x, start.scaling, start.lip_decay,
+                   operator, mu, mu_r)
+
+    def _lipschitz_estimate(self) -> float:
+        """:func:`colsim.solvers.apgd.lipschitz_estimate` with the device's kernels: G T v into one of
+        two buffers, so that v and G T v never share one."""
+        zero = cuda.to_device(np.zeros(5 * self.m))
+        h = cuda.device_array_like(self.hx)
+        buffers = [cuda.device_array_like(self.x), cuda.device_array_like(self.x)]
+
+        def apply_GT(v):
+            out = buffers[1] if v is buffers[0] else buffers[0]
+            transpose_on_device(self.geometry, v, h)
+            gradient_on_device(self.geometry, h, self.inv_mass, zero, out)
+            return out
+
+        buffers[0].copy_to_device(power_start(5 * self.m))
+        return lipschitz_estimate(buffers[0], apply_GT, dot, _divide)
 
     def iterate(self, n: int):
         (self.x, self.x_prev, self.x_new, self.hx, self.h_new, self.theta, self.beta, self.lip, bt,
@@ -177,3 +318,13 @@ class CudaIteration:
     def host_x(self) -> np.ndarray:
         """(5m,) the scaled iterate z on the host."""
         return self.x.copy_to_host()
+
+    def is_warm(self) -> bool:
+        """Does the first iterate hold a force (a warm start)? Asked before iterating."""
+        return bool(np.any(self.host_x())) if self.warm is None else self.warm
+
+    def forces(self) -> np.ndarray:
+        """(m, 5) the contact forces S z of the iterate, on the host."""
+        out = cuda.device_array(5 * self.m, dtype=np.float64)
+        _forces_kernel[blocks_for(5 * self.m), THREADS](self.geometry.s, self.x, out)
+        return out.copy_to_host().reshape(self.m, 5)
