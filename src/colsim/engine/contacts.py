@@ -198,6 +198,21 @@ def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndar
     return i, k, normal, gap
 
 
+def pair_frames(state: ParticleState, i: np.ndarray, j: np.ndarray, normal: np.ndarray | None = None,
+                most_recovered: float = np.inf):
+    """(normal, tangent1, tangent2 (m, 3), gap (m,)) of particle pairs (i, j): the unit normal from
+    i to j (or the `normal` given), the tangents of :func:`tangent_basis` and the gap along the
+    normal (length), relaxed by :func:`recovery_relaxation` of the centre-distance gap."""
+    d = state.position[j] - state.position[i]
+    if normal is None:
+        normal = d / np.linalg.norm(d, axis=1)[:, None]
+    gap = np.einsum("ij,ij->i", normal, d) - state.radius[i] - state.radius[j]
+    true_gap = np.linalg.norm(d, axis=1) - state.radius[i] - state.radius[j]
+    gap += recovery_relaxation(true_gap, most_recovered)
+    t1, t2 = tangent_basis(np.reshape(normal, (-1, 3)))
+    return normal, t1, t2, gap
+
+
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
            most_recovered: float = np.inf, device: str = "cpu") -> Contacts:
@@ -214,29 +229,26 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     most_recovered (length): the most of an overlap present at the start that the step removes; the
     gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
-    device: where the swept pairs are found, 'cpu' (a k-d tree) or 'cuda' (a grid on the GPU,
-    :mod:`colsim.engine.cuda_contacts`: the same pairs).
+    device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
+    :func:`pair_frames`) or 'cuda' (a grid on the GPU, :func:`colsim.engine.cuda_contacts.swept_pair_frames`:
+    the same pairs, the same arithmetic); the walls and fixed spheres stay on the host.
     """
     if device == "cuda":
-        from .cuda_contacts import swept_pairs_on_device
+        from .cuda_contacts import swept_pair_frames
 
-        pi, pj = swept_pairs_on_device(state, predicted, margin, slack)
+        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = swept_pair_frames(state, predicted, margin, slack,
+                                                                            most_recovered)
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
-    d = state.position[pj] - state.position[pi]
-    pair_normal = d / np.linalg.norm(d, axis=1)[:, None]
-    if renormal is not None:
+        pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
+    if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
         n = state.n
-        keys = pi.astype(np.int64) * n + pj
-        drop = np.isin(keys, ri.astype(np.int64) * n + rj)
-        pi = np.concatenate([pi[~drop], ri])
-        pj = np.concatenate([pj[~drop], rj])
-        pair_normal = np.concatenate([pair_normal[~drop], rnormal])
-        d = state.position[pj] - state.position[pi]
-    pair_gap = np.einsum("ij,ij->i", pair_normal, d) - state.radius[pi] - state.radius[pj]
-    true_pair_gap = np.linalg.norm(d, axis=1) - state.radius[pi] - state.radius[pj]
-    pair_gap += recovery_relaxation(true_pair_gap, most_recovered)
+        keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
+        given = pair_frames(state, ri, rj, rnormal, most_recovered)
+        pi, pj = np.concatenate([pi[keep], ri]), np.concatenate([pj[keep], rj])
+        pair_normal, pair_t1, pair_t2, pair_gap = (np.concatenate([ours[keep], theirs]) for ours, theirs in zip(
+            (pair_normal, pair_t1, pair_t2, pair_gap), given))
     speed = np.linalg.norm(predicted, axis=1)
     reach = margin + (1.0 + slack) * speed
     wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
@@ -246,13 +258,15 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     i = np.concatenate([pi, wi, fi]).astype(np.int64)
     j = np.concatenate([pj, np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64)
     family = np.concatenate([np.full(len(pi), PARTICLE), wfamily, np.full(len(fi), PARTICLE)]).astype(np.int64)
-    normal = np.concatenate([pair_normal, wnormal, fnormal]).reshape(-1, 3)
+    wall_normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
+    wall_t1, wall_t2 = tangent_basis(wall_normal)
+    normal, t1, t2 = (np.concatenate([pair.reshape(-1, 3), wall]) for pair, wall in (
+        (pair_normal, wall_normal), (pair_t1, wall_t1), (pair_t2, wall_t2)))
     gap = np.concatenate([pair_gap, wgap, fgap])
     radius_i = state.radius[i]
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
                                walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
     lever = rolling_lever(radius_i, radius_j, law.rolling_lever)
-    t1, t2 = tangent_basis(normal)
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
         radius_i=radius_i, radius_j=radius_j, lever=lever,

@@ -38,28 +38,92 @@ CELLS_PER_PARTICLE = 4
 def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: float):
     """(i, j) int64 (m,): the pairs of :func:`colsim.engine.contacts.swept_pairs`, sorted by (i, j),
     found on the GPU. state: a ParticleState (n particles); predicted: (n, 3) length."""
-    n = state.n
-    if n < 2:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty
-    position = np.ascontiguousarray(state.position, dtype=float)
-    predicted = np.ascontiguousarray(predicted, dtype=float)
-    radius = np.ascontiguousarray(state.radius, dtype=float)
-    midpoint, reach = swept_midpoints(state, predicted, margin, slack)
-    lower, dims, width = _grid(midpoint, reach)
-    d_position, d_predicted, d_radius = cuda.to_device(position), cuda.to_device(predicted), cuda.to_device(radius)
-    d_midpoint = cuda.to_device(midpoint)
-    start, listed = _cell_lists(d_midpoint, lower, dims, width)
-    args = (d_position, d_predicted, d_radius, d_midpoint, start, listed, lower, dims, width,
-            reach * reach, float(margin), float(slack))
-    counts = cuda.to_device(np.zeros(n, dtype=np.int64))
-    _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
-    found = counts.copy_to_host()
-    offsets = np.concatenate([[0], np.cumsum(found)])
-    partners = cuda.to_device(np.zeros(max(int(offsets[-1]), 1), dtype=np.int64))
-    _pairs_kernel[blocks_for(n), THREADS](*args, counts, cuda.to_device(offsets), partners, True)
-    j = partners.copy_to_host()[:offsets[-1]]
-    return np.repeat(np.arange(n, dtype=np.int64), found), j
+    if state.n < 2:
+        return _no_pairs()[:2]
+    found = _SweptPairs(state, predicted, margin, slack)
+    return found.i, found.partners.copy_to_host()[:found.m]
+
+
+def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float):
+    """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, normal,
+    tangent1, tangent2 (m, 3), gap (m,)), the pairs of :func:`swept_pairs_on_device`, the unit normal
+    from i to j, the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the
+    normal, relaxed by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered
+    (length; inf: none): the particle pairs of :func:`colsim.engine.contacts.detect`, in the same
+    arithmetic (to rounding: a GPU fuses some multiply-adds)."""
+    if state.n < 2:
+        return _no_pairs()
+    found = _SweptPairs(state, predicted, margin, slack)
+    m = max(found.m, 1)
+    normal, tangent1, tangent2 = (cuda.device_array((m, 3), dtype=np.float64) for _ in range(3))
+    gap = cuda.device_array(m, dtype=np.float64)
+    _frames_kernel[blocks_for(state.n), THREADS](found.position, found.radius, found.offsets, found.partners,
+                                                 float(most_recovered), normal, gap, tangent1, tangent2)
+    j, normal, tangent1, tangent2, gap = (array.copy_to_host()[:found.m] for array in (
+        found.partners, normal, tangent1, tangent2, gap))
+    return found.i, j, normal, tangent1, tangent2, gap
+
+
+def _no_pairs():
+    empty = np.zeros(0, dtype=np.int64)
+    return empty, empty, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+
+
+class _SweptPairs:
+    """The swept pairs of n >= 2 particles on the device: particle i's partners are
+    partners[offsets[i]:offsets[i + 1]] (sorted); i (m,): each pair's first particle, on the host;
+    position, radius: the particles' on the device."""
+
+    def __init__(self, state, predicted: np.ndarray, margin: float, slack: float):
+        n = state.n
+        position = np.ascontiguousarray(state.position, dtype=float)
+        predicted = np.ascontiguousarray(predicted, dtype=float)
+        radius = np.ascontiguousarray(state.radius, dtype=float)
+        midpoint, reach = swept_midpoints(state, predicted, margin, slack)
+        lower, dims, width = _grid(midpoint, reach)
+        self.position, self.radius = cuda.to_device(position), cuda.to_device(radius)
+        d_midpoint = cuda.to_device(midpoint)
+        start, listed = _cell_lists(d_midpoint, lower, dims, width)
+        args = (self.position, cuda.to_device(predicted), self.radius, d_midpoint, start, listed, lower, dims, width,
+                reach * reach, float(margin), float(slack))
+        counts = cuda.to_device(np.zeros(n, dtype=np.int64))
+        _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
+        found = counts.copy_to_host()
+        offsets = np.concatenate([[0], np.cumsum(found)])
+        self.m = int(offsets[-1])
+        self.offsets = cuda.to_device(offsets)
+        self.partners = cuda.to_device(np.zeros(max(self.m, 1), dtype=np.int64))
+        _pairs_kernel[blocks_for(n), THREADS](*args, counts, self.offsets, self.partners, True)
+        self.i = np.repeat(np.arange(n, dtype=np.int64), found)
+
+
+@cuda.jit
+def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2):
+    """Each pair (i, j) of particle i (one thread a particle): the unit normal from i to j, the gap
+    along it relaxed by max(0, -(|d| - R_i - R_j) - most_recovered), and the tangents of
+    colsim.engine.contacts.tangent_basis (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
+    normalised; t2 = n x t1), in the CPU's arithmetic."""
+    i = cuda.grid(1)
+    if i >= offsets.shape[0] - 1:
+        return
+    for k in range(offsets[i], offsets[i + 1]):
+        j = partners[k]
+        d0 = position[j, 0] - position[i, 0]
+        d1 = position[j, 1] - position[i, 1]
+        d2 = position[j, 2] - position[i, 2]
+        distance = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        n0, n1, n2 = d0 / distance, d1 / distance, d2 / distance
+        g = n0 * d0 + n1 * d1 + n2 * d2 - radius[i] - radius[j]
+        gap[k] = g + max(0.0, -(distance - radius[i] - radius[j]) - most_recovered)
+        normal[k, 0], normal[k, 1], normal[k, 2] = n0, n1, n2
+        h0, h1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)   # the helper (h0, h1, 0)
+        a0, a1, a2 = h1 * n2 - 0.0 * n1, 0.0 * n0 - h0 * n2, h0 * n1 - h1 * n0   # helper x n, as np.cross
+        length = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        a0, a1, a2 = a0 / length, a1 / length, a2 / length
+        tangent1[k, 0], tangent1[k, 1], tangent1[k, 2] = a0, a1, a2
+        tangent2[k, 0] = n1 * a2 - n2 * a1
+        tangent2[k, 1] = n2 * a0 - n0 * a2
+        tangent2[k, 2] = n0 * a1 - n1 * a0
 
 
 def _grid(midpoint: np.ndarray, reach: float):
