@@ -19,3 +19,18 @@ if [ $# -eq 0 ]; then
         --profile "${OUT:-results/benchmarks}/profiles"
 fi
 python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@"
+
+# A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
+# NAME.settings.yaml (the study's settings.yaml), `colsim collapse --device cuda` to rest, stopped
+# after REST_LIMIT seconds (default 240) if not at rest; its checkpoint and log come back either way,
+# and `colsim analyse` measures a finished run.
+for column in .gpu/rest/*.nc; do
+    [ -e "$column" ] || continue
+    name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out"
+    start=$(date +%s)
+    timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$name.settings.yaml" \
+        --input "$column" --device cuda --checkpoint-every 50 --output "$out/$name.nc" > "$out/$name.log" 2>&1 \
+        && python3 -m colsim.cli analyse --input "$out/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
+        || echo "$name: stopped or failed (exit $?); see $out/$name.log"
+    echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
+done
