@@ -29,7 +29,7 @@ for column in .gpu/rest/*.nc; do
     name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out"
     start=$(date +%s)
     timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$name.settings.yaml" \
-        --input "$column" --device cuda --checkpoint-every 50 --output "$out/$name.nc" > "$out/$name.log" 2>&1 \
+        --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 --output "$out/$name.nc" > "$out/$name.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$out/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
         || echo "$name: stopped or failed (exit $?); see $out/$name.log"
     echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
