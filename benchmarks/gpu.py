@@ -6,7 +6,9 @@ as a solve makes it.
     python -m benchmarks gpu --spheres 73000 704000 2000000 --iterations 60
     python -m benchmarks gpu --spheres --columns r0_3_a5.nc r0_6_a5.nc --steps 20
 
-Then the swept pairs of contact detection on the same lattice, every sphere moving up to 0.01 of its
+First, what a launch of an empty kernel (1 or 13 arguments, plain or specialised) and a small copy
+to the host cost (:func:`launch_costs`): a small column's iteration is made of them. Then the swept
+pairs of contact detection on the same lattice, every sphere moving up to 0.01 of its
 diameter in a random direction (a collapse step's): the CPU's (a k-d tree, the swept test on numba's
 threads) against the GPU's (a uniform grid, colsim.engine.cuda_contacts; the copies to and from the
 device included), best of three, and whether the two lists are the same; and the warm start's
@@ -132,6 +134,43 @@ def timed(run, iterations: int, mu, mu_r, synchronise=lambda: None) -> float:
     return time.perf_counter() - begin
 
 
+def launch_costs(cuda, repeat: int = 2000) -> dict:
+    """Microseconds of what an APGD iteration on the GPU pays besides its memory traffic, each the mean
+    over `repeat` back-to-back calls (synchronised once at the end): launching an empty kernel of one
+    device-array argument, of 13 (12 device arrays and a float, as the gradient kernel takes), the
+    same through a dispatcher specialised to those arguments (`specialize`: no type resolution a
+    call), and a copy of 3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
+    arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
+
+    @cuda.jit
+    def one(a):
+        pass
+
+    @cuda.jit
+    def many(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, x):
+        pass
+
+    def mean_us(call) -> float:
+        call()   # compiles
+        cuda.synchronize()
+        begin = time.perf_counter()
+        for _ in range(repeat):
+            call()
+        cuda.synchronize()
+        return 1e6 * (time.perf_counter() - begin) / repeat
+
+    parts = cuda.to_device(np.zeros((3, 128)))
+    costs = {"1 argument": mean_us(lambda: one[1, 128](arrays[0])),
+             "13 arguments": mean_us(lambda: many[1, 128](*arrays, 1.0))}
+    try:
+        special = many.specialize(*arrays, 1.0)
+        costs["13 arguments, specialised"] = mean_us(lambda: special[1, 128](*arrays, 1.0))
+    except Exception as error:   # a numba without it
+        print(f"specialize: {error}")
+    costs["copy 3 x 128 to the host"] = mean_us(lambda: parts.copy_to_host())
+    return costs
+
+
 def detection(spheres: int, repeat: int = 3) -> dict:
     """Best-of-`repeat` seconds of the swept pairs of the lattice of about `spheres` on the CPU and on
     the GPU (the first call of each compiles), the pairs found, and whether both found the same."""
@@ -230,6 +269,10 @@ def main(argv=None):
     device = "simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name
     device = device.decode() if isinstance(device, bytes) else str(device)
     record.note("device", device)
+    if args.spheres:
+        launches = record.table(["what", f"us each ({device})"], title="launch and round-trip costs")
+        for what, us in launch_costs(cuda, 5 if numba_config.ENABLE_CUDASIM else 2000).items():
+            launches.row(what, f"{us:.1f}", data={"what": what, "us": us, "device": device})
     nominal, copied = bandwidth(cuda, 1e-4 if numba_config.ENABLE_CUDASIM else 1.0) if args.spheres else (None, None)
     if args.spheres:
         record.note("bandwidth", {"nominal_gb_s": nominal, "copy_gb_s": copied})
