@@ -14,7 +14,8 @@ as the k-d tree's reach, so that every candidate pair lies in neighbouring cells
    second pass writes them there and sorts them by j.
 
 So the pairs come out sorted by (i, j) as the CPU's do, and the same every run: no order depends on
-the atomic adds. The prefix sums run on the host (one copy of the counts each way). Without a GPU
+the atomic adds. For detect, :func:`swept_pair_frames` then gives each pair its normal, tangents and
+gap there (3. one thread a particle over its partners), so that only the results come back. The prefix sums run on the host (one copy of the counts each way). Without a GPU
 the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), where the tests compare the
 pairs with the CPU's.
 """

@@ -8,8 +8,10 @@ memory, then added on the host in block order: the same bits every run on one de
 from the CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's two sums)
 costs one copy of its partial sums to the host, the only host round trip of an iteration; a residual
 check costs one more. theta, beta and the Lipschitz estimate live on the host (scalars). A solve's
-start is made on the device as well: the scaled problem and the first iterate go there once, and
-T x, the first gradient and the Lipschitz estimate's power iteration run on the kernels.
+start is made on the device as well (:meth:`CudaIteration.of_program`): the contacts' frames, the
+masses, the free forces, the gaps, the coefficients and the warm start go there once, and the row
+scales, c, the first iterate, T x, the first gradient and the Lipschitz estimate's power iteration
+are made by kernels.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), as in the tests.
 """
@@ -220,11 +222,13 @@ iterate = apgd_iterations(trial_step, extrapolate, gradient)
 
 class CudaIteration:
     """The APGD state on the device: the fields and methods of :class:`colsim.solvers.apgd._Iteration`,
-    as device arrays, made there from the same arguments: the scaled problem (c, mu_s, mu_r_s (m,),
-    inv_mass (6n,), the scaling (m, 5)) and the first iterate x (5m,) come from the host once; hx = T x,
-    the gradient g and the Lipschitz estimate (the same power iteration, :func:`lipschitz_estimate`)
-    are made on the device. operator: the program's CPU operator (its frames are copied); mu, mu_r:
-    the program's coefficients, for the residual check."""
+    as device arrays, from the same arguments (host or device arrays): the scaled problem (c (5m,),
+    mu_s, mu_r_s (m,), inv_mass (6n,), the scaling (m, 5) or (5m,)) and the first iterate x (5m,);
+    hx = T x, the gradient g and the Lipschitz estimate (the same power iteration,
+    :func:`lipschitz_estimate`) are made on the device. operator: the program's CPU operator (its
+    frames are copied) or their copy on the device; mu, mu_r: the program's coefficients, for the
+    residual check; warm: whether x holds a force (None: look). :meth:`of_program` makes the scaled
+    problem on the device too."""
 
     def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None):
         self.m = len(mu_s)
