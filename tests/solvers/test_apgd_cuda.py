@@ -95,6 +95,8 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     sol = ApgdSolver(kernel="cuda").solve(program, warm_start=warm)
     assert sol.info["kernel"] == "cuda" and sol.info["start"] == "warm" and sol.iterations == 10
     assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
+    expected = program.increments(sol.forces)   # the device's hx, B' lam, is the host's product
+    np.testing.assert_allclose(sol.increments, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
     ref = ClarabelSolver(tolerance=1e-10).solve(program)
     du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
     net, net_ref = (program.jacobian.T @ forces.ravel() for forces in (sol.forces, ref.forces))

@@ -267,6 +267,10 @@ class _Iteration:
         """(m, 5) the contact forces S z of the iterate."""
         return (self.scaling.ravel() * self.x).reshape(-1, 5)
 
+    def increments(self, program: ConeProgram) -> np.ndarray:
+        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate's forces."""
+        return program.increments(self.forces())
+
     def iterate(self, n: int):
         if self.geometry is not None:
             (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, bt,
@@ -488,4 +492,4 @@ class ApgdSolver(Solver):
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        return ConeSolution(program.increments(forces), forces, "Solved", k, setup_time, solve_time, info)
+        return ConeSolution(run.increments(program), forces, "Solved", k, setup_time, solve_time, info)

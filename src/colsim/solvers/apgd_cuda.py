@@ -327,6 +327,11 @@ class CudaIteration:
         """Does the first iterate hold a force (a warm start)? Asked before iterating."""
         return bool(np.any(self.host_x())) if self.warm is None else self.warm
 
+    def increments(self, program) -> np.ndarray:
+        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate: B' lam = B' S z is the device's hx, so only
+        it comes back (no product with B' on the host)."""
+        return (program.fbar + self.hx.copy_to_host()) / program.mass
+
     def forces(self) -> np.ndarray:
         """(m, 5) the contact forces S z of the iterate, on the host."""
         out = cuda.device_array(5 * self.m, dtype=np.float64)
