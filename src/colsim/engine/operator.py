@@ -25,6 +25,8 @@ def body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.nda
     bodies = bodies[entry]
     start = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(bodies, minlength=n), out=start[1:])
+    if not HAVE_NUMBA:   # the counting sort's loop is for the compiler only
+        return start, entry[np.argsort(bodies, kind="stable")]
     return start, _by_body(entry, bodies, start)
 
 

@@ -267,9 +267,9 @@ class _Iteration:
         """(m, 5) the contact forces S z of the iterate."""
         return (self.scaling.ravel() * self.x).reshape(-1, 5)
 
-    def increments(self, program: ConeProgram) -> np.ndarray:
-        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate's forces."""
-        return program.increments(self.forces())
+    def increments(self, program: ConeProgram, forces: np.ndarray) -> np.ndarray:
+        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate's forces lam (m, 5) (:meth:`forces`)."""
+        return program.increments(forces)
 
     def iterate(self, n: int):
         if self.geometry is not None:
@@ -492,4 +492,4 @@ class ApgdSolver(Solver):
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        return ConeSolution(run.increments(program), forces, "Solved", k, setup_time, solve_time, info)
+        return ConeSolution(run.increments(program, forces), forces, "Solved", k, setup_time, solve_time, info)

@@ -327,9 +327,9 @@ class CudaIteration:
         """Does the first iterate hold a force (a warm start)? Asked before iterating."""
         return bool(np.any(self.host_x())) if self.warm is None else self.warm
 
-    def increments(self, program) -> np.ndarray:
+    def increments(self, program, forces=None) -> np.ndarray:
         """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate: B' lam = B' S z is the device's hx, so only
-        it comes back (no product with B' on the host)."""
+        it comes back (no product with B' on the host; `forces`, the host's lam, is not needed)."""
         return (program.fbar + self.hx.copy_to_host()) / program.mass
 
     def forces(self) -> np.ndarray:
