@@ -53,6 +53,7 @@ import numpy as np
 import record
 from cuda_operator import DIAMETER, lattice_contacts, lattice_positions
 from colsim.engine.cones import scales_of_diagonal
+from colsim.engine.cuda_launch import launch, plain_launches
 from colsim.engine.contacts import swept_pairs
 from colsim.engine.state import ParticleState
 from colsim.engine.operator import ContactOperator
@@ -139,7 +140,7 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     over `repeat` back-to-back calls (synchronised once at the end): launching an empty kernel of one
     device-array argument, of 13 (12 device arrays and a float, as the gradient kernel takes), the
     same through a dispatcher specialised to those arguments (`specialize`: no type resolution a
-    call), and a copy of 3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
+    call), both through colsim.engine.cuda_launch (the arrays' words made once), and a copy of 3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
     arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
 
     @cuda.jit
@@ -161,7 +162,9 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
 
     parts = cuda.to_device(np.zeros((3, 128)))
     costs = {"1 argument": mean_us(lambda: one[1, 128](arrays[0])),
-             "13 arguments": mean_us(lambda: many[1, 128](*arrays, 1.0))}
+             "13 arguments": mean_us(lambda: many[1, 128](*arrays, 1.0)),
+             "1 argument, marshalled once (cuda_launch)": mean_us(lambda: launch(one, 1, 128, arrays[0])),
+             "13 arguments, marshalled once (cuda_launch)": mean_us(lambda: launch(many, 1, 128, *arrays, 1.0))}
     try:
         special = many.specialize(*arrays, 1.0)
         costs["13 arguments, specialised"] = mean_us(lambda: special[1, 128](*arrays, 1.0))
@@ -281,18 +284,22 @@ def main(argv=None):
     table = record.table(["spheres", "contacts", f"CPU ms an iteration ({threads()} threads)",
                           f"GPU ms an iteration ({device})", "GPU vs CPU", "iterate difference / largest",
                           "restarts, backtracks (CPU; GPU)", "GB an iteration (counted)",
-                          "GPU over the bound (copy bandwidth; nominal)"])
+                          "GPU over the bound (copy bandwidth; nominal)",
+                          "GPU ms, plain launches (same iterate)"])
     for spheres in args.spheres:   # none with `--spheres` alone
-        for warm_up in range(2):   # the first compiles both kernel sets; both start again from the same point
+        for warm_up in range(2):   # the first compiles both kernel sets; all start again from the same point
             cpu, operator, mu, mu_r = start_of(spheres)
-            gpu = CudaIteration.like(cpu, operator, mu, mu_r)
+            gpu, plain = (CudaIteration.like(cpu, operator, mu, mu_r) for _ in range(2))
             if not warm_up:
                 timed(cpu, 1, mu, mu_r)
                 timed(gpu, 1, mu, mu_r, cuda.synchronize)
         gpu_s = timed(gpu, args.iterations, mu, mu_r, cuda.synchronize)
+        with plain_launches():
+            plain_s = timed(plain, args.iterations, mu, mu_r, cuda.synchronize)
         cpu_s = timed(cpu, args.iterations, mu, mu_r)
         x = cpu.host_x()
         difference = float(np.max(np.abs(gpu.host_x() - x)) / max(np.max(np.abs(x)), 1e-300))
+        same = bool(np.array_equal(gpu.host_x(), plain.host_x()))
         per_cpu, per_gpu = cpu_s / args.iterations, gpu_s / args.iterations
         moved = iteration_bytes(operator.m, operator.n, len(operator.entry), args.iterations + gpu.backtracks,
                                 args.iterations, math.ceil(args.iterations / 10)) / args.iterations
@@ -300,7 +307,8 @@ def main(argv=None):
         table.row(operator.n, operator.m, f"{1e3 * per_cpu:.2f}", f"{1e3 * per_gpu:.2f}", f"{per_cpu / per_gpu:.1f}",
                   f"{difference:.1e}", f"{cpu.restarts}, {cpu.backtracks}; {gpu.restarts}, {gpu.backtracks}",
                   f"{moved / 1e9:.3f}", "; ".join("-" if x is None else f"{x:.1f}" for x in over),
-                  data={"spheres": operator.n, "contacts": operator.m, "cpu_ms": 1e3 * per_cpu,
+                  f"{1e3 * plain_s / args.iterations:.2f} ({'yes' if same else 'NO'})",
+                  data={"plain_launch_gpu_ms": 1e3 * plain_s / args.iterations, "plain_same_iterate": same, "spheres": operator.n, "contacts": operator.m, "cpu_ms": 1e3 * per_cpu,
                         "gpu_ms": 1e3 * per_gpu, "cpu_threads": threads(), "device": device,
                         "simulator": bool(numba_config.ENABLE_CUDASIM), "iterations": args.iterations,
                         "relative_difference": difference, "bytes_an_iteration": moved,

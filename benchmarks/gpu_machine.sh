@@ -13,24 +13,33 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upg
 export PYTHONPATH="/tmp/colsim-site:$PWD/src:$PWD${PYTHONPATH:+:$PYTHONPATH}"
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>/dev/null || echo "no nvidia-smi"
 echo "CPUs: $(nproc); python: $(python3 --version); numpy: $(python3 -c 'import numpy; print(numpy.__version__)')"
+# With GPU_TESTS set (pytest arguments, e.g. "tests/engine/test_cuda_launch.py"), those tests first, on the
+# GPU itself (NUMBA_ENABLE_CUDASIM=0), for at most 120 s: what CI checks on the simulator, on the card.
+if [ -n "${GPU_TESTS:-}" ]; then
+    NUMBA_ENABLE_CUDASIM=0 timeout 120 python3 -m pytest -q -p no:cacheprovider $GPU_TESTS 2>&1 | tail -n 15 \
+        || echo "GPU tests: failed or stopped"
+fi
+
 if [ $# -eq 0 ]; then
     columns=(.gpu/*.nc)
     set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
         --profile "${OUT:-results/benchmarks}/profiles"
 fi
-python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@"
+python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
 # NAME.settings.yaml (the study's settings.yaml), `colsim collapse --device cuda` to rest, stopped
-# after REST_LIMIT seconds (default 240) if not at rest; its checkpoint and log come back either way,
-# and `colsim analyse` measures a finished run.
+# after REST_LIMIT seconds (default 240) if not at rest, after the benchmarks. Its log
+# comes back, and `colsim analyse` of a finished run (h_inf/r0 and the run-out, in the log too); the
+# trajectory stays in /tmp there (an r0 = 3 collapse's is 31 MB, over what the device tool brings back).
 for column in .gpu/rest/*.nc; do
     [ -e "$column" ] || continue
-    name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out"
+    name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out" /tmp/rest
     start=$(date +%s)
     timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$name.settings.yaml" \
-        --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 --output "$out/$name.nc" > "$out/$name.log" 2>&1 \
-        && python3 -m colsim.cli analyse --input "$out/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
+        --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 --output "/tmp/rest/$name.nc" > "$out/$name.log" 2>&1 \
+        && python3 -m colsim.cli analyse --input "/tmp/rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
         || echo "$name: stopped or failed (exit $?); see $out/$name.log"
     echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
 done
+

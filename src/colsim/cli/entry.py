@@ -161,6 +161,7 @@ def main(argv=None) -> int:
         parser.error("-v and -q contradict each other")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
+    logging.getLogger("numba").setLevel(logging.WARNING)   # its CUDA driver logs each free at INFO: 16 MB a collapse
     from . import commands
     from ..io.files import InputError
     from ..engine.solver_contract import SolverError

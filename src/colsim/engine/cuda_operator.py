@@ -27,6 +27,7 @@ if not hasattr(np, "row_stack"):   # numba-cuda 0.30.4 calls np.row_stack, which
 from numba import cuda  # noqa: E402 (after the alias)
 
 from .cones import project_point
+from .cuda_launch import launch
 from .operator import ContactGeometry, body_contacts
 
 #: threads a block; a power of two (the dot product's tree halves it)
@@ -176,17 +177,17 @@ def gradient_on_device(geometry: ContactGeometry, h, inv_mass, c, out) -> None:
     """out (5m,) = S B Mbar^-1 h + c, every array on the device (colsim.engine.operator.gradient_of)."""
     g = geometry
     if g.i.shape[0]:
-        _gradient_kernel[blocks_for(g.i.shape[0]), THREADS](h, inv_mass, g.s, g.i, g.j, g.normal, g.tangent1,
-                                                           g.tangent2, g.radius_i, g.radius_j, g.lever, c, out)
+        launch(_gradient_kernel, blocks_for(g.i.shape[0]), THREADS, h, inv_mass, g.s, g.i, g.j, g.normal,
+               g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, c, out)
 
 
 def transpose_on_device(geometry: ContactGeometry, z, out) -> None:
     """out (6n,) = B' S z, every array on the device (colsim.engine.operator.transpose_of)."""
     g = geometry
     if g.i.shape[0]:
-        _wrench_kernel[blocks_for(g.i.shape[0]), THREADS](z, g.s, g.normal, g.tangent1, g.tangent2, g.radius_i,
-                                                         g.radius_j, g.lever, g.work)
-    _transpose_kernel[blocks_for(g.start.shape[0] - 1), THREADS](g.work, g.start, g.entry, out)
+        launch(_wrench_kernel, blocks_for(g.i.shape[0]), THREADS, z, g.s, g.normal, g.tangent1, g.tangent2,
+               g.radius_i, g.radius_j, g.lever, g.work)
+    launch(_transpose_kernel, blocks_for(g.start.shape[0] - 1), THREADS, g.work, g.start, g.entry, out)
 
 
 class CudaContactOperator:

@@ -25,6 +25,7 @@ from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, 
                                     gradient_on_device, project_point_on_device,
                                     transpose_on_device)   # first: numba.cuda on numpy 2.5
 from ..engine.cones import combine_residuals
+from ..engine.cuda_launch import launch
 from .apgd import apgd_iterations, lipschitz_estimate, power_start
 
 @cuda.jit
@@ -120,9 +121,9 @@ def _residual_kernel(g, x, s, mu, mu_r, parts):
 def trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, parts):
     """The projection, h_new = T x_new and the descent test's sums, on the device; returns
     (||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}), summed in block order on the host."""
-    _project_kernel[blocks_for(mu_s.shape[0]), THREADS](x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts)
+    launch(_project_kernel, blocks_for(mu_s.shape[0]), THREADS, x, x_prev, beta, g, x_new, step, mu_s, mu_r_s, parts)
     transpose_on_device(geometry, x_new, h_new)
-    _weighted_change_kernel[blocks_for(h_new.shape[0]), THREADS](h_new, hy, inv_mass, parts)
+    launch(_weighted_change_kernel, blocks_for(h_new.shape[0]), THREADS, h_new, hy, inv_mass, parts)
     sums = parts.copy_to_host().sum(axis=1)   # entries past a kernel's blocks stay zero
     return float(sums[0]), float(sums[1]), float(sums[2])
 
@@ -209,7 +210,7 @@ def _copy(device_array):
 
 
 def extrapolate(hy, h_new, hx, beta):
-    _extrapolate_kernel[blocks_for(hy.shape[0]), THREADS](hy, h_new, hx, beta)
+    launch(_extrapolate_kernel, blocks_for(hy.shape[0]), THREADS, hy, h_new, hx, beta)
 
 
 def gradient(hy, inv_mass, geometry, c, g):
@@ -313,8 +314,8 @@ class CudaIteration:
         """The relative residuals at the iterate (colsim.engine.cones.relative_residuals), on the
         device; mu, mu_r: the program's (those given at construction are used)."""
         gradient_on_device(self.geometry, self.hx, self.inv_mass, self.c, self.gap)
-        _residual_kernel[blocks_for(self.m), THREADS](self.gap, self.x, self.geometry.s, self.mu, self.mu_r,
-                                                      self.residual_parts)
+        launch(_residual_kernel, blocks_for(self.m), THREADS, self.gap, self.x, self.geometry.s, self.mu, self.mu_r,
+               self.residual_parts)
         parts = self.residual_parts.copy_to_host()
         return combine_residuals(max(0.0, float(parts[0].max())), max(0.0, float(parts[1].max())),
                                  float(parts[2].sum()), float(parts[3].sum()), self.m, scale, floor)
