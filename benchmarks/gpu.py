@@ -224,7 +224,7 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     from colsim.stages.settings import CollapseSettings
 
     state, source = io.read_state(column)
-    settings = CollapseSettings(mu_r=0.12, checkpoint_every=10**9)
+    settings = CollapseSettings(mu_r=0.12, checkpoint_every=10**9, frame_every=steps)   # the last step a frame
     solver = make_solver("auto", scaled_time_step=settings.scaled_step,
                          apgd={"kernel": "cuda"} if device == "cuda" else {})
     start = time.perf_counter()
@@ -235,8 +235,10 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     d = run.diagnostics
     shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall
               for name in ("detection", "assembly", "setup", "solve")}
+    last_step, last = run.frames[-1]
+    assert last_step == len(d) == steps, (last_step, len(d), steps)   # the end state, not the column's
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
-            "iterations": float(np.mean([x.solver_iterations for x in d])), "end": run.frames[-1][1].position,
+            "iterations": float(np.mean([x.solver_iterations for x in d])), "end": last.position,
             "diameter": 2 * float(state.radius.mean())}
 
 
