@@ -7,6 +7,8 @@
 #   bash benchmarks/gpu_machine.sh --spheres 100 --iterations 2   # any `benchmarks gpu` arguments
 #
 # Records go to $OUT (the device tool's folder that comes back), else results/benchmarks.
+# STAGES (default "bench rest pour") picks what runs, in that order: the benchmark, the collapses
+# of .gpu/rest/ to rest, the pours of .gpu/pour/ with their collapses.
 set -euo pipefail
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/colsim-site \
     .gpu/whl/*.whl
@@ -20,12 +22,15 @@ if [ -n "${GPU_TESTS:-}" ]; then
         || echo "GPU tests: failed or stopped"
 fi
 
-if [ $# -eq 0 ]; then
-    columns=(.gpu/*.nc)
-    set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
-        --profile "${OUT:-results/benchmarks}/profiles"
+stages=" ${STAGES:-bench rest pour} "
+if [[ "$stages" == *" bench "* ]]; then
+    if [ $# -eq 0 ]; then
+        columns=(.gpu/*.nc)
+        set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
+            --profile "${OUT:-results/benchmarks}/profiles"
+    fi
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
 fi
-python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
 # NAME.settings.yaml (the study's settings.yaml), `colsim collapse --device cuda` to rest, stopped
@@ -33,7 +38,7 @@ python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "b
 # comes back, and `colsim analyse` of a finished run (h_inf/r0 and the run-out, in the log too); the
 # trajectory stays in /tmp there (an r0 = 3 collapse's is 31 MB, over what the device tool brings back).
 for column in .gpu/rest/*.nc; do
-    [ -e "$column" ] || continue
+    [[ "$stages" == *" rest "* && -e "$column" ]] || continue
     name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out" /tmp/rest
     start=$(date +%s)
     timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$name.settings.yaml" \
@@ -43,3 +48,30 @@ for column in .gpu/rest/*.nc; do
     echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
 done
 
+
+# A pour, its trim and its collapse on the GPU (issue 46's "pour and collapse of r0 = 6 in 10
+# minutes"): each .gpu/pour/NAME.pack.yaml (a study's packing settings.yaml) with NAME.collapse.yaml
+# (its run's settings.yaml), `colsim pack --device cuda` stopped after POUR_LIMIT seconds (default
+# 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
+# and the analysis come back; the files stay in /tmp there.
+for settings in .gpu/pour/*.pack.yaml; do
+    [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
+    name=$(basename "$settings" .pack.yaml); out="${OUT:-results/benchmarks}/pour"; work=/tmp/pour/$name
+    mkdir -p "$out" "$work"
+    start=$(date +%s)
+    timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
+        --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
+        || echo "$name: the pour stopped or failed (exit $?); see $out/$name.pack.log"
+    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"; tail -n 2 "$out/$name.pack.log"
+    [ -e "$work/packing.nc" ] || continue
+    python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
+        --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1
+    timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/pour/$name.collapse.yaml" \
+        --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \
+        --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
+        && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
+            >> "$out/$name.collapse.log" 2>&1 \
+        || echo "$name: the collapse stopped or failed (exit $?); see $out/$name.collapse.log"
+    echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
+    tail -n 3 "$out/$name.collapse.log"
+done
