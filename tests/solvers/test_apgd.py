@@ -121,3 +121,15 @@ def test_overlap_tolerance_bounds_the_largest_violation_in_diameters(solver_pile
         ApgdSolver(overlap_tolerance=-1.0)
 
 
+
+
+def test_the_power_iterations_start_is_the_same_whatever_was_asked_before():
+    """power_start keeps its longest draw and hands out prefixes: each equals a fresh draw of its
+    size (numpy's generator fills in sequence), whatever sizes came before, and is the caller's own."""
+    from colsim.solvers.apgd import power_start
+
+    for size in (7, 3, 5000, 12, 20001, 1):
+        start = power_start(size)
+        assert np.array_equal(start, np.random.default_rng(0).standard_normal(size))
+        start[:] = 0.0   # lipschitz_estimate overwrites its start
+    assert np.array_equal(power_start(20001), np.random.default_rng(0).standard_normal(20001))
