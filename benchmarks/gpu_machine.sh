@@ -34,18 +34,26 @@ fi
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
 # NAME.settings.yaml (the study's settings.yaml), `colsim collapse --device cuda` to rest, stopped
-# after REST_LIMIT seconds (default 240) if not at rest, after the benchmarks. Its log
-# comes back, and `colsim analyse` of a finished run (h_inf/r0 and the run-out, in the log too); the
-# trajectory stays in /tmp there (an r0 = 3 collapse's is 31 MB, over what the device tool brings back).
+# after REST_LIMIT seconds (default 240) if not at rest, after the benchmarks; with REST_TOLERANCES
+# (e.g. "1e-5 9e-6 1.1e-5") once for each APGD tolerance. The logs and `colsim analyse` of each
+# finished run (h_inf/r0 and the run-out, in the log too) come back in rest.tgz (the device tool
+# brings back 8 files); the trajectories stay in /tmp there (an r0 = 3 collapse's is 31 MB).
+rm -rf /tmp/rest-out /tmp/pour-out
 for column in .gpu/rest/*.nc; do
     [[ "$stages" == *" rest "* && -e "$column" ]] || continue
-    name=$(basename "$column" .nc); out="${OUT:-results/benchmarks}/rest"; mkdir -p "$out" /tmp/rest
-    start=$(date +%s)
-    timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$name.settings.yaml" \
-        --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 --output "/tmp/rest/$name.nc" > "$out/$name.log" 2>&1 \
-        && python3 -m colsim.cli analyse --input "/tmp/rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
-        || echo "$name: stopped or failed (exit $?); see $out/$name.log"
-    echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
+    for tolerance in ${REST_TOLERANCES:-settings}; do   # APGD's tolerance: the settings' own, or each given
+        name=$(basename "$column" .nc); flags=()
+        [ "$tolerance" = settings ] || { name="$name-tol$tolerance"; flags=(--solver-tolerance "$tolerance"); }
+        out=/tmp/rest-out; mkdir -p "$out" /tmp/rest
+        start=$(date +%s)
+        timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$(basename "$column" .nc).settings.yaml" \
+            --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 "${flags[@]}" \
+            --output "/tmp/rest/$name.nc" > "$out/$name.log" 2>&1 \
+            && python3 -m colsim.cli analyse --input "/tmp/rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
+            || echo "$name: stopped or failed (exit $?); see rest.tgz"
+        echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
+        tar czf "${OUT:-results/benchmarks}/rest.tgz" -C /tmp rest-out   # each run's log and analysis, one file
+    done
 done
 
 
@@ -53,25 +61,27 @@ done
 # minutes"): each .gpu/pour/NAME.pack.yaml (a study's packing settings.yaml) with NAME.collapse.yaml
 # (its run's settings.yaml), `colsim pack --device cuda` stopped after POUR_LIMIT seconds (default
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
-# and the analysis come back; the files stay in /tmp there.
+# and the analysis come back in pour.tgz; the files stay in /tmp there.
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
-    name=$(basename "$settings" .pack.yaml); out="${OUT:-results/benchmarks}/pour"; work=/tmp/pour/$name
+    name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=/tmp/pour/$name
     mkdir -p "$out" "$work"
     start=$(date +%s)
     timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
-        || echo "$name: the pour stopped or failed (exit $?); see $out/$name.pack.log"
+        || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"; tail -n 2 "$out/$name.pack.log"
+    tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
-        --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1
+        --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
     timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/pour/$name.collapse.yaml" \
         --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
             >> "$out/$name.collapse.log" 2>&1 \
-        || echo "$name: the collapse stopped or failed (exit $?); see $out/$name.collapse.log"
+        || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
     tail -n 3 "$out/$name.collapse.log"
+    tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
