@@ -192,7 +192,7 @@ def _divide_kernel(v, norm):
 
 
 def _divide(v, norm: float) -> None:
-    _divide_kernel[blocks_for(v.shape[0]), THREADS](v, norm)
+    launch(_divide_kernel, blocks_for(v.shape[0]), THREADS, v, norm)
 
 
 def _to_device(array):
