@@ -34,7 +34,9 @@ rounding of their sums does not flip a decision). The GPU's one host round trip 
 trial step's sums) is inside its time. Beside them: the bytes an iteration must move
 (:func:`iteration_bytes`, counted from the kernels' arrays at the run's backtracks and checks) and
 how many times the time to move them the GPU took, at the card's nominal bandwidth and at that of a
-1 GiB device-to-device copy. Run the CPU baseline on the same machine, in the same call.
+1 GiB device-to-device copy; and the GPU's time with every launch the plain way (numba-cuda's
+dispatcher, colsim.engine.cuda_launch.plain_launches) from the same start, whose iterate must be
+the same bits. Run the CPU baseline on the same machine, in the same call.
 Without a GPU the kernels run on numba's simulator (NUMBA_ENABLE_CUDASIM=1): only to check the
 script, at a hundred spheres and a few iterations; its times mean nothing.
 """
@@ -140,7 +142,8 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     over `repeat` back-to-back calls (synchronised once at the end): launching an empty kernel of one
     device-array argument, of 13 (12 device arrays and a float, as the gradient kernel takes), the
     same through a dispatcher specialised to those arguments (`specialize`: no type resolution a
-    call), both through colsim.engine.cuda_launch (the arrays' words made once), and a copy of 3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
+    call), both through colsim.engine.cuda_launch (the arrays' words made once), and a copy of
+    3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
     arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
 
     @cuda.jit
