@@ -42,11 +42,11 @@ rm -rf /tmp/rest-out /tmp/pour-out
 for column in .gpu/rest/*.nc; do
     [[ "$stages" == *" rest "* && -e "$column" ]] || continue
     for tolerance in ${REST_TOLERANCES:-settings}; do   # APGD's tolerance: the settings' own, or each given
-        name=$(basename "$column" .nc); flags=()
-        [ "$tolerance" = settings ] || { name="$name-tol$tolerance"; flags=(--solver-tolerance "$tolerance"); }
+        base=$(basename "$column" .nc); name=$base; flags=()
+        [ "$tolerance" = settings ] || { name="$base-tol$tolerance"; flags=(--solver-tolerance "$tolerance"); }
         out=/tmp/rest-out; mkdir -p "$out" /tmp/rest
         start=$(date +%s)
-        timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$(basename "$column" .nc).settings.yaml" \
+        timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$base.settings.yaml" \
             --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 "${flags[@]}" \
             --output "/tmp/rest/$name.nc" > "$out/$name.log" 2>&1 \
             && python3 -m colsim.cli analyse --input "/tmp/rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \

@@ -164,20 +164,13 @@ def _block_dot_kernel(u, v, partial):
         partial[cuda.blockIdx.x] = cache[0]
 
 
-#: the dot product's per-block sums, one device array per block count (kept: an allocation and a
-#: launch's marshalling of a fresh array cost more than a small column's dot product)
-_partials: dict = {}
-
-
-def dot(u, v) -> float:
+def dot(u, v, partial=None) -> float:
     """u . v of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
-    block order, so the result is the same every run."""
+    block order, so the result is the same every run. partial: a device array of the blocks' count
+    for those sums, kept by a caller that takes many products of one length (None: a new one)."""
     blocks = blocks_for(u.shape[0])
-    partial = _partials.get(blocks)
     if partial is None:
-        if len(_partials) >= 64:   # the column sizes of a run come and go
-            _partials.clear()
-        partial = _partials[blocks] = cuda.device_array(blocks, dtype=np.float64)
+        partial = cuda.device_array(blocks, dtype=np.float64)
     launch(_block_dot_kernel, blocks, THREADS, u, v, partial)
     return float(np.sum(partial.copy_to_host()))
 

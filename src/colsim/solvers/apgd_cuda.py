@@ -299,8 +299,9 @@ class CudaIteration:
             gradient_on_device(self.geometry, h, self.inv_mass, zero, out)
             return out
 
+        partial = cuda.device_array(blocks_for(5 * self.m), dtype=np.float64)   # for all 24 dot products
         buffers[0].copy_to_device(power_start(5 * self.m))
-        return lipschitz_estimate(buffers[0], apply_GT, dot, _divide)
+        return lipschitz_estimate(buffers[0], apply_GT, lambda u, v: dot(u, v, partial), _divide)
 
     def iterate(self, n: int):
         (self.x, self.x_prev, self.x_new, self.hx, self.h_new, self.theta, self.beta, self.lip, bt,
