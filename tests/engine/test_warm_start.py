@@ -71,3 +71,15 @@ def test_forces_go_to_the_moving_spheres_numbering_and_back():
     np.testing.assert_array_equal(held.i, [0, 2, 2])
     np.testing.assert_array_equal(held.j, [4, 4, -1])
     assert held.joined(back).m == 6
+
+
+def test_from_step_is_the_frames_sum_to_the_bit(solver_pile):
+    """The compiled global frame gives numpy's broadcast sum p n + q1 t1 + q2 t2 (and r1 t1 + r2 t2)
+    bit for bit: the same sums in the same order, so a run's warm starts did not change."""
+    _, found = collapse_program(solver_pile)
+    forces = np.random.default_rng(5).normal(size=(found.m, 5))
+    warm = WarmStart.from_step(found, forces)
+    expected_force = forces[:, :1] * found.normal + forces[:, 1:2] * found.tangent1 + forces[:, 2:3] * found.tangent2
+    expected_rolling = forces[:, 3:4] * found.tangent1 + forces[:, 4:5] * found.tangent2
+    assert np.array_equal(warm.force, expected_force) and np.array_equal(warm.rolling, expected_rolling)
+    assert np.array_equal(warm.i, found.i) and np.array_equal(warm.j, found.j)

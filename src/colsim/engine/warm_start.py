@@ -10,8 +10,8 @@ final forces can start the first step of its column's collapse. A pour in layers
 moving spheres, on fixed ones: :meth:`WarmStart.for_moving` and :meth:`WarmStart.in_whole` carry the
 forces between the whole packing's numbering and that step's.
 
-A plain record: the cone projection (numba) is loaded by :meth:`WarmStart.match` alone, so that reading
-a file's forces (:mod:`colsim.io`) loads no numerics.
+A plain record: the compiled kernels (numba) are loaded by :meth:`WarmStart.match` and
+:meth:`WarmStart.from_step` alone, so that reading a file's forces (:mod:`colsim.io`) loads no numerics.
 """
 from __future__ import annotations
 
@@ -42,10 +42,14 @@ class WarmStart:
 
     @classmethod
     def from_step(cls, contacts, forces: np.ndarray) -> "WarmStart":
-        """The forces (m, 5) = (p, q1, q2, r1, r2) of a step's `contacts`, in the global frame."""
-        f = (forces[:, :1] * contacts.normal + forces[:, 1:2] * contacts.tangent1
-             + forces[:, 2:3] * contacts.tangent2)
-        r = forces[:, 3:4] * contacts.tangent1 + forces[:, 4:5] * contacts.tangent2
+        """The forces (m, 5) = (p, q1, q2, r1, r2) of a step's `contacts`, in the global frame
+        (:func:`colsim.engine.operator.global_forces`)."""
+        from .operator import global_forces
+
+        m = len(forces)
+        f, r = np.empty((m, 3)), np.empty((m, 3))
+        global_forces(*(np.ascontiguousarray(a, dtype=float) for a in (
+            forces, contacts.normal, contacts.tangent1, contacts.tangent2)), f, r)
         return cls(contacts.i.copy(), contacts.j.copy(), contacts.family.copy(), f, r)
 
     def carries_load(self) -> bool:
