@@ -1,7 +1,7 @@
 """APGD's iterations on one GPU against the CPU's, on the same program from the same start: the
-control flow colsim.solvers.apgd.apgd_iterations driving the CUDA kernels (colsim.solvers.apgd_cuda)
-and the compiled CPU kernels (the process's numba threads), with a residual check every 10 iterations
-as a solve makes it.
+same decisions (colsim.solvers.apgd.decide) made on the device between the CUDA kernels
+(colsim.solvers.apgd_cuda) and in the compiled CPU loop (the process's numba threads), with a
+residual check every 10 iterations as a solve makes it.
 
     python -m benchmarks gpu --spheres 73000 704000 2000000 --iterations 60
     python -m benchmarks gpu --spheres --columns r0_3_a5.nc r0_6_a5.nc --steps 20
@@ -16,6 +16,8 @@ matching of forces stored for every lattice contact to those contacts (WarmStart
 a sorted array; on the GPU, a hash table: colsim.engine.cuda_warm_start), best of three, and the
 largest difference over the largest force.
 
+With --trajectories (finished `colsim collapse` files, e.g. the collapses to rest that
+gpu_machine.sh runs on the GPU), where their steps' wall time went (:func:`step_times`).
 With --columns (`colsim trim` files), also the first --steps steps of each column's collapse (the
 default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
 packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`: detection and the
@@ -30,8 +32,8 @@ preconditioned as APGD does (colsim.engine.cones.scales_of_diagonal). Both start
 each with its own Lipschitz estimate (the same power iteration, on its own kernels: equal to rounding). Reported: milliseconds an iteration (the whole run over the
 iterations, wall time, the GPU synchronised), their ratio, the iterate's largest difference over its
 largest entry after the run, and the restarts and backtracks of each (the same on both when the
-rounding of their sums does not flip a decision). The GPU's one host round trip an iteration (the
-trial step's sums) is inside its time. Beside them: the bytes an iteration must move
+rounding of their sums does not flip a decision). The GPU's reads of its control array (one a
+round of trial steps, CudaIteration.iterate) are inside its time. Beside them: the bytes an iteration must move
 (:func:`iteration_bytes`, counted from the kernels' arrays at the run's backtracks and checks) and
 how many times the time to move them the GPU took, at the card's nominal bandwidth and at that of a
 1 GiB device-to-device copy; and the GPU's time with every launch the plain way (numba-cuda's
@@ -79,7 +81,10 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 + entries +
     9m); the descent test's sum reads h_new, hy and inv_mass (18n). Then each iteration extrapolates
     (18n) and takes the gradient (h and inv_mass 12n; s, i, j, the frame, the lengths and c read, g
-    written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m)."""
+    written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m).
+    Not counted, as the algorithm does not need them: the device's iteration copies x_new into x's
+    slot and h_new into hx (10m + 6n words an iteration, so that no trial step waits for the host),
+    and takes the gradient again after a rejected trial step."""
     trial = 22 * m + 31 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
     gradient = 12 * n + 29 * m
     check = gradient + 17 * m
@@ -245,6 +250,26 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
             "diameter": 2 * float(state.radius.mean())}
 
 
+def step_times(trajectory: str) -> dict:
+    """Where a finished collapse's steps spent their wall time, from its file's per-step diagnostics
+    (a `colsim collapse` trajectory): seconds, the shares of detection, assembly, the solver's setup
+    and its solve (the rest: the warm start's matching, the overlap check, redone attempts' other
+    work, the bookkeeping), mean iterations, steps redone, and seconds a step over each third."""
+    import xarray as xr
+
+    with xr.open_dataset(trajectory) as d:
+        wall = d["step_wall_time"].values
+        parts = {name: float(d[f"step_{name}_time"].sum()) for name in ("detection", "assembly", "setup", "solve")}
+        iterations, redone = d["step_solver_iterations"].values, d["step_redone"].values
+        spheres = int(d.sizes.get("particle", 0))
+    total = float(wall.sum())
+    thirds = [float(np.mean(part)) for part in np.array_split(wall, 3) if len(part)]
+    return {"trajectory": trajectory, "spheres": spheres, "steps": len(wall), "wall_s": total,
+            "shares": {name: value / total for name, value in parts.items()},
+            "iterations": float(np.mean(iterations)), "redone": int(np.count_nonzero(redone)),
+            "s_a_step_by_third": thirds}
+
+
 @contextlib.contextmanager
 def _profiled(path: str | None):
     """cProfile the block into `path` (pstats), or nothing when None."""
@@ -266,6 +291,8 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--columns", nargs="*", default=[], help="column files (colsim trim) to collapse")
     parser.add_argument("--steps", type=int, default=20, help="steps of each column's collapse")
+    parser.add_argument("--trajectories", nargs="*", default=[], help="finished collapses (colsim collapse "
+                        "files) whose steps' wall time to split by phase, as the rest stage's runs on a GPU")
     parser.add_argument("--profile", default=None, help="a folder for cProfile's statistics of each column's "
                         "collapse steps on each device (COLUMN-DEVICE.pstats)")
     args = parser.parse_args(argv)
@@ -274,7 +301,8 @@ def main(argv=None):
 
     from colsim.solvers.apgd_cuda import CudaIteration
 
-    device = "simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name
+    device = ("simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name if cuda.is_available()
+              else "no GPU")   # --trajectories alone needs none
     device = device.decode() if isinstance(device, bytes) else str(device)
     record.note("device", device)
     if args.spheres:
@@ -286,11 +314,12 @@ def main(argv=None):
         record.note("bandwidth", {"nominal_gb_s": nominal, "copy_gb_s": copied})
         print(f"memory bandwidth: nominal {'unknown' if nominal is None else f'{nominal:.0f} GB/s'}, "
               f"a device-to-device copy {copied:.0f} GB/s")
-    table = record.table(["spheres", "contacts", f"CPU ms an iteration ({threads()} threads)",
-                          f"GPU ms an iteration ({device})", "GPU vs CPU", "iterate difference / largest",
-                          "restarts, backtracks (CPU; GPU)", "GB an iteration (counted)",
-                          "GPU over the bound (copy bandwidth; nominal)",
-                          "GPU ms, plain launches (same iterate)"])
+    if args.spheres:
+        table = record.table(["spheres", "contacts", f"CPU ms an iteration ({threads()} threads)",
+                              f"GPU ms an iteration ({device})", "GPU vs CPU", "iterate difference / largest",
+                              "restarts, backtracks (CPU; GPU)", "GB an iteration (counted)",
+                              "GPU over the bound (copy bandwidth; nominal)",
+                              "GPU ms, plain launches (same iterate)"])
     for spheres in args.spheres:   # none with `--spheres` alone
         for warm_up in range(2):   # the first compiles both kernel sets; all start again from the same point
             cpu, operator, mu, mu_r = start_of(spheres)
@@ -334,6 +363,17 @@ def main(argv=None):
         matched.row(d["spheres"], d["contacts"], f"{1e3 * d['cpu_s']:.1f}", f"{1e3 * d['gpu_s']:.1f}",
                     f"{d['cpu_s'] / d['gpu_s']:.1f}", f"{d['difference']:.1e}",
                     data={**d, "device": device, "simulator": bool(numba_config.ENABLE_CUDASIM)})
+    if args.trajectories:
+        spent = record.table(["trajectory", "spheres", "steps", "wall s", "detection, assembly, setup, solve, rest",
+                              "iterations a step", "steps redone", "s a step by third"],
+                             title="where whole collapses spent their steps' time")
+    for trajectory in args.trajectories:
+        t = step_times(trajectory)
+        shares = t["shares"]
+        spent.row(Path(trajectory).name, t["spheres"], t["steps"], f"{t['wall_s']:.1f}",
+                  ", ".join(f"{x:.0%}" for x in (*shares.values(), 1.0 - sum(shares.values()))),
+                  f"{t['iterations']:.0f}", t["redone"], ", ".join(f"{x:.3f}" for x in t["s_a_step_by_third"]),
+                  data={**t, "device": device})
     if not args.columns:
         return
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",

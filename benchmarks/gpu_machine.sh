@@ -37,19 +37,25 @@ fi
 # after REST_LIMIT seconds (default 240) if not at rest, after the benchmarks; with REST_TOLERANCES
 # (e.g. "1e-5 9e-6 1.1e-5") once for each APGD tolerance. The logs and `colsim analyse` of each
 # finished run (h_inf/r0 and the run-out, in the log too) come back in rest.tgz (the device tool
-# brings back 8 files); the trajectories stay in /tmp there (an r0 = 3 collapse's is 31 MB).
+# brings back 8 files); the trajectories stay in results/gpu-rest there (an r0 = 3 collapse's is 31 MB).
+# REST_COLUMNS (names without .nc, e.g. "r0_6_a5_seed1") picks some of them; a run that finds its
+# checkpoint in results/gpu-rest (git-ignored: kept on a warm machine between calls) goes on from it.
+# Each finished run's steps are split by phase (`benchmarks gpu --trajectories`) in its log.
 rm -rf /tmp/rest-out /tmp/pour-out
 for column in .gpu/rest/*.nc; do
+    if [ -n "${REST_COLUMNS:-}" ] && [[ " $REST_COLUMNS " != *" $(basename "$column" .nc) "* ]]; then continue; fi
     [[ "$stages" == *" rest "* && -e "$column" ]] || continue
     for tolerance in ${REST_TOLERANCES:-settings}; do   # APGD's tolerance: the settings' own, or each given
         base=$(basename "$column" .nc); name=$base; flags=()
         [ "$tolerance" = settings ] || { name="$base-tol$tolerance"; flags=(--solver-tolerance "$tolerance"); }
-        out=/tmp/rest-out; mkdir -p "$out" /tmp/rest
+        out=/tmp/rest-out; mkdir -p "$out" results/gpu-rest
         start=$(date +%s)
         timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$base.settings.yaml" \
             --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 "${flags[@]}" \
-            --output "/tmp/rest/$name.nc" > "$out/$name.log" 2>&1 \
-            && python3 -m colsim.cli analyse --input "/tmp/rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
+            --output "results/gpu-rest/$name.nc" > "$out/$name.log" 2>&1 \
+            && python3 -m colsim.cli analyse --input "results/gpu-rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
+            && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "results/gpu-rest/$name.nc" 2>&1 \
+                | grep "^|" >> "$out/$name.log" \
             || echo "$name: stopped or failed (exit $?); see rest.tgz"
         echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
         tar czf "${OUT:-results/benchmarks}/rest.tgz" -C /tmp rest-out   # each run's log and analysis, one file

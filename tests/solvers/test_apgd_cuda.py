@@ -1,6 +1,6 @@
-"""APGD's iterations on the GPU (colsim.solvers.apgd_cuda, issue 46): the one control flow
-(colsim.solvers.apgd.apgd_iterations) driving the CUDA kernels follows the CPU's, and a solve on the
-device meets Clarabel as the CPU's does. They run on numba's CUDA simulator here (conftest sets
+"""APGD's iterations on the GPU (colsim.solvers.apgd_cuda, issue 46): the CPU's decisions
+(colsim.solvers.apgd.decide), made on the device between the CUDA kernels, follow the CPU's, and a
+solve on the device meets Clarabel as the CPU's does. They run on numba's CUDA simulator here (conftest sets
 NUMBA_ENABLE_CUDASIM=1 unless told otherwise), on a GPU where there is one.
 
 Bounds: a kernel against its CPU twin 1e-12 relative (the same arithmetic; the sums over contacts
@@ -58,11 +58,11 @@ def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
 def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
     cpu = ApgdSolver(kernel="numba").prepare(program)
     gpu = ApgdSolver(kernel="cuda").prepare(program)
-    step = 1.0 / cpu.lip
     x_new, h_new = np.empty_like(cpu.x), np.empty_like(cpu.hx)
-    ours = apgd_cuda.trial_step(gpu.x, gpu.x_prev, 0.0, gpu.g, gpu.x_new, step, gpu.h_new, gpu.hy, gpu.geometry,
-                                gpu.mu_s, gpu.mu_r_s, gpu.inv_mass, gpu.parts)
-    theirs = _trial_step(cpu.x, cpu.x_prev, 0.0, cpu.g, x_new, step, h_new, cpu.hy, cpu.geometry, cpu.mu_s,
+    apgd_cuda.trial_step(*gpu.slots, gpu.control, gpu.g, gpu.x_new, gpu.h_new, gpu.hy, gpu.geometry, gpu.mu_s,
+                         gpu.mu_r_s, gpu.inv_mass, gpu.parts)
+    ours = gpu.parts.copy_to_host().sum(axis=1)   # the blocks' sums (the step 1/lip and beta from the device)
+    theirs = _trial_step(cpu.x, cpu.x_prev, 0.0, cpu.g, x_new, 1.0 / cpu.lip, h_new, cpu.hy, cpu.geometry, cpu.mu_s,
                          cpu.mu_r_s, cpu.inv_mass, 1)
     np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-300)
     for device, host in ((gpu.x_new, x_new), (gpu.h_new, h_new)):

@@ -125,10 +125,32 @@ def _weighted_change(h_new, hy, inv_mass, blocks):
     return total
 
 
-# APGD's control flow, written once: Nesterov's momentum, the gradient restart, the backtracking on
-# the step length. It drives a kernel set: the CPU's (below, compiled together with it) or the GPU's
-# (colsim.solvers.apgd_cuda, run from Python, each kernel a launch). The numpy loop in
-# _Iteration._iterate_numpy is the tests' oracle.
+# APGD's decisions, written once: Nesterov's momentum, the gradient restart, the backtracking on the
+# step length (decide). The CPU's loop (apgd_iterations, compiled with the CPU's kernels below) and
+# the GPU's (colsim.solvers.apgd_cuda: a kernel a trial step runs decide on the device) both make
+# them with it. The numpy loop in _Iteration._iterate_numpy is the tests' oracle.
+
+def decide(dd, uphill, change, lip, theta, beta, lip_decay):
+    """What a trial step from y with step 1/lip decides, from its sums dd = ||x_new - y||^2,
+    uphill = g . (x_new - x) and change = ||T (x_new - y)||^2_{Mbar^-1}: returns (accepted, lip,
+    theta, beta, restarted). The step is accepted when change <= lip dd (the exact descent test of a
+    quadratic), or when dd = 0 (nothing moved; the test would compare two roundings of zero, and lip
+    would double forever); then Nesterov's theta and beta move on, or restart (theta = 1, beta = 0)
+    when uphill > 0, and lip *= lip_decay. Else lip doubles and the rest stays."""
+    if not (dd == 0.0 or change <= lip * dd * (1.0 + 1e-12)):
+        return False, 2.0 * lip, theta, beta, False
+    theta_new = 0.5 * (-theta * theta + theta * math.sqrt(theta * theta + 4.0))
+    beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+    restarted = uphill > 0.0
+    if restarted:
+        theta_new = 1.0
+        beta = 0.0
+    return True, lip * lip_decay, theta_new, beta, restarted
+
+
+if HAVE_NUMBA:
+    decide = numba.njit(cache=True)(decide)
+
 
 def apgd_iterations(trial_step, extrapolate, gradient):
     """The function iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c,
@@ -138,17 +160,14 @@ def apgd_iterations(trial_step, extrapolate, gradient):
 
     x, hx = T x: the iterate; the extrapolated point is y = x + beta (x - x_prev), never stored,
     hy = T y, and g = G hy + c the gradient at y; T = B' S and G = S B Mbar^-1 come from the contact
-    `geometry` (:class:`colsim.engine.operator.ContactGeometry`). After each iteration lip *= lip_decay.
-    The step 1/lip is accepted when ||T d||^2_{Mbar^-1} <= lip ||d||^2 for d = x_new - y (the exact
-    descent test of a quadratic), or when d = 0 (nothing moved; the test would compare roundings of
-    zero), else lip doubles. Restart when g . (x_new - x) > 0.
+    `geometry` (:class:`colsim.engine.operator.ContactGeometry`). Each trial step's outcome is
+    :func:`decide`'s; an accepted one moves the iterate on.
 
     The kernel set: trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_s,
     inv_mass, reduction) sets x_new = Proj_K(y - step g) and h_new = T x_new and returns
     (||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}); extrapolate(hy, h_new, hx, beta)
     sets hy = h_new + beta (h_new - hx); gradient(hy, inv_mass, geometry, c, g) sets g = G hy + c.
-    `reduction` is how the kernels sum (the CPU's: a count of fixed blocks; the GPU's: room for the
-    blocks' sums)."""
+    `reduction` is how the kernels sum (the CPU's: a count of fixed blocks)."""
 
     def iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s,
                 inv_mass, lip_decay, reduction):
@@ -158,20 +177,12 @@ def apgd_iterations(trial_step, extrapolate, gradient):
             while True:
                 dd, uphill, change = trial_step(x, x_prev, beta, g, x_new, 1.0 / lip, h_new, hy, geometry,
                                                 mu_s, mu_r_s, inv_mass, reduction)
-                # dd == 0: the step does not move y (every contact already projected onto itself), and
-                # the test would compare two roundings of zero: accept, or lip would double forever
-                if dd == 0.0 or change <= lip * dd * (1.0 + 1e-12):
+                accepted, lip, theta, beta, restarted = decide(dd, uphill, change, lip, theta, beta, lip_decay)
+                if accepted:
                     break
-                lip *= 2.0
                 backtracks += 1
-            theta_new = 0.5 * (-theta * theta + theta * math.sqrt(theta * theta + 4.0))
-            beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-            if uphill > 0.0:
-                theta_new = 1.0
-                beta = 0.0
+            if restarted:
                 restarts += 1
-            theta = theta_new
-            lip *= lip_decay
             x_prev, x, x_new = x, x_new, x_prev
             extrapolate(hy, h_new, hx, beta)
             hx, h_new = h_new, hx
