@@ -148,7 +148,9 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     device-array argument, of 13 (12 device arrays and a float, as the gradient kernel takes), the
     same through a dispatcher specialised to those arguments (`specialize`: no type resolution a
     call), both through colsim.engine.cuda_launch (the arrays' words made once), and a copy of
-    3 x 128 float64 to the host (a trial step's round trip, synchronising)."""
+    3 x 128 float64 to the host (a trial step's round trip, synchronising); then an allocation of
+    8 kB on the device and copies of 8 kB and 8 MB from the host, each into a new array (what a
+    step's set-up pays for each of the dozens of arrays it makes)."""
     arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
 
     @cuda.jit
@@ -179,6 +181,13 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     except Exception as error:   # a numba without it
         print(f"specialize: {error}")
     costs["copy 3 x 128 to the host"] = mean_us(lambda: parts.copy_to_host())
+    # what a step's set-up pays for each array it makes on the device (dozens a step: the frames,
+    # the solver's start, detection's lists): an allocation (numba-cuda's, freed in batches), and a
+    # small and a large copy from the host's (pageable) memory
+    small, large = np.zeros(1024), np.zeros(1 << 20)
+    costs["allocate 8 kB on the device"] = mean_us(lambda: cuda.device_array(1024))
+    costs["copy 8 kB from the host (allocated)"] = mean_us(lambda: cuda.to_device(small))
+    costs["copy 8 MB from the host (allocated)"] = mean_us(lambda: cuda.to_device(large))
     return costs
 
 
