@@ -37,6 +37,21 @@ def test_lever_formulas():
         ContactLaw(rolling_lever="R")
 
 
+def test_the_compiled_levers_are_the_definition_to_the_bit():
+    """detect's compiled levers (contact_levers) give rolling_lever's numbers bit for bit, walls
+    (radius_j = 0) included, and refuse an unknown lever alike."""
+    from colsim.engine.contacts import contact_levers
+
+    rng = np.random.default_rng(4)
+    ri, rj = rng.uniform(0.05, 0.5, 1000), rng.uniform(0.05, 0.5, 1000)
+    rj[::7] = 0.0
+    for lever in ROLLING_LEVERS:
+        assert np.array_equal(contact_levers(ri, rj, lever), rolling_lever(ri, rj, lever))
+    assert contact_levers(ri[:0], rj[:0], "paper").shape == (0,)
+    with pytest.raises(ValueError, match="rolling lever"):
+        contact_levers(ri, rj, "radius")
+
+
 def _pair(lever, radii=(0.2, 0.3)):
     """Contacts and program of two touching spheres of `radii` (and the floor under the first)."""
     state = ParticleState.at_rest([[0.0, 0.0, radii[0]], [0.0, 0.0, 0.0]], list(radii))

@@ -137,9 +137,30 @@ def _swept_keep(i, j, position, predicted, radius, margin, slack, keep):
         keep[k] = swept_close(position, predicted, radius, i[k], j[k], margin, slack)
 
 
+def _levers(radius_i, radius_j, scale, out):
+    """out (m,) = :func:`colsim.engine.state.rolling_lever` in one pass, the same arithmetic (scale 2
+    for 'paper', 1 for 'effective'): numpy's form made eight temporaries, 78 ms at 2 M contacts."""
+    for k in prange(len(out)):
+        if radius_j[k] > 0:
+            out[k] = scale * (radius_i[k] * radius_j[k] / (radius_i[k] + radius_j[k]))
+        else:
+            out[k] = radius_i[k]
+
+
+def contact_levers(radius_i: np.ndarray, radius_j: np.ndarray, lever: str) -> np.ndarray:
+    """(m,) the rolling lever of each contact (:func:`colsim.engine.state.rolling_lever`, its
+    definition and the tests' oracle), compiled for the step's arrays."""
+    rolling_lever(radius_i[:1], radius_j[:1], lever)   # the same check of `lever`
+    out = np.empty(len(radius_i))
+    _levers(np.ascontiguousarray(radius_i, dtype=float), np.ascontiguousarray(radius_j, dtype=float),
+            2.0 if lever == "paper" else 1.0, out)
+    return out
+
+
 if HAVE_NUMBA:
     swept_close = numba.njit(cache=True, inline="always")(swept_close)
     _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
+    _levers = numba.njit(cache=True, parallel=True)(_levers)
 
 
 def recovery_relaxation(true_gap: np.ndarray, most_recovered: float) -> np.ndarray:
@@ -266,7 +287,7 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     radius_i = state.radius[i]
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
                                walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
-    lever = rolling_lever(radius_i, radius_j, law.rolling_lever)
+    lever = contact_levers(radius_i, radius_j, law.rolling_lever)
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
         radius_i=radius_i, radius_j=radius_j, lever=lever,
