@@ -5,7 +5,7 @@ Each kernel is its CPU twin's arithmetic (colsim.solvers.apgd, colsim.engine.con
 or one body a thread. Sums over contacts or bodies are taken per block by a fixed tree in shared
 memory, then added in block order: the same bits every run on one device (they differ from the
 CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's sums) is followed
-by one thread that adds its blocks' sums and decides as the CPU does, with the CPU's own code
+by one block that adds its blocks' sums (a fixed tree) and decides as the CPU does, with the CPU's own code
 (:func:`colsim.solvers.apgd.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
 iteration's scalars kept in a small device array; an accepted step then moves the iterate. So the
 host launches trial steps without waiting for any, and reads that array once a round of them
@@ -39,14 +39,6 @@ LIP, THETA, BETA, LIP_DECAY, ACCEPTED, SLOT, ITERATIONS, BACKTRACKS, RESTARTS = 
 CONTROL_SIZE = 9
 
 
-@cuda.jit(device=True)
-def _slots(control, slot_0, slot_1):
-    """(x, x_prev): the two slots in the order the control array says."""
-    if control[SLOT] == 0.0:
-        return slot_0, slot_1
-    return slot_1, slot_0
-
-
 @cuda.jit
 def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, parts):
     """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev from
@@ -59,7 +51,9 @@ def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, parts):
     moved[t] = 0.0
     uphill[t] = 0.0
     if k < mu_s.shape[0]:
-        x, x_prev = _slots(control, slot_0, slot_1)
+        x, x_prev = slot_0, slot_1   # the slots in the order the control array says
+        if control[SLOT] != 0.0:
+            x, x_prev = slot_1, slot_0
         beta = control[BETA]
         step = 1.0 / control[LIP]
         o = 5 * k
@@ -100,20 +94,36 @@ def _weighted_change_kernel(h_new, hy, inv_mass, parts):
 _decide_on_device = cuda.jit(device=True)(getattr(decide, "py_func", decide))
 
 
+#: threads of the decision's one block, a power of two: they add the trial step's block sums (up to
+#: 33,000 a row at 700,000 spheres) by a fixed assignment and tree, so the same bits every run
+DECIDE_THREADS = 1024
+
+
 @cuda.jit
 def _decide_kernel(parts, control):
-    """One thread: the trial step's sums (parts' blocks, added in block order) and APGD's decision
-    (:func:`colsim.solvers.apgd.decide`, the CPU's code) into the control array; an accepted step
-    moves x to the other slot (where :func:`_accept_kernel` copies x_new)."""
-    if cuda.grid(1) != 0:
+    """One block: the trial step's sums (each row of parts, thread t adding blocks t, t + 1024, ...,
+    then a fixed tree) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the
+    CPU's code) into the control array; an accepted step moves x to the other slot (where
+    :func:`_accept_kernel` copies x_new)."""
+    sums = cuda.shared.array((3, DECIDE_THREADS), dtype=np.float64)
+    t = cuda.threadIdx.x
+    for row in range(3):   # entries past a kernel's blocks stay zero
+        total = 0.0
+        for b in range(t, parts.shape[1], DECIDE_THREADS):
+            total += parts[row, b]
+        sums[row, t] = total
+    cuda.syncthreads()
+    half = DECIDE_THREADS // 2
+    while half > 0:
+        if t < half:
+            for row in range(3):
+                sums[row, t] += sums[row, t + half]
+        cuda.syncthreads()
+        half //= 2
+    if t != 0:
         return
-    dd = uphill = change = 0.0
-    for b in range(parts.shape[1]):   # entries past a kernel's blocks stay zero
-        dd += parts[0, b]
-        uphill += parts[1, b]
-        change += parts[2, b]
-    accepted, lip, theta, beta, restarted = _decide_on_device(dd, uphill, change, control[LIP], control[THETA],
-                                                              control[BETA], control[LIP_DECAY])
+    accepted, lip, theta, beta, restarted = _decide_on_device(sums[0, 0], sums[1, 0], sums[2, 0], control[LIP],
+                                                              control[THETA], control[BETA], control[LIP_DECAY])
     control[LIP], control[THETA], control[BETA] = lip, theta, beta
     if accepted:
         control[ACCEPTED] = 1.0
@@ -135,8 +145,10 @@ def _accept_kernel(control, slot_0, slot_1, x_new, hy, h_new, hx):
         return
     i = cuda.grid(1)
     if i < x_new.shape[0]:
-        x, _ = _slots(control, slot_0, slot_1)
-        x[i] = x_new[i]
+        if control[SLOT] == 0.0:
+            slot_0[i] = x_new[i]
+        else:
+            slot_1[i] = x_new[i]
     if i < hx.shape[0]:
         beta = control[BETA]
         hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
@@ -375,7 +387,7 @@ class CudaIteration:
         """One trial step and its decision, and the iterate's move when accepted: seven launches."""
         trial_step(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry, self.mu_s,
                    self.mu_r_s, self.inv_mass, self.parts)
-        launch(_decide_kernel, 1, 1, self.parts, self.control)
+        launch(_decide_kernel, 1, DECIDE_THREADS, self.parts, self.control)
         launch(_accept_kernel, blocks_for(max(5 * self.m, self.hx.shape[0])), THREADS, self.control, *self.slots,
                self.x_new, self.hy, self.h_new, self.hx)
         gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)   # rejected: the same g again
