@@ -3,9 +3,9 @@ device, the residual check there, and the iteration state that stays on the devi
 
 Each kernel is its CPU twin's arithmetic (colsim.solvers.apgd, colsim.engine.cones) for one contact
 or one body a thread. Sums over contacts or bodies are taken per block by a fixed tree in shared
-memory, then added in block order: the same bits every run on one device (they differ from the
-CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's sums) is followed
-by one block that adds its blocks' sums (a fixed tree) and decides as the CPU does, with the CPU's own code
+memory, then the blocks' sums in a fixed order: the same bits every run on one device (they differ
+from the CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's sums) is
+followed by one block that adds its blocks' sums and decides as the CPU does, with the CPU's code
 (:func:`colsim.solvers.apgd.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
 iteration's scalars kept in a small device array; an accepted step then moves the iterate. So the
 host launches trial steps without waiting for any, and reads that array once a round of them
