@@ -305,14 +305,14 @@ class CudaIteration:
         for name, array in (("c", c), ("mu_s", mu_s), ("mu_r_s", mu_r_s), ("inv_mass", inv_mass), ("mu", mu),
                             ("mu_r", mu_r)):
             setattr(self, name, _to_device(array))
-        self.slots = (_to_device(x), None)
+        x = _to_device(x)
         self.hx = cuda.device_array(len(inv_mass), dtype=np.float64)
-        transpose_on_device(self.geometry, self.slots[0], self.hx)
-        self.slots = (self.slots[0], _copy(self.slots[0]))   # y = x + beta (x - x_prev) = x
+        transpose_on_device(self.geometry, x, self.hx)
+        self.slots = (x, _copy(x))   # x, then x_prev: y = x + beta (x - x_prev) = x
         self.hy = _copy(self.hx)
         self.g = cuda.device_array(5 * self.m, dtype=np.float64)
         gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)
-        self.x_new, self.h_new = cuda.device_array_like(self.slots[0]), cuda.device_array_like(self.hx)
+        self.x_new, self.h_new = cuda.device_array_like(x), cuda.device_array_like(self.hx)
         lip = self._lipschitz_estimate()
         start = np.zeros(CONTROL_SIZE)
         start[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
