@@ -43,3 +43,22 @@ def test_no_contacts_give_zero_forces():
     gpu = cuda_operator.CudaContactOperator(empty, 4)
     np.testing.assert_array_equal(gpu.transpose(np.zeros(0)), np.zeros(24))
     assert gpu.apply(np.ones(24)).shape == (0,) and gpu.diagonal(np.ones(24)).shape == (0, 5)
+
+
+def test_a_frame_goes_to_the_device_once_and_goes_with_its_array():
+    """The warm start's matching and the solver's operator share one device copy of each frame of
+    an attempt's contacts: the same host array gives the same device array, another array its own,
+    and the copy is dropped with the host array."""
+    import gc
+
+    from colsim.engine.cuda_operator import _frames_on_device, frame_on_device
+
+    normal = np.random.default_rng(6).normal(size=(40, 3))
+    first = frame_on_device(normal)
+    assert frame_on_device(normal) is first and np.array_equal(first.copy_to_host(), normal)
+    other = normal.copy()
+    assert frame_on_device(other) is not first
+    key = id(normal)
+    del normal
+    gc.collect()
+    assert key not in _frames_on_device

@@ -18,6 +18,7 @@ which is how CI checks them against the CPU kernels. APGD's iterations on the GP
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 
@@ -41,6 +42,27 @@ project_point_on_device = cuda.jit(device=True)(getattr(project_point, "py_func"
 def blocks_for(count: int) -> int:
     """Blocks of THREADS threads for one thread an item."""
     return max(1, math.ceil(count / THREADS))
+
+
+#: the contacts' frames already on the device, by the host array's identity (:func:`frame_on_device`)
+_frames_on_device: dict = {}
+
+#: the contact arrays a step never changes once made, which may share one device copy
+SHARED_FRAMES = ("normal", "tangent1", "tangent2")
+
+
+def frame_on_device(array: np.ndarray):
+    """The device's copy of one of a step's contact frames (m, 3), made at the first call for that
+    host array and shared by the later ones (the warm start's matching and the solver's operator
+    both take the frames: one copy from the host an attempt instead of two). Only for arrays that
+    are not changed after they are made (detection's :data:`SHARED_FRAMES`); the copy goes when the
+    host array does."""
+    key = id(array)
+    copy = _frames_on_device.get(key)
+    if copy is None:
+        copy = _frames_on_device[key] = cuda.to_device(np.ascontiguousarray(array, dtype=float))
+        weakref.finalize(array, _frames_on_device.pop, key, None)
+    return copy
 
 
 @cuda.jit
@@ -218,8 +240,9 @@ class CudaContactOperator:
 
     def _copy(self, host: dict) -> None:
         self.m = len(host["i"])
-        self.device = {name: cuda.to_device(np.ascontiguousarray(array, dtype=np.int64 if name in (
-            "i", "j", "start", "entry") else float)) for name, array in host.items()}
+        self.device = {name: frame_on_device(array) if name in SHARED_FRAMES else cuda.to_device(
+            np.ascontiguousarray(array, dtype=np.int64 if name in ("i", "j", "start", "entry") else float))
+            for name, array in host.items()}
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
 
     def geometry(self, s) -> ContactGeometry:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cuda_operator import THREADS, blocks_for, cuda, project_point_on_device
+from .cuda_operator import THREADS, blocks_for, cuda, frame_on_device, project_point_on_device
 from .program import ROWS_PER_CONTACT
 from .warm_start import WarmStart, _pair_keys
 
@@ -34,8 +34,8 @@ def match_on_device(warm: WarmStart, contacts, n_particles: int) -> np.ndarray:
     _insert_kernel[blocks_for(warm.m), THREADS](cuda.to_device(stored), table_key, table_row)
     keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
     d_out = cuda.to_device(out)
-    frames = [cuda.to_device(np.ascontiguousarray(array, dtype=float))
-              for array in (contacts.normal, contacts.tangent1, contacts.tangent2, contacts.mu, contacts.mu_r)]
+    frames = [frame_on_device(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
+    frames += [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (contacts.mu, contacts.mu_r)]
     forces = [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (warm.force, warm.rolling)]
     _match_kernel[blocks_for(contacts.m), THREADS](cuda.to_device(keys), table_key, table_row, *forces, *frames, d_out)
     return d_out.copy_to_host()
