@@ -163,10 +163,11 @@ def _diagonal_kernel(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
 
 @cuda.jit(device=True)
 def block_reduce(cache, t, largest):
-    """Reduce a block's shared array `cache` (THREADS values, thread t's at cache[t]) into cache[0]
-    by a fixed tree: the sum, or the largest value where `largest`. Every thread of the block calls it."""
+    """Reduce a block's shared array `cache` (one value a thread, thread t's at cache[t]; its length
+    the block's threads, a power of two) into cache[0] by a fixed tree: the sum, or the largest value
+    where `largest`. Every thread of the block calls it."""
     cuda.syncthreads()
-    half = THREADS // 2
+    half = cache.shape[0] // 2
     while half > 0:
         if t < half:
             cache[t] = max(cache[t], cache[t + half]) if largest else cache[t] + cache[t + half]

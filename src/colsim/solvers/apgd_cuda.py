@@ -105,24 +105,24 @@ def _decide_kernel(parts, control):
     then a fixed tree) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the
     CPU's code) into the control array; an accepted step moves x to the other slot (where
     :func:`_accept_kernel` copies x_new)."""
-    sums = cuda.shared.array((3, DECIDE_THREADS), dtype=np.float64)
+    moved = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+    uphill = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+    change = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
     t = cuda.threadIdx.x
-    for row in range(3):   # entries past a kernel's blocks stay zero
-        total = 0.0
-        for b in range(t, parts.shape[1], DECIDE_THREADS):
-            total += parts[row, b]
-        sums[row, t] = total
-    cuda.syncthreads()
-    half = DECIDE_THREADS // 2
-    while half > 0:
-        if t < half:
-            for row in range(3):
-                sums[row, t] += sums[row, t + half]
-        cuda.syncthreads()
-        half //= 2
+    dd = up = dh = 0.0
+    for b in range(t, parts.shape[1], DECIDE_THREADS):   # entries past a kernel's blocks stay zero
+        dd += parts[0, b]
+        up += parts[1, b]
+        dh += parts[2, b]
+    moved[t] = dd
+    uphill[t] = up
+    change[t] = dh
+    block_reduce(moved, t, False)
+    block_reduce(uphill, t, False)
+    block_reduce(change, t, False)
     if t != 0:
         return
-    accepted, lip, theta, beta, restarted = _decide_on_device(sums[0, 0], sums[1, 0], sums[2, 0], control[LIP],
+    accepted, lip, theta, beta, restarted = _decide_on_device(moved[0], uphill[0], change[0], control[LIP],
                                                               control[THETA], control[BETA], control[LIP_DECAY])
     control[LIP], control[THETA], control[BETA] = lip, theta, beta
     if accepted:
