@@ -89,6 +89,30 @@ def test_thirty_iterations_follow_the_cpu_s(program):
     np.testing.assert_allclose(gpu.host_x(), x, rtol=0, atol=1e-10 * np.abs(x).max())
 
 
+@pytest.mark.parametrize("row", [1, 32])
+def test_the_small_decision_block_gives_the_large_one_s_bits(row):
+    """A row of at most FEW_DECIDE_THREADS block sums: the 32-thread block adds them by the same tree
+    as the 1,024-thread one without its levels that add zeros, so the two decide alike to the bit
+    (lip, theta, beta, the slot and the counts), on accepted and rejected trial steps, with and
+    without a restart."""
+    rng = np.random.default_rng(row)
+    lip, outcomes = 0.5, set()
+    for descent, uphill in ((4.0, -1.0), (0.25, -1.0), (0.25, 1.0)):   # rejected; accepted; restarted
+        moved = np.abs(rng.normal(size=row))   # ||x_new - y||^2 by block
+        parts = np.stack([moved, uphill * np.abs(rng.normal(size=row)), descent * lip * moved])
+        start = np.zeros(apgd_cuda.CONTROL_SIZE)
+        start[[apgd_cuda.LIP, apgd_cuda.THETA, apgd_cuda.BETA, apgd_cuda.LIP_DECAY]] = lip, 0.7, 0.3, 0.9
+        after = []
+        for kernel, threads in ((apgd_cuda._decide_kernel, apgd_cuda.DECIDE_THREADS),
+                                (apgd_cuda._decide_kernel_few, apgd_cuda.FEW_DECIDE_THREADS)):
+            control = cuda.to_device(start)
+            kernel[1, threads](cuda.to_device(parts), control)
+            after.append(control.copy_to_host())
+        np.testing.assert_array_equal(after[1], after[0])
+        outcomes.add((after[0][apgd_cuda.ACCEPTED], after[0][apgd_cuda.RESTARTS]))
+    assert outcomes == {(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)}, outcomes   # every branch of the decision
+
+
 def test_a_solve_on_the_device_agrees_with_clarabel(program):
     """The device's solve, its stopping check included, warm-started from the CPU's answer (a cold
     solve takes hundreds of iterations, minutes on the simulator): it stops at its first check, and

@@ -97,20 +97,22 @@ _decide_on_device = cuda.jit(device=True)(getattr(decide, "py_func", decide))
 #: threads of the decision's one block, a power of two: they add the trial step's block sums (up to
 #: 33,000 a row at 700,000 spheres) by a fixed assignment and tree, so the same bits every run
 DECIDE_THREADS = 1024
+#: the block for a row of at most this many sums (up to 4,096 contacts and bodies): the same tree
+#: without the levels that add zeros, so the same bits as DECIDE_THREADS, and the simulator runs 32
+#: threads, not 1,024 (each a Python thread there)
+FEW_DECIDE_THREADS = 32
 
 
-@cuda.jit
-def _decide_kernel(parts, control):
-    """One block: the trial step's sums (each row of parts, thread t adding blocks t, t + 1024, ...,
-    then a fixed tree) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the
-    CPU's code) into the control array; an accepted step moves x to the other slot (where
-    :func:`_accept_kernel` copies x_new)."""
-    moved = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
-    uphill = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
-    change = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+@cuda.jit(device=True)
+def _decide(parts, control, moved, uphill, change):
+    """The decision's block: the trial step's sums (each row of parts, thread t adding blocks t,
+    t + threads, ..., then a fixed tree in the shared arrays moved, uphill and change, one value a
+    thread) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the CPU's code)
+    into the control array; an accepted step moves x to the other slot (where :func:`_accept_kernel`
+    copies x_new)."""
     t = cuda.threadIdx.x
     dd = up = dh = 0.0
-    for b in range(t, parts.shape[1], DECIDE_THREADS):   # entries past a kernel's blocks stay zero
+    for b in range(t, parts.shape[1], moved.shape[0]):   # entries past a kernel's blocks stay zero
         dd += parts[0, b]
         up += parts[1, b]
         dh += parts[2, b]
@@ -134,6 +136,25 @@ def _decide_kernel(parts, control):
     else:
         control[ACCEPTED] = 0.0
         control[BACKTRACKS] += 1.0
+
+
+@cuda.jit
+def _decide_kernel(parts, control):
+    """:func:`_decide` in one block of DECIDE_THREADS threads. (One shared array a line: the simulator
+    tells them apart by the line that makes them.)"""
+    moved = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+    uphill = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+    change = cuda.shared.array(DECIDE_THREADS, dtype=np.float64)
+    _decide(parts, control, moved, uphill, change)
+
+
+@cuda.jit
+def _decide_kernel_few(parts, control):
+    """:func:`_decide` in one block of FEW_DECIDE_THREADS threads (a row of at most that many sums)."""
+    moved = cuda.shared.array(FEW_DECIDE_THREADS, dtype=np.float64)
+    uphill = cuda.shared.array(FEW_DECIDE_THREADS, dtype=np.float64)
+    change = cuda.shared.array(FEW_DECIDE_THREADS, dtype=np.float64)
+    _decide(parts, control, moved, uphill, change)
 
 
 @cuda.jit
@@ -292,7 +313,7 @@ class CudaIteration:
     problem on the device too.
 
     The iteration's scalars (lip, theta, beta) and its decisions live on the device too (`control`,
-    :func:`_decide_kernel`): a trial step is seven launches that never wait for the host, and the
+    :func:`_decide`): a trial step is seven launches that never wait for the host, and the
     host reads the control array once a round (:meth:`iterate`). x and x_prev are two slots that
     trade roles on the device; `x`, `x_prev`, `lip`, `theta`, `beta`, `backtracks` and `restarts`
     read them (each a copy from the device)."""
@@ -387,7 +408,10 @@ class CudaIteration:
         """One trial step and its decision, and the iterate's move when accepted: seven launches."""
         trial_step(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry, self.mu_s,
                    self.mu_r_s, self.inv_mass, self.parts)
-        launch(_decide_kernel, 1, DECIDE_THREADS, self.parts, self.control)
+        if self.parts.shape[1] <= FEW_DECIDE_THREADS:
+            launch(_decide_kernel_few, 1, FEW_DECIDE_THREADS, self.parts, self.control)
+        else:
+            launch(_decide_kernel, 1, DECIDE_THREADS, self.parts, self.control)
         launch(_accept_kernel, blocks_for(max(5 * self.m, self.hx.shape[0])), THREADS, self.control, *self.slots,
                self.x_new, self.hy, self.h_new, self.hx)
         gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)   # rejected: the same g again
