@@ -97,9 +97,9 @@ _decide_on_device = cuda.jit(device=True)(getattr(decide, "py_func", decide))
 #: threads of the decision's one block, a power of two: they add the trial step's block sums (up to
 #: 33,000 a row at 700,000 spheres) by a fixed assignment and tree, so the same bits every run
 DECIDE_THREADS = 1024
-#: the block for a row of at most this many sums (up to 4,096 contacts and bodies): the same tree
-#: without the levels that add zeros, so the same bits as DECIDE_THREADS, and the simulator runs 32
-#: threads, not 1,024 (each a Python thread there)
+#: the block for a row of at most this many sums (4,096 contacts and 682 spheres at most): the same
+#: tree without the levels that add zeros, so the same bits as DECIDE_THREADS, and the simulator runs
+#: 32 threads, not 1,024 (each a Python thread there)
 FEW_DECIDE_THREADS = 32
 
 
