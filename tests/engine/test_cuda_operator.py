@@ -5,6 +5,8 @@ particle, floor, cylinder and fixed-sphere contacts. They run on numba's CUDA si
 
 Bound 1e-14 relative: the same arithmetic in the same order, each body's sums in contact order on
 both; only a fused multiply-add that one compiler makes and the other does not can change a last bit."""
+import gc
+
 import numpy as np
 import pytest
 
@@ -49,16 +51,12 @@ def test_a_frame_goes_to_the_device_once_and_goes_with_its_array():
     """The warm start's matching and the solver's operator share one device copy of each frame of
     an attempt's contacts: the same host array gives the same device array, another array its own,
     and the copy is dropped with the host array."""
-    import gc
-
-    from colsim.engine.cuda_operator import _frames_on_device, frame_on_device
-
     normal = np.random.default_rng(6).normal(size=(40, 3))
-    first = frame_on_device(normal)
-    assert frame_on_device(normal) is first and np.array_equal(first.copy_to_host(), normal)
+    first = cuda_operator.frame_on_device(normal)
+    assert cuda_operator.frame_on_device(normal) is first and np.array_equal(first.copy_to_host(), normal)
     other = normal.copy()
-    assert frame_on_device(other) is not first
+    assert cuda_operator.frame_on_device(other) is not first
     key = id(normal)
     del normal
     gc.collect()
-    assert key not in _frames_on_device
+    assert key not in cuda_operator._frames_on_device
