@@ -77,15 +77,16 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     threads once too): a lower bound on the traffic to the GPU's memory.
 
     A trial step: the projection reads x, x_prev, g and the two scaled coefficients and writes x_new
-    (22m); the wrenches read x_new, s, the frame and the three lengths and write 9 a contact (31m);
-    the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 + entries +
-    9m); the descent test's sum reads h_new, hy and inv_mass (18n). Then each iteration extrapolates
-    (18n) and takes the gradient (h and inv_mass 12n; s, i, j, the frame, the lengths and c read, g
-    written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m).
+    (22m); the same thread's wrench reads s, the frame and the three lengths and writes 9 a contact
+    (26m); the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 +
+    entries + 9m); the same thread's part of the descent test reads hy and inv_mass (12n). (Until
+    those two pairs of kernels were fused, 2026-11-27, the bound counted 5m + 6n more words a trial
+    step: x_new and h_new read back.) Then each iteration extrapolates (18n) and takes the gradient
+    (h and inv_mass 12n; s, i, j, the frame, the lengths and c read, g written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m).
     Not counted, as the algorithm does not need them: the device's iteration copies x_new into x's
     slot and h_new into hx (10m + 6n words an iteration, so that no trial step waits for the host),
     and takes the gradient again after a rejected trial step."""
-    trial = 22 * m + 31 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
+    trial = 22 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 12 * n
     gradient = 12 * n + 29 * m
     check = gradient + 17 * m
     return WORD * (trial_steps * trial + iterations * (18 * n + gradient) + checks * check)

@@ -107,15 +107,10 @@ def _gradient_kernel(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out)
     out[o + 4] = s[o + 4] * ur2 + c[o + 4]
 
 
-@cuda.jit
-def _wrench_kernel(z, s, nrm, t1, t2, ri, rj, lever, work):
-    """work (m, 9): contact k's force on its second body, its moment on the first and on the second."""
-    k = cuda.grid(1)
-    if k >= ri.shape[0]:
-        return
-    o = 5 * k
-    p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
-    r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
+@cuda.jit(device=True)
+def wrench_on_device(k, p, q1, q2, r1, r2, nrm, t1, t2, ri, rj, lever, work):
+    """work[k] (9,): contact k's force on its second body, its moment on the first and on the second,
+    from its force p (normal), q1, q2 (sliding), r1, r2 (rolling)."""
     for d in range(3):
         sliding = q2 * t1[k, d] - q1 * t2[k, d]
         rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
@@ -125,12 +120,21 @@ def _wrench_kernel(z, s, nrm, t1, t2, ri, rj, lever, work):
 
 
 @cuda.jit
-def _transpose_kernel(work, start, entry, out):
-    """out (6n,) = B' S z from the contacts' wrenches: body b sums its contacts in contact order."""
-    body = cuda.grid(1)
-    n = start.shape[0] - 1
-    if body >= n:
+def _wrench_kernel(z, s, nrm, t1, t2, ri, rj, lever, work):
+    """work (m, 9): each contact's wrench (:func:`wrench_on_device`) from its force S z."""
+    k = cuda.grid(1)
+    if k >= ri.shape[0]:
         return
+    o = 5 * k
+    wrench_on_device(k, s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2], s[o + 3] * z[o + 3],
+                     s[o + 4] * z[o + 4], nrm, t1, t2, ri, rj, lever, work)
+
+
+@cuda.jit(device=True)
+def body_sums_on_device(body, work, start, entry, out):
+    """out's entries of `body` (force 3 body + d, moment 3 n + 3 body + d) = the sums of its contacts'
+    wrenches (work (m, 9)) in contact order."""
+    n = start.shape[0] - 1
     for d in range(3):
         force = 0.0
         moment = 0.0
@@ -144,6 +148,14 @@ def _transpose_kernel(work, start, entry, out):
                 moment += work[k, 3 + d]
         out[3 * body + d] = force
         out[3 * n + 3 * body + d] = moment
+
+
+@cuda.jit
+def _transpose_kernel(work, start, entry, out):
+    """out (6n,) = B' S z from the contacts' wrenches, one body a thread (:func:`body_sums_on_device`)."""
+    body = cuda.grid(1)
+    if body < start.shape[0] - 1:
+        body_sums_on_device(body, work, start, entry, out)
 
 
 @cuda.jit

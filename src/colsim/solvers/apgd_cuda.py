@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for, cuda, dot,
-                                    gradient_on_device, project_point_on_device,
-                                    transpose_on_device)   # first: numba.cuda on numpy 2.5
+from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
+                                    body_sums_on_device, cuda, dot, gradient_on_device,     # on numpy 2.5
+                                    project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import launch
 from .apgd import decide, lipschitz_estimate, power_start
@@ -40,10 +40,12 @@ CONTROL_SIZE = 9
 
 
 @cuda.jit
-def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, parts):
+def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, s, nrm, t1, t2, ri, rj, lever, work, parts):
     """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev from
-    the slots, lip and beta from the control array); parts[0] and parts[1] (per block):
-    ||x_new - y||^2 and g . (x_new - x) (colsim.solvers.apgd._project_step)."""
+    the slots, lip and beta from the control array), and its wrench from the force S x_new into work
+    (m, 9) (the first half of T x_new: :func:`colsim.engine.cuda_operator.wrench_on_device`, s and
+    the frames from the contact geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and
+    g . (x_new - x) (colsim.solvers.apgd._project_step)."""
     moved = cuda.shared.array(THREADS, dtype=np.float64)
     uphill = cuda.shared.array(THREADS, dtype=np.float64)
     k = cuda.grid(1)
@@ -65,6 +67,8 @@ def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, parts):
         p, q1, q2, r1, r2 = project_point_on_device(y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
                                                     y3 - step * g[o + 3], y4 - step * g[o + 4], mu_s[k], mu_r_s[k])
         x_new[o], x_new[o + 1], x_new[o + 2], x_new[o + 3], x_new[o + 4] = p, q1, q2, r1, r2
+        wrench_on_device(k, s[o] * p, s[o + 1] * q1, s[o + 2] * q2, s[o + 3] * r1, s[o + 4] * r2, nrm, t1, t2, ri,
+                         rj, lever, work)
         moved[t] = ((p - y0) * (p - y0) + (q1 - y1) * (q1 - y1) + (q2 - y2) * (q2 - y2)
                     + (r1 - y3) * (r1 - y3) + (r2 - y4) * (r2 - y4))
         uphill[t] = (g[o] * (p - x[o]) + g[o + 1] * (q1 - x[o + 1]) + g[o + 2] * (q2 - x[o + 2])
@@ -77,15 +81,24 @@ def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, parts):
 
 
 @cuda.jit
-def _weighted_change_kernel(h_new, hy, inv_mass, parts):
-    """parts[2] (per block): ||h_new - hy||^2 weighted by inv_mass (colsim.solvers.apgd._weighted_change)."""
+def _transpose_change_kernel(work, start, entry, h_new, hy, inv_mass, parts):
+    """h_new (6n,) = T x_new from the wrenches in work (the second half of T x_new, one body a thread:
+    :func:`colsim.engine.cuda_operator.body_sums_on_device`), and parts[2] (per block of bodies):
+    ||h_new - hy||^2 weighted by inv_mass (colsim.solvers.apgd._weighted_change), each body's three
+    force entries, then its three moment entries."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
-    i = cuda.grid(1)
+    body = cuda.grid(1)
     t = cuda.threadIdx.x
+    n = start.shape[0] - 1
     cache[t] = 0.0
-    if i < h_new.shape[0]:
-        dh = h_new[i] - hy[i]
-        cache[t] = dh * dh * inv_mass[i]
+    if body < n:
+        body_sums_on_device(body, work, start, entry, h_new)
+        change = 0.0
+        for first in (3 * body, 3 * n + 3 * body):
+            for i in range(first, first + 3):
+                dh = h_new[i] - hy[i]
+                change += dh * dh * inv_mass[i]
+        cache[t] = change
     block_reduce(cache, t, False)
     if t == 0:
         parts[2, cuda.blockIdx.x] = cache[0]
@@ -214,11 +227,13 @@ def _residual_kernel(g, x, s, mu, mu_r, parts):
 
 def trial_step(slot_0, slot_1, control, g, x_new, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, parts):
     """The projection, h_new = T x_new and the descent test's sums per block into parts (rows
-    ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}): launches only, nothing waits."""
+    ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}): two launches (one thread a contact,
+    then one a body), nothing waits."""
+    geo = geometry
     launch(_project_kernel, blocks_for(mu_s.shape[0]), THREADS, slot_0, slot_1, control, g, x_new, mu_s, mu_r_s,
-           parts)
-    transpose_on_device(geometry, x_new, h_new)
-    launch(_weighted_change_kernel, blocks_for(h_new.shape[0]), THREADS, h_new, hy, inv_mass, parts)
+           geo.s, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)
+    launch(_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS, geo.work, geo.start, geo.entry,
+           h_new, hy, inv_mass, parts)
 
 
 @cuda.jit
@@ -313,7 +328,7 @@ class CudaIteration:
     problem on the device too.
 
     The iteration's scalars (lip, theta, beta) and its decisions live on the device too (`control`,
-    :func:`_decide`): a trial step is seven launches that never wait for the host, and the
+    :func:`_decide`): a trial step is five launches that never wait for the host, and the
     host reads the control array once a round (:meth:`iterate`). x and x_prev are two slots that
     trade roles on the device; `x`, `x_prev`, `lip`, `theta`, `beta`, `backtracks` and `restarts`
     read them (each a copy from the device)."""
@@ -340,7 +355,7 @@ class CudaIteration:
         self.control = cuda.to_device(start)
         self._read = start.copy()   # the control array as last read: x's slot, the iterations done
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
-        self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass))))))
+        self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
         self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
 
@@ -405,7 +420,7 @@ class CudaIteration:
             self._read = self.control.copy_to_host()
 
     def _trial(self):
-        """One trial step and its decision, and the iterate's move when accepted: seven launches."""
+        """One trial step and its decision, and the iterate's move when accepted: five launches."""
         trial_step(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry, self.mu_s,
                    self.mu_r_s, self.inv_mass, self.parts)
         if self.parts.shape[1] <= FEW_DECIDE_THREADS:
