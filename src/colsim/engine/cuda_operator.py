@@ -221,10 +221,16 @@ def dot(u, v, partial=None) -> float:
 
 def gradient_on_device(geometry: ContactGeometry, h, inv_mass, c, out) -> None:
     """out (5m,) = S B Mbar^-1 h + c, every array on the device (colsim.engine.operator.gradient_of)."""
+    if geometry.i.shape[0]:
+        kernel, blocks, threads, arguments = gradient_launch(geometry, h, inv_mass, c, out)
+        launch(kernel, blocks, threads, *arguments)
+
+
+def gradient_launch(geometry: ContactGeometry, h, inv_mass, c, out) -> tuple:
+    """:func:`gradient_on_device`'s launch (kernel, blocks, threads, arguments), for m > 0 contacts."""
     g = geometry
-    if g.i.shape[0]:
-        launch(_gradient_kernel, blocks_for(g.i.shape[0]), THREADS, h, inv_mass, g.s, g.i, g.j, g.normal,
-               g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, c, out)
+    return (_gradient_kernel, blocks_for(g.i.shape[0]), THREADS,
+            (h, inv_mass, g.s, g.i, g.j, g.normal, g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, c, out))
 
 
 def transpose_on_device(geometry: ContactGeometry, z, out) -> None:

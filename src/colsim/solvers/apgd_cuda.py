@@ -25,10 +25,11 @@ import math
 import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
-                                    body_sums_on_device, cuda, dot, gradient_on_device,     # on numpy 2.5
-                                    project_point_on_device, transpose_on_device, wrench_on_device)
+                                    body_sums_on_device, cuda, dot, gradient_launch,        # on numpy 2.5
+                                    gradient_on_device, project_point_on_device, transpose_on_device,
+                                    wrench_on_device)
 from ..engine.cones import combine_residuals
-from ..engine.cuda_launch import launch
+from ..engine.cuda_launch import Prepared, launch
 from .apgd import decide, lipschitz_estimate, power_start
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
@@ -229,11 +230,19 @@ def trial_step(slot_0, slot_1, control, g, x_new, h_new, hy, geometry, mu_s, mu_
     """The projection, h_new = T x_new and the descent test's sums per block into parts (rows
     ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}): two launches (one thread a contact,
     then one a body), nothing waits."""
+    for kernel, blocks, threads, arguments in trial_launches(slot_0, slot_1, control, g, x_new, h_new, hy, geometry,
+                                                             mu_s, mu_r_s, inv_mass, parts):
+        launch(kernel, blocks, threads, *arguments)
+
+
+def trial_launches(slot_0, slot_1, control, g, x_new, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, parts):
+    """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments)."""
     geo = geometry
-    launch(_project_kernel, blocks_for(mu_s.shape[0]), THREADS, slot_0, slot_1, control, g, x_new, mu_s, mu_r_s,
-           geo.s, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)
-    launch(_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS, geo.work, geo.start, geo.entry,
-           h_new, hy, inv_mass, parts)
+    return ((_project_kernel, blocks_for(mu_s.shape[0]), THREADS,
+             (slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, geo.s, geo.normal, geo.tangent1, geo.tangent2,
+              geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)),
+            (_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS,
+             (geo.work, geo.start, geo.entry, h_new, hy, inv_mass, parts)))
 
 
 @cuda.jit
@@ -358,6 +367,8 @@ class CudaIteration:
         self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
         self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
+        self._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
+                                for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
 
     @classmethod
     def of_program(cls, program, inv_mass: np.ndarray, warm_start, precondition: bool,
@@ -420,16 +431,22 @@ class CudaIteration:
             self._read = self.control.copy_to_host()
 
     def _trial(self):
-        """One trial step and its decision, and the iterate's move when accepted: five launches."""
-        trial_step(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry, self.mu_s,
-                   self.mu_r_s, self.inv_mass, self.parts)
-        if self.parts.shape[1] <= FEW_DECIDE_THREADS:
-            launch(_decide_kernel_few, 1, FEW_DECIDE_THREADS, self.parts, self.control)
-        else:
-            launch(_decide_kernel, 1, DECIDE_THREADS, self.parts, self.control)
-        launch(_accept_kernel, blocks_for(max(5 * self.m, self.hx.shape[0])), THREADS, self.control, *self.slots,
-               self.x_new, self.hy, self.h_new, self.hx)
-        gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)   # rejected: the same g again
+        """One trial step and its decision, and the iterate's move when accepted: five launches, each
+        with the same arguments every time (prepared once: :class:`colsim.engine.cuda_launch.Prepared`)."""
+        for prepared in self._trial_launches:
+            prepared()
+
+    def _launches_of_a_trial(self) -> list:
+        """The trial step's two launches, its decision's, the accepted step's move and the gradient
+        at the new y (the same again after a rejected step): each (kernel, blocks, threads, arguments)."""
+        decide = ((_decide_kernel_few, 1, FEW_DECIDE_THREADS) if self.parts.shape[1] <= FEW_DECIDE_THREADS
+                  else (_decide_kernel, 1, DECIDE_THREADS))
+        return [*trial_launches(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry,
+                                self.mu_s, self.mu_r_s, self.inv_mass, self.parts),
+                (*decide, (self.parts, self.control)),
+                (_accept_kernel, blocks_for(max(5 * self.m, self.hx.shape[0])), THREADS,
+                 (self.control, *self.slots, self.x_new, self.hy, self.h_new, self.hx)),
+                gradient_launch(self.geometry, self.hy, self.inv_mass, self.c, self.g)]
 
     @property
     def x(self):
