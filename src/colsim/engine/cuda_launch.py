@@ -13,6 +13,10 @@ overload, its function and numba-cuda's own marshalling (``_prepare_args``), the
 numba-cuda calls (``cuda.core.launch``): the same kernel on the same words, so the same bits. Where
 any of that is not at hand (numba's simulator, a kernel not yet compiled or compiled for several
 signatures, a host array, a debug or extended kernel, another numba-cuda) it launches the plain way.
+
+:class:`Prepared` is one launch made again and again with the same arguments (APGD's trial step):
+through :func:`launch`, or, where :data:`direct_enabled`, by the driver's cuLaunchKernel with the
+parameters packed once (off until a GPU has timed it: `benchmarks gpu --direct`).
 """
 from __future__ import annotations
 
