@@ -60,3 +60,14 @@ def test_a_frame_goes_to_the_device_once_and_goes_with_its_array():
     del normal
     gc.collect()
     assert key not in cuda_operator._frames_on_device
+
+
+@pytest.mark.parametrize("shape, value, dtype", [(300, 0.0, np.float64), ((7, 5), 2.5, np.float64),
+                                                 (129, -1, np.int64), (0, 0, np.int64)])
+def test_an_array_filled_on_the_device_holds_its_value_everywhere(shape, value, dtype):
+    """full_on_device makes the array there; every entry is the value (none left as allocated)."""
+    garbage = cuda_operator.cuda.to_device(np.full(shape, 99, dtype=dtype))   # a freed block to reuse
+    del garbage
+    ours = cuda_operator.full_on_device(shape, value, dtype).copy_to_host()
+    assert ours.dtype == dtype and ours.shape == np.full(shape, value, dtype=dtype).shape
+    assert np.array_equal(ours, np.full(shape, value, dtype=dtype))

@@ -133,3 +133,14 @@ def test_cuda_without_a_gpu_or_the_simulator_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(cuda, "is_available", lambda: False)
     with pytest.raises(ValueError, match="needs a CUDA GPU"):
         ApgdSolver(kernel="cuda")
+
+
+def test_the_power_iteration_starts_from_the_cpu_s_numbers_at_any_size():
+    """The device's start vector is power_start's, copied on the device from its longest draw: the same
+    numbers whether the sizes grow or shrink."""
+    from colsim.solvers.apgd import power_start
+
+    for size in (10, 700, 50, 5000, 700):
+        out = cuda.device_array(size)
+        apgd_cuda._power_start_into(out)
+        assert np.array_equal(out.copy_to_host(), power_start(size))

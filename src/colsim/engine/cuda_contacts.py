@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import THREADS, blocks_for, cuda
+from .cuda_operator import THREADS, blocks_for, cuda, full_on_device
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -82,18 +82,20 @@ class _SweptPairs:
         radius = np.ascontiguousarray(state.radius, dtype=float)
         midpoint, reach = swept_midpoints(state, predicted, margin, slack)
         lower, dims, width = _grid(midpoint, reach)
+        cells = int(np.prod(dims))
+        lower, dims = cuda.to_device(lower), cuda.to_device(dims)   # device arrays: no copies at each launch
         self.position, self.radius = cuda.to_device(position), cuda.to_device(radius)
         d_midpoint = cuda.to_device(midpoint)
-        start, listed = _cell_lists(d_midpoint, lower, dims, width)
+        start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
         args = (self.position, cuda.to_device(predicted), self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
-        counts = cuda.to_device(np.zeros(n, dtype=np.int64))
+        counts = full_on_device(n, 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
         found = counts.copy_to_host()
         offsets = np.concatenate([[0], np.cumsum(found)])
         self.m = int(offsets[-1])
         self.offsets = cuda.to_device(offsets)
-        self.partners = cuda.to_device(np.zeros(max(self.m, 1), dtype=np.int64))
+        self.partners = full_on_device(max(self.m, 1), 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, self.offsets, self.partners, True)
         self.i = np.repeat(np.arange(n, dtype=np.int64), found)
 
@@ -140,16 +142,17 @@ def _grid(midpoint: np.ndarray, reach: float):
         width *= 2.0
 
 
-def _cell_lists(midpoint, lower, dims, width):
+def _cell_lists(midpoint, lower, dims, width, cells: int):
     """(start (cells + 1,), listed (n,)) on the device: the particles of cell c are
-    listed[start[c]:start[c + 1]]."""
-    n, cells = midpoint.shape[0], int(np.prod(dims))
+    listed[start[c]:start[c + 1]]; lower (3,), dims (3,): the grid's corner and cells along each axis,
+    on the device (`cells` their product)."""
+    n = midpoint.shape[0]
     cell = cuda.device_array(n, dtype=np.int64)
-    count = cuda.to_device(np.zeros(cells, dtype=np.int64))
+    count = full_on_device(cells, 0, np.int64)
     _cell_kernel[blocks_for(n), THREADS](midpoint, lower, dims, width, cell, count)
     start = np.concatenate([[0], np.cumsum(count.copy_to_host())])
     d_start = cuda.to_device(start)
-    filled = cuda.to_device(np.zeros(cells, dtype=np.int64))
+    filled = full_on_device(cells, 0, np.int64)
     listed = cuda.device_array(n, dtype=np.int64)
     _list_kernel[blocks_for(n), THREADS](cell, d_start, filled, listed)
     return d_start, listed

@@ -182,6 +182,24 @@ def _diagonal_kernel(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
             out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
 
 
+@cuda.jit
+def _fill_kernel(flat, value):
+    """flat[i] = value, one entry a thread."""
+    i = cuda.grid(1)
+    if i < flat.shape[0]:
+        flat[i] = value
+
+
+def full_on_device(shape, value, dtype=np.float64):
+    """A device array of `shape` and `dtype` filled with `value`, made there: no host array and no copy
+    from the host (which a step's set-up paid for each of its zero arrays, up to tens of MB at
+    700,000 spheres)."""
+    out = cuda.device_array(shape, dtype=dtype)
+    if out.size:
+        _fill_kernel[blocks_for(out.size), THREADS](out.reshape(out.size), value)
+    return out
+
+
 @cuda.jit(device=True)
 def block_reduce(cache, t, largest):
     """Reduce a block's shared array `cache` (one value a thread, thread t's at cache[t]; its length
@@ -289,7 +307,7 @@ class CudaContactOperator:
             return
         inv_mass = self._ones(6 * self.n) if inv_mass is None else inv_mass
         s = self._ones(5 * self.m) if s is None else s
-        c = cuda.to_device(np.zeros(5 * self.m)) if c is None else c
+        c = full_on_device(5 * self.m, 0.0) if c is None else c
         gradient_on_device(self.geometry(s), u, inv_mass, c, out)
 
     def transpose_on_device(self, z, s, out) -> None:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cuda_operator import THREADS, blocks_for, cuda, frame_on_device, project_point_on_device
+from .cuda_operator import THREADS, blocks_for, cuda, frame_on_device, full_on_device, project_point_on_device
 from .program import ROWS_PER_CONTACT
 from .warm_start import WarmStart, _pair_keys
 
@@ -29,11 +29,11 @@ def match_on_device(warm: WarmStart, contacts, n_particles: int) -> np.ndarray:
         return out
     stored = _pair_keys(warm.i, warm.j, warm.family, n_particles)
     size = 1 << int(2 * warm.m - 1).bit_length()       # a power of two >= 2 m
-    table_key = cuda.to_device(np.full(size, EMPTY, dtype=np.int64))
-    table_row = cuda.to_device(np.zeros(size, dtype=np.int64))
+    table_key = full_on_device(size, EMPTY, np.int64)
+    table_row = cuda.device_array(size, dtype=np.int64)   # read only where a key was stored
     _insert_kernel[blocks_for(warm.m), THREADS](cuda.to_device(stored), table_key, table_row)
     keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
-    d_out = cuda.to_device(out)
+    d_out = full_on_device((contacts.m, ROWS_PER_CONTACT), 0.0)
     frames = [frame_on_device(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
     frames += [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (contacts.mu, contacts.mu_r)]
     forces = [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (warm.force, warm.rolling)]

@@ -25,11 +25,12 @@ import math
 import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
-                                    body_sums_on_device, cuda, dot, gradient_launch,        # on numpy 2.5
-                                    gradient_on_device, project_point_on_device, transpose_on_device,
-                                    wrench_on_device)
+                                    body_sums_on_device, cuda, dot, full_on_device,         # on numpy 2.5
+                                    gradient_launch, gradient_on_device, project_point_on_device,
+                                    transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
+from . import apgd
 from .apgd import decide, lipschitz_estimate, power_start
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
@@ -312,6 +313,21 @@ def _divide(v, norm: float) -> None:
     launch(_divide_kernel, blocks_for(v.shape[0]), THREADS, v, norm)
 
 
+#: :func:`colsim.solvers.apgd.power_start`'s numbers on the device (all drawn so far)
+_power_start_on_device = None
+
+
+def _power_start_into(out) -> None:
+    """out (size,) = power_start(size), copied on the device from its copy of all the numbers drawn
+    so far: one copy from the host a longer draw, not one a solve (9 MB a solve at r0 = 6)."""
+    global _power_start_on_device
+    size = out.shape[0]
+    if _power_start_on_device is None or _power_start_on_device.shape[0] < size:
+        power_start(size)   # draws at least size numbers, the same every time
+        _power_start_on_device = cuda.to_device(apgd._power_start)
+    out.copy_to_device(_power_start_on_device[:size])
+
+
 def _to_device(array):
     """A float64 copy of a host array on the device; a device array as it is."""
     if hasattr(array, "copy_to_host"):
@@ -386,11 +402,11 @@ class CudaIteration:
         mu_s, mu_r_s = cuda.device_array(m, dtype=np.float64), cuda.device_array(m, dtype=np.float64)
         _scales_kernel[blocks_for(m), THREADS](diagonal, bool(precondition), mu, mu_r, s, mu_s, mu_r_s)
         c = cuda.device_array(5 * m, dtype=np.float64)
-        gradient_on_device(device.geometry(_to_device(np.ones(5 * m))), _to_device(program.fbar), d_inv_mass,
-                           _to_device(np.zeros(5 * m)), c)
+        gradient_on_device(device.geometry(full_on_device(5 * m, 1.0)), _to_device(program.fbar), d_inv_mass,
+                           full_on_device(5 * m, 0.0), c)
         _offset_kernel[blocks_for(m), THREADS](c, _to_device(program.gap), s)
-        x = cuda.to_device(np.zeros(5 * m))
-        nonzero = cuda.to_device(np.zeros(1, dtype=np.int64))
+        x = full_on_device(5 * m, 0.0)
+        nonzero = full_on_device(1, 0, np.int64)
         if warm_start is not None and np.shape(warm_start) == (m, 5):
             _first_iterate_kernel[blocks_for(m), THREADS](_to_device(warm_start), s, mu_s, mu_r_s, x, nonzero)
         return cls(c, mu_s, mu_r_s, d_inv_mass, x, s, lip_decay, device, mu, mu_r,
@@ -406,7 +422,7 @@ class CudaIteration:
     def _lipschitz_estimate(self) -> float:
         """:func:`colsim.solvers.apgd.lipschitz_estimate` with the device's kernels: G T v into one of
         two buffers, so that v and G T v never share one."""
-        zero = cuda.to_device(np.zeros(5 * self.m))
+        zero = full_on_device(5 * self.m, 0.0)
         h = cuda.device_array_like(self.hx)
         buffers = [cuda.device_array_like(self.x_new), cuda.device_array_like(self.x_new)]
 
@@ -417,7 +433,7 @@ class CudaIteration:
             return out
 
         partial = cuda.device_array(blocks_for(5 * self.m), dtype=np.float64)   # for all 24 dot products
-        buffers[0].copy_to_device(power_start(5 * self.m))
+        _power_start_into(buffers[0])
         return lipschitz_estimate(buffers[0], apply_GT, lambda u, v: dot(u, v, partial), _divide)
 
     def iterate(self, n: int):
