@@ -71,3 +71,19 @@ def test_an_array_filled_on_the_device_holds_its_value_everywhere(shape, value, 
     ours = cuda_operator.full_on_device(shape, value, dtype).copy_to_host()
     assert ours.dtype == dtype and ours.shape == np.full(shape, value, dtype=dtype).shape
     assert np.array_equal(ours, np.full(shape, value, dtype=dtype))
+
+
+def test_a_vector_normalised_on_the_device_has_unit_length_and_the_same_bits_every_run():
+    """normalise_on_device: v / ||v|| to rounding (the norm's sum in another order than numpy's), and
+    the same bits on a second run (a fixed order)."""
+    cuda = cuda_operator.cuda
+    v = np.random.default_rng(12).standard_normal(1000) * 1e3
+    runs = []
+    for _ in range(2):
+        d_v = cuda.to_device(v)
+        partial = cuda.device_array(cuda_operator.blocks_for(len(v)))
+        square = cuda.device_array(1)
+        cuda_operator.normalise_on_device(d_v, partial, square)
+        runs.append(d_v.copy_to_host())
+    np.testing.assert_allclose(runs[0], v / np.linalg.norm(v), rtol=1e-14, atol=0)
+    assert np.array_equal(runs[0], runs[1])

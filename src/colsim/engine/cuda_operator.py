@@ -226,6 +226,37 @@ def _block_dot_kernel(u, v, partial):
         partial[cuda.blockIdx.x] = cache[0]
 
 
+@cuda.jit
+def _sum_blocks_kernel(partial, out):
+    """out[0] = the sum of partial's entries (blocks' sums) in one block of THREADS threads: thread t
+    adds entries t, t + THREADS, ..., then a fixed tree."""
+    cache = cuda.shared.array(THREADS, dtype=np.float64)
+    t = cuda.threadIdx.x
+    total = 0.0
+    for b in range(t, partial.shape[0], THREADS):
+        total += partial[b]
+    cache[t] = total
+    block_reduce(cache, t, False)
+    if t == 0:
+        out[0] = cache[0]
+
+
+@cuda.jit
+def _divide_by_root_kernel(v, square):
+    """v /= sqrt(square[0]), one entry a thread."""
+    i = cuda.grid(1)
+    if i < v.shape[0]:
+        v[i] /= math.sqrt(square[0])
+
+
+def normalise_on_device(v, partial, square) -> None:
+    """v /= ||v|| on the device, the norm summed in a fixed order (the same bits every run), with no
+    copy to the host: partial (blocks_for(len(v)),) and square (1,) are device arrays it writes."""
+    launch(_block_dot_kernel, blocks_for(v.shape[0]), THREADS, v, v, partial)
+    launch(_sum_blocks_kernel, 1, THREADS, partial, square)
+    launch(_divide_by_root_kernel, blocks_for(v.shape[0]), THREADS, v, square)
+
+
 def dot(u, v, partial=None) -> float:
     """u . v of two device (or host) vectors: the blocks' sums (fixed trees), added on the host in
     block order, so the result is the same every run. partial: a device array of the blocks' count

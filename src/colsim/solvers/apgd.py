@@ -256,7 +256,7 @@ class _Iteration:
         """:func:`lipschitz_estimate` with this iteration's G and T."""
         zero = np.zeros_like(self.c)
         return lipschitz_estimate(power_start(len(self.c)), lambda v: self.apply_G(self.apply_T(v), zero), _dot,
-                                  lambda v, norm: np.divide(v, norm, out=v))
+                                  lambda v: np.divide(v, math.sqrt(_dot(v, v)), out=v))
 
     def gradient_at_x(self) -> np.ndarray:
         """G hx + c: the scaled end-of-step gaps S (B u + g e_n) at the iterate."""
@@ -341,18 +341,17 @@ def power_start(size: int) -> np.ndarray:
     return _power_start[:size].copy()
 
 
-def lipschitz_estimate(v, apply_GT, dot, divide, iterations: int = 12) -> float:
+def lipschitz_estimate(v, apply_GT, dot, normalise, iterations: int = 12) -> float:
     """The largest eigenvalue of S W S = G T, from below, by power iteration from v (overwritten),
     with a kernel set's operations (the CPU's or the GPU's): apply_GT(v) returns G T v, dot(u, v) the
-    scalar product, divide(v, norm) divides v in place. The backtracking in the iteration keeps the
+    scalar product (only the last iteration's, v . G T v, is taken), normalise(v) divides v by its
+    norm in place (on a GPU without a copy to the host). The backtracking in the iteration keeps the
     step safe."""
-    lip = 1.0
     for _ in range(iterations):
-        divide(v, math.sqrt(dot(v, v)))
+        normalise(v)
         wv = apply_GT(v)
-        lip = dot(v, wv)
-        v = wv
-    return max(lip, 1e-12)
+        v, last = wv, v
+    return max(dot(last, wv), 1e-12)
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> float:

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, cuda, dot, full_on_device,         # on numpy 2.5
-                                    gradient_launch, gradient_on_device, project_point_on_device,
-                                    transpose_on_device, wrench_on_device)
+                                    gradient_launch, gradient_on_device, normalise_on_device,
+                                    project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
 from . import apgd
@@ -301,18 +301,6 @@ def _forces_kernel(s, x, forces):
         forces[i] = s[i] * x[i]
 
 
-@cuda.jit
-def _divide_kernel(v, norm):
-    """v /= norm, one entry a thread."""
-    i = cuda.grid(1)
-    if i < v.shape[0]:
-        v[i] /= norm
-
-
-def _divide(v, norm: float) -> None:
-    launch(_divide_kernel, blocks_for(v.shape[0]), THREADS, v, norm)
-
-
 #: :func:`colsim.solvers.apgd.power_start`'s numbers on the device (all drawn so far)
 _power_start_on_device = None
 
@@ -421,7 +409,8 @@ class CudaIteration:
 
     def _lipschitz_estimate(self) -> float:
         """:func:`colsim.solvers.apgd.lipschitz_estimate` with the device's kernels: G T v into one of
-        two buffers, so that v and G T v never share one."""
+        two buffers, so that v and G T v never share one; the norms stay on the device, so the one
+        copy to the host is the last product's."""
         zero = full_on_device(5 * self.m, 0.0)
         h = cuda.device_array_like(self.hx)
         buffers = [cuda.device_array_like(self.x_new), cuda.device_array_like(self.x_new)]
@@ -432,9 +421,11 @@ class CudaIteration:
             gradient_on_device(self.geometry, h, self.inv_mass, zero, out)
             return out
 
-        partial = cuda.device_array(blocks_for(5 * self.m), dtype=np.float64)   # for all 24 dot products
+        partial = cuda.device_array(blocks_for(5 * self.m), dtype=np.float64)   # the products' block sums
+        square = cuda.device_array(1, dtype=np.float64)
         _power_start_into(buffers[0])
-        return lipschitz_estimate(buffers[0], apply_GT, lambda u, v: dot(u, v, partial), _divide)
+        return lipschitz_estimate(buffers[0], apply_GT, lambda u, v: dot(u, v, partial),
+                                  lambda v: normalise_on_device(v, partial, square))
 
     def iterate(self, n: int):
         """n more APGD iterations (accepted trial steps): rounds of as many trial steps as iterations
