@@ -79,17 +79,17 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     A trial step: the projection reads x, x_prev, g and the two scaled coefficients and writes x_new
     (22m); the same thread's wrench reads s, the frame and the three lengths and writes 9 a contact
     (26m); the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 +
-    entries + 9m); the same thread's part of the descent test reads hy and inv_mass (12n). (Until
-    those two pairs of kernels were fused, 2026-11-27, the bound counted 5m + 6n more words a trial
-    step: x_new and h_new read back.) Then each iteration extrapolates (18n) and takes the gradient
-    (h and inv_mass 12n; s, i, j, the frame, the lengths and c read, g written: 29m). A residual check: a gradient and the residual kernel (g, x, s, mu and mu_r: 17m).
-    Not counted, as the algorithm does not need them: the device's iteration copies x_new into x's
-    slot and h_new into hx (10m + 6n words an iteration, so that no trial step waits for the host),
-    and takes the gradient again after a rejected trial step."""
-    trial = 22 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 12 * n
+    entries + 9m); the same thread's part of the descent test reads hx, hx_prev and inv_mass (18n:
+    hy = hx + beta (hx - hx_prev) is made there). An accepted trial step (an iteration) then takes
+    the gradient at the new y (hx, hx_prev and inv_mass 18n; s, i, j, the frame, the lengths and c
+    read, g written: 29m); a rejected one moves nothing. A residual check: a gradient at x (12n + 29m)
+    and the residual kernel (g, x, s, mu and mu_r: 17m). Until 2026-11-27 the kernels also read back
+    x_new and h_new (5m + 6n a trial step), stored hy (18n an iteration) and copied x_new and h_new
+    into their slots; the bound counted the first two."""
+    trial = 22 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
     gradient = 12 * n + 29 * m
     check = gradient + 17 * m
-    return WORD * (trial_steps * trial + iterations * (18 * n + gradient) + checks * check)
+    return WORD * (trial_steps * trial + iterations * (6 * n + gradient) + checks * check)
 
 
 def bandwidth(cuda, gib: float = 1.0, repeat: int = 5) -> tuple[float | None, float]:

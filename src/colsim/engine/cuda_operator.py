@@ -78,22 +78,36 @@ def frame_on_device(array: np.ndarray):
 def _gradient_kernel(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
     """out (5m,) = S B Mbar^-1 h + c: contact k's relative motion (colsim.engine.operator.apply_gradient)."""
     k = cuda.grid(1)
-    if k >= ci.shape[0]:
-        return
+    if k < ci.shape[0]:
+        gradient_row(k, h, h, 0.0, False, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out)
+
+
+@cuda.jit(device=True)
+def _entry(h, h_prev, beta, extrapolate, i):
+    """h[i], or h[i] + beta (h[i] - h_prev[i]) where `extrapolate` (T y of y = x + beta (x - x_prev)
+    from h = T x and h_prev = T x_prev, as the CPU's extrapolation makes it)."""
+    if extrapolate:
+        return h[i] + beta * (h[i] - h_prev[i])
+    return h[i]
+
+
+@cuda.jit(device=True)
+def gradient_row(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
+    """out[5k:5k + 5] = contact k's rows of S B Mbar^-1 h + c (h's entries by :func:`_entry`)."""
     rot = h.shape[0] // 2
     first, second = ci[k], cj[k]
     un = ut1 = ut2 = ur1 = ur2 = 0.0
     for d in range(3):
-        dx = -h[3 * first + d] * inv_mass[3 * first + d]
-        w = h[rot + 3 * first + d] * inv_mass[rot + 3 * first + d]
+        dx = -_entry(h, h_prev, beta, extrapolate, 3 * first + d) * inv_mass[3 * first + d]
+        w = _entry(h, h_prev, beta, extrapolate, rot + 3 * first + d) * inv_mass[rot + 3 * first + d]
         un += nrm[k, d] * dx
         ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
         ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
         ur1 -= lever[k] * t1[k, d] * w
         ur2 -= lever[k] * t2[k, d] * w
         if second >= 0:
-            dx = h[3 * second + d] * inv_mass[3 * second + d]
-            w = h[rot + 3 * second + d] * inv_mass[rot + 3 * second + d]
+            dx = _entry(h, h_prev, beta, extrapolate, 3 * second + d) * inv_mass[3 * second + d]
+            w = _entry(h, h_prev, beta, extrapolate, rot + 3 * second + d) * inv_mass[rot + 3 * second + d]
             un += nrm[k, d] * dx
             ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
             ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
@@ -270,16 +284,10 @@ def dot(u, v, partial=None) -> float:
 
 def gradient_on_device(geometry: ContactGeometry, h, inv_mass, c, out) -> None:
     """out (5m,) = S B Mbar^-1 h + c, every array on the device (colsim.engine.operator.gradient_of)."""
-    if geometry.i.shape[0]:
-        kernel, blocks, threads, arguments = gradient_launch(geometry, h, inv_mass, c, out)
-        launch(kernel, blocks, threads, *arguments)
-
-
-def gradient_launch(geometry: ContactGeometry, h, inv_mass, c, out) -> tuple:
-    """:func:`gradient_on_device`'s launch (kernel, blocks, threads, arguments), for m > 0 contacts."""
     g = geometry
-    return (_gradient_kernel, blocks_for(g.i.shape[0]), THREADS,
-            (h, inv_mass, g.s, g.i, g.j, g.normal, g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, c, out))
+    if g.i.shape[0]:
+        launch(_gradient_kernel, blocks_for(g.i.shape[0]), THREADS, h, inv_mass, g.s, g.i, g.j, g.normal,
+               g.tangent1, g.tangent2, g.radius_i, g.radius_j, g.lever, c, out)
 
 
 def transpose_on_device(geometry: ContactGeometry, z, out) -> None:

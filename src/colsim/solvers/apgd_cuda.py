@@ -7,7 +7,8 @@ memory, then the blocks' sums in a fixed order: the same bits every run on one d
 from the CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's sums) is
 followed by one block that adds its blocks' sums and decides as the CPU does, with the CPU's code
 (:func:`colsim.solvers.apgd.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
-iteration's scalars kept in a small device array; an accepted step then moves the iterate. So the
+iteration's scalars kept in a small device array; an accepted step then moves the iterate (the
+roles of three slots move on, nothing is copied) and the gradient at the new y is taken. So the
 host launches trial steps without waiting for any, and reads that array once a round of them
 (:meth:`CudaIteration.iterate`): a trial step used to wait for a copy of its sums to the host, which
 with the launches was most of an iteration at 69,000 spheres (0.22 ms on an H200, against 0.04 ms of
@@ -26,7 +27,7 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, cuda, dot, full_on_device,         # on numpy 2.5
-                                    gradient_launch, gradient_on_device, normalise_on_device,
+                                    gradient_on_device, gradient_row, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
@@ -35,16 +36,33 @@ from .apgd import decide, lipschitz_estimate, power_start
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
 #: estimate, Nesterov's theta and beta, lip's decay an iteration, whether the last trial step was
-#: accepted, which of the two slots holds x (the other x_prev), and the counts of accepted trial
+#: accepted, which of the three slots holds x (:func:`_slot`), and the counts of accepted trial
 #: steps (iterations), backtracks and restarts
 LIP, THETA, BETA, LIP_DECAY, ACCEPTED, SLOT, ITERATIONS, BACKTRACKS, RESTARTS = range(9)
 CONTROL_SIZE = 9
 
+#: where x, x_prev and x_new are among the three slots of x (and hx, hx_prev, h_new among those of
+#: h = T x), from the control's SLOT r: r, r + 2 and r + 1 (mod 3). An accepted trial step moves r
+#: on by one: x_new becomes x, x becomes x_prev, and the old x_prev's slot takes the next x_new, so
+#: nothing is copied
+X, X_PREV, X_NEW = 0, 2, 1
+
+
+@cuda.jit(device=True)
+def _slot(slots_0, slots_1, slots_2, control, role):
+    """The slot that holds `role` (X, X_PREV or X_NEW) of the three."""
+    index = (int(control[SLOT]) + role) % 3
+    if index == 0:
+        return slots_0
+    if index == 1:
+        return slots_1
+    return slots_2
+
 
 @cuda.jit
-def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, s, nrm, t1, t2, ri, rj, lever, work, parts):
-    """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev from
-    the slots, lip and beta from the control array), and its wrench from the force S x_new into work
+def _project_kernel(x_0, x_1, x_2, control, g, mu_s, mu_r_s, s, nrm, t1, t2, ri, rj, lever, work, parts):
+    """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev and
+    x_new from the three slots x_0, x_1, x_2, lip and beta from the control array), and its wrench from the force S x_new into work
     (m, 9) (the first half of T x_new: :func:`colsim.engine.cuda_operator.wrench_on_device`, s and
     the frames from the contact geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and
     g . (x_new - x) (colsim.solvers.apgd._project_step)."""
@@ -55,9 +73,8 @@ def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, s, nrm, t1,
     moved[t] = 0.0
     uphill[t] = 0.0
     if k < mu_s.shape[0]:
-        x, x_prev = slot_0, slot_1   # the slots in the order the control array says
-        if control[SLOT] != 0.0:
-            x, x_prev = slot_1, slot_0
+        x, x_prev = _slot(x_0, x_1, x_2, control, X), _slot(x_0, x_1, x_2, control, X_PREV)
+        x_new = _slot(x_0, x_1, x_2, control, X_NEW)
         beta = control[BETA]
         step = 1.0 / control[LIP]
         o = 5 * k
@@ -83,22 +100,26 @@ def _project_kernel(slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, s, nrm, t1,
 
 
 @cuda.jit
-def _transpose_change_kernel(work, start, entry, h_new, hy, inv_mass, parts):
+def _transpose_change_kernel(work, start, entry, h_0, h_1, h_2, control, inv_mass, parts):
     """h_new (6n,) = T x_new from the wrenches in work (the second half of T x_new, one body a thread:
     :func:`colsim.engine.cuda_operator.body_sums_on_device`), and parts[2] (per block of bodies):
     ||h_new - hy||^2 weighted by inv_mass (colsim.solvers.apgd._weighted_change), each body's three
-    force entries, then its three moment entries."""
+    force entries, then its three moment entries; hx, hx_prev and h_new from the three slots of h,
+    and hy = hx + beta (hx - hx_prev) made here, as the CPU's extrapolation makes it."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
     body = cuda.grid(1)
     t = cuda.threadIdx.x
     n = start.shape[0] - 1
     cache[t] = 0.0
     if body < n:
+        hx, hx_prev = _slot(h_0, h_1, h_2, control, X), _slot(h_0, h_1, h_2, control, X_PREV)
+        h_new = _slot(h_0, h_1, h_2, control, X_NEW)
+        beta = control[BETA]
         body_sums_on_device(body, work, start, entry, h_new)
         change = 0.0
         for first in (3 * body, 3 * n + 3 * body):
             for i in range(first, first + 3):
-                dh = h_new[i] - hy[i]
+                dh = h_new[i] - (hx[i] + beta * (hx[i] - hx_prev[i]))
                 change += dh * dh * inv_mass[i]
         cache[t] = change
     block_reduce(cache, t, False)
@@ -123,8 +144,7 @@ def _decide(parts, control, moved, uphill, change):
     """The decision's block: the trial step's sums (each row of parts, thread t adding blocks t,
     t + threads, ..., then a fixed tree in the shared arrays moved, uphill and change, one value a
     thread) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the CPU's code)
-    into the control array; an accepted step moves x to the other slot (where :func:`_accept_kernel`
-    copies x_new)."""
+    into the control array; an accepted step moves the slots' roles on (x_new becomes x)."""
     t = cuda.threadIdx.x
     dd = up = dh = 0.0
     for b in range(t, parts.shape[1], moved.shape[0]):   # entries past a kernel's blocks stay zero
@@ -144,7 +164,7 @@ def _decide(parts, control, moved, uphill, change):
     control[LIP], control[THETA], control[BETA] = lip, theta, beta
     if accepted:
         control[ACCEPTED] = 1.0
-        control[SLOT] = 1.0 - control[SLOT]
+        control[SLOT] = (control[SLOT] + 1.0) % 3.0
         control[ITERATIONS] += 1.0
         if restarted:
             control[RESTARTS] += 1.0
@@ -173,22 +193,15 @@ def _decide_kernel_few(parts, control):
 
 
 @cuda.jit
-def _accept_kernel(control, slot_0, slot_1, x_new, hy, h_new, hx):
-    """After an accepted trial step, one entry a thread: x = x_new into x's new slot (the old
-    x_prev's: the old x is now x_prev), hy = h_new + beta (h_new - hx), then hx = h_new. Nothing
-    after a rejected one."""
-    if control[ACCEPTED] == 0.0:
+def _extrapolated_gradient_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g):
+    """After an accepted trial step, g (5m,) = S B Mbar^-1 hy + c at the new y, one contact a thread,
+    hy = hx + beta (hx - hx_prev) made from the slots of h as it is read
+    (:func:`colsim.engine.cuda_operator.gradient_row`); after a rejected one g stays (y has not moved)."""
+    k = cuda.grid(1)
+    if control[ACCEPTED] == 0.0 or k >= ci.shape[0]:
         return
-    i = cuda.grid(1)
-    if i < x_new.shape[0]:
-        if control[SLOT] == 0.0:
-            slot_0[i] = x_new[i]
-        else:
-            slot_1[i] = x_new[i]
-    if i < hx.shape[0]:
-        beta = control[BETA]
-        hy[i] = h_new[i] + beta * (h_new[i] - hx[i])
-        hx[i] = h_new[i]
+    gradient_row(k, _slot(h_0, h_1, h_2, control, X), _slot(h_0, h_1, h_2, control, X_PREV), control[BETA], True,
+                 inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g)
 
 
 @cuda.jit
@@ -227,23 +240,24 @@ def _residual_kernel(g, x, s, mu, mu_r, parts):
 
 # -- an iteration on the device -----------------------------------------------------------------
 
-def trial_step(slot_0, slot_1, control, g, x_new, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, parts):
+def trial_step(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s, inv_mass, parts):
     """The projection, h_new = T x_new and the descent test's sums per block into parts (rows
-    ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}): two launches (one thread a contact,
-    then one a body), nothing waits."""
-    for kernel, blocks, threads, arguments in trial_launches(slot_0, slot_1, control, g, x_new, h_new, hy, geometry,
-                                                             mu_s, mu_r_s, inv_mass, parts):
+    ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}); x_slots, h_slots: the three slots
+    of x and of h = T x (:data:`X`): two launches (one thread a contact, then one a body), nothing
+    waits."""
+    for kernel, blocks, threads, arguments in trial_launches(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s,
+                                                             inv_mass, parts):
         launch(kernel, blocks, threads, *arguments)
 
 
-def trial_launches(slot_0, slot_1, control, g, x_new, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, parts):
+def trial_launches(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s, inv_mass, parts):
     """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments)."""
     geo = geometry
     return ((_project_kernel, blocks_for(mu_s.shape[0]), THREADS,
-             (slot_0, slot_1, control, g, x_new, mu_s, mu_r_s, geo.s, geo.normal, geo.tangent1, geo.tangent2,
-              geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)),
+             (*x_slots, control, g, mu_s, mu_r_s, geo.s, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i,
+              geo.radius_j, geo.lever, geo.work, parts)),
             (_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS,
-             (geo.work, geo.start, geo.entry, h_new, hy, inv_mass, parts)))
+             (geo.work, geo.start, geo.entry, *h_slots, control, inv_mass, parts)))
 
 
 @cuda.jit
@@ -341,10 +355,12 @@ class CudaIteration:
     problem on the device too.
 
     The iteration's scalars (lip, theta, beta) and its decisions live on the device too (`control`,
-    :func:`_decide`): a trial step is five launches that never wait for the host, and the
-    host reads the control array once a round (:meth:`iterate`). x and x_prev are two slots that
-    trade roles on the device; `x`, `x_prev`, `lip`, `theta`, `beta`, `backtracks` and `restarts`
-    read them (each a copy from the device)."""
+    :func:`_decide`): a trial step is four launches that never wait for the host, and the
+    host reads the control array once a round (:meth:`iterate`). x, x_prev and x_new are three slots
+    that trade roles on the device (:data:`X`), and so are hx, hx_prev and h_new (y and hy = T y are
+    made where they are read); `x`, `x_prev`, `x_new`, `hx` and `h_new` are the slots in those roles
+    at the last read, `lip`, `theta`, `beta`, `backtracks` and `restarts` read the control array
+    (each a copy from the device)."""
 
     def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None):
         self.m = len(mu_s)
@@ -355,18 +371,19 @@ class CudaIteration:
                             ("mu_r", mu_r)):
             setattr(self, name, _to_device(array))
         x = _to_device(x)
-        self.hx = cuda.device_array(len(inv_mass), dtype=np.float64)
-        transpose_on_device(self.geometry, x, self.hx)
-        self.slots = (x, _copy(x))   # x, then x_prev: y = x + beta (x - x_prev) = x
-        self.hy = _copy(self.hx)
+        hx = cuda.device_array(len(inv_mass), dtype=np.float64)
+        transpose_on_device(self.geometry, x, hx)
+        # the slots of x, x_new, x_prev (:data:`X` at SLOT 0) and of h = T x: x_prev = x, so y = x
+        self.x_slots = (x, cuda.device_array_like(x), _copy(x))
+        self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
         self.g = cuda.device_array(5 * self.m, dtype=np.float64)
-        gradient_on_device(self.geometry, self.hy, self.inv_mass, self.c, self.g)
-        self.x_new, self.h_new = cuda.device_array_like(x), cuda.device_array_like(self.hx)
+        gradient_on_device(self.geometry, hx, self.inv_mass, self.c, self.g)
+        self._read = np.zeros(CONTROL_SIZE)   # the control array as last read: the slots' roles, the iterations
         lip = self._lipschitz_estimate()
         start = np.zeros(CONTROL_SIZE)
         start[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self.control = cuda.to_device(start)
-        self._read = start.copy()   # the control array as last read: x's slot, the iterations done
+        self._read = start.copy()
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
@@ -413,7 +430,7 @@ class CudaIteration:
         copy to the host is the last product's."""
         zero = full_on_device(5 * self.m, 0.0)
         h = cuda.device_array_like(self.hx)
-        buffers = [cuda.device_array_like(self.x_new), cuda.device_array_like(self.x_new)]
+        buffers = [cuda.device_array_like(self.x), cuda.device_array_like(self.x)]
 
         def apply_GT(v):
             out = buffers[1] if v is buffers[0] else buffers[0]
@@ -438,32 +455,34 @@ class CudaIteration:
             self._read = self.control.copy_to_host()
 
     def _trial(self):
-        """One trial step and its decision, and the iterate's move when accepted: five launches, each
+        """One trial step, its decision and the gradient at the new y when accepted: four launches, each
         with the same arguments every time (prepared once: :class:`colsim.engine.cuda_launch.Prepared`)."""
         for prepared in self._trial_launches:
             prepared()
 
     def _launches_of_a_trial(self) -> list:
-        """The trial step's two launches, its decision's, the accepted step's move and the gradient
-        at the new y (the same again after a rejected step): each (kernel, blocks, threads, arguments)."""
+        """The trial step's two launches, its decision's and the gradient at the new y after an
+        accepted step: each (kernel, blocks, threads, arguments)."""
         decide = ((_decide_kernel_few, 1, FEW_DECIDE_THREADS) if self.parts.shape[1] <= FEW_DECIDE_THREADS
                   else (_decide_kernel, 1, DECIDE_THREADS))
-        return [*trial_launches(*self.slots, self.control, self.g, self.x_new, self.h_new, self.hy, self.geometry,
-                                self.mu_s, self.mu_r_s, self.inv_mass, self.parts),
+        geo = self.geometry
+        return [*trial_launches(self.x_slots, self.h_slots, self.control, self.g, geo, self.mu_s, self.mu_r_s,
+                                self.inv_mass, self.parts),
                 (*decide, (self.parts, self.control)),
-                (_accept_kernel, blocks_for(max(5 * self.m, self.hx.shape[0])), THREADS,
-                 (self.control, *self.slots, self.x_new, self.hy, self.h_new, self.hx)),
-                gradient_launch(self.geometry, self.hy, self.inv_mass, self.c, self.g)]
+                (_extrapolated_gradient_kernel, blocks_for(self.m), THREADS,
+                 (self.control, *self.h_slots, self.inv_mass, geo.s, geo.i, geo.j, geo.normal, geo.tangent1,
+                  geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, self.c, self.g))]
 
-    @property
-    def x(self):
-        """(5m,) device array: the iterate z (as of the control array's last read)."""
-        return self.slots[int(self._read[SLOT])]
+    def _role(self, slots, role: int):
+        """The slot of `slots` that holds `role` (:data:`X`), as of the control array's last read."""
+        return slots[(int(self._read[SLOT]) + role) % 3]
 
-    @property
-    def x_prev(self):
-        """(5m,) device array: the iterate before it."""
-        return self.slots[1 - int(self._read[SLOT])]
+    x = property(lambda self: self._role(self.x_slots, X),
+                 doc="(5m,) device array: the iterate z (as of the control array's last read).")
+    x_prev = property(lambda self: self._role(self.x_slots, X_PREV), doc="(5m,) device array: the iterate before it.")
+    x_new = property(lambda self: self._role(self.x_slots, X_NEW), doc="(5m,) device array: the last trial point.")
+    hx = property(lambda self: self._role(self.h_slots, X), doc="(6n,) device array: T x.")
+    h_new = property(lambda self: self._role(self.h_slots, X_NEW), doc="(6n,) device array: T x_new.")
 
     def _scalar(self, index: int) -> float:
         self._read = self.control.copy_to_host()
