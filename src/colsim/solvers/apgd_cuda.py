@@ -62,10 +62,11 @@ def _slot(slots_0, slots_1, slots_2, control, role):
 @cuda.jit
 def _project_kernel(x_0, x_1, x_2, control, g, mu_s, mu_r_s, s, nrm, t1, t2, ri, rj, lever, work, parts):
     """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev and
-    x_new from the three slots x_0, x_1, x_2, lip and beta from the control array), and its wrench from the force S x_new into work
-    (m, 9) (the first half of T x_new: :func:`colsim.engine.cuda_operator.wrench_on_device`, s and
-    the frames from the contact geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and
-    g . (x_new - x) (colsim.solvers.apgd._project_step)."""
+    x_new from the three slots x_0, x_1, x_2, lip and beta from the control array), and its wrench
+    from the force S x_new into work (m, 9) (the first half of T x_new:
+    :func:`colsim.engine.cuda_operator.wrench_on_device`, s and the frames from the contact
+    geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and g . (x_new - x)
+    (colsim.solvers.apgd._project_step)."""
     moved = cuda.shared.array(THREADS, dtype=np.float64)
     uphill = cuda.shared.array(THREADS, dtype=np.float64)
     k = cuda.grid(1)
