@@ -152,24 +152,10 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     3 x 128 float64 to the host (a trial step's round trip, synchronising); then an allocation of
     8 kB on the device and copies of 8 kB and 8 MB from the host, each into a new array (what a
     step's set-up pays for each of the dozens of arrays it makes)."""
-    arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
-
-    @cuda.jit
-    def one(a):
-        pass
-
-    @cuda.jit
-    def many(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, x):
-        pass
+    arrays, one, many = empty_kernels(cuda)
 
     def mean_us(call) -> float:
-        call()   # compiles
-        cuda.synchronize()
-        begin = time.perf_counter()
-        for _ in range(repeat):
-            call()
-        cuda.synchronize()
-        return 1e6 * (time.perf_counter() - begin) / repeat
+        return mean_launch_us(cuda, call, repeat)
 
     parts = cuda.to_device(np.zeros((3, 128)))
     costs = {"1 argument": mean_us(lambda: one[1, 128](arrays[0])),
@@ -196,6 +182,19 @@ def direct_launch_costs(cuda, repeat: int = 2000) -> dict:
     """Microseconds of an empty kernel's launch (1 device array; 12 and a float), as
     :func:`launch_costs` times them, through colsim.engine.cuda_launch.Prepared calling the driver
     itself (its parameters packed once)."""
+    arrays, one, many = empty_kernels(cuda)
+    costs = {}
+    with direct_launches():
+        for what, prepared in (("1 argument, direct (Prepared)", Prepared(one, 1, 128, arrays[0])),
+                               ("13 arguments, direct (Prepared)", Prepared(many, 1, 128, *arrays, 1.0))):
+            prepared()   # compiles; the timing's first call packs
+            costs[what] = mean_launch_us(cuda, prepared, repeat)
+            costs[what + " went direct"] = bool(prepared._direct)
+    return costs
+
+
+def empty_kernels(cuda) -> tuple:
+    """(12 device arrays of 1,024 float64, an empty kernel of one array, one of 12 arrays and a float)."""
     arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
 
     @cuda.jit
@@ -206,20 +205,19 @@ def direct_launch_costs(cuda, repeat: int = 2000) -> dict:
     def many(a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, x):
         pass
 
-    costs = {}
-    with direct_launches():
-        for what, prepared in (("1 argument, direct (Prepared)", Prepared(one, 1, 128, arrays[0])),
-                               ("13 arguments, direct (Prepared)", Prepared(many, 1, 128, *arrays, 1.0))):
-            prepared()   # compiles
-            prepared()   # packs
-            cuda.synchronize()
-            begin = time.perf_counter()
-            for _ in range(repeat):
-                prepared()
-            cuda.synchronize()
-            costs[what] = 1e6 * (time.perf_counter() - begin) / repeat
-            costs[what + " went direct"] = bool(prepared._direct)
-    return costs
+    return arrays, one, many
+
+
+def mean_launch_us(cuda, call, repeat: int) -> float:
+    """Microseconds a call of `call`, the mean over `repeat` back-to-back calls after one more (which
+    compiles), synchronised before and after."""
+    call()
+    cuda.synchronize()
+    begin = time.perf_counter()
+    for _ in range(repeat):
+        call()
+    cuda.synchronize()
+    return 1e6 * (time.perf_counter() - begin) / repeat
 
 
 def direct_iterations(spheres_list, iterations: int, cuda, device: str, simulator: bool) -> None:
