@@ -9,7 +9,7 @@ The simulator runs each GPU thread of a block as a Python thread.
 - It makes a block's shared array when the first thread asks for it and hands it to the others,
   with nothing to stop two threads from asking at once. Both then make one, and a tree sum mixes
   the two (a CI run's dot product came out 1.2e49). A shorter switch interval makes that likelier;
-  :func:`use` makes the arrays under a lock, as the simulator's own code does otherwise.
+  :func:`use` has them made as the simulator makes them, but under a lock.
 """
 from __future__ import annotations
 
