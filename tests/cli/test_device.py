@@ -39,8 +39,8 @@ def column(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
-    """4 steps at dt/sqrt(h0/g) = 0.004 (the simulator runs about 3 s an iteration, each GPU thread
-    a Python thread: 80 iterations here, 4 minutes; 20 steps would take 20): the same iterations a
+    """4 steps at dt/sqrt(h0/g) = 0.004 (the simulator runs about 1 s an iteration, each GPU thread
+    a Python thread: 80 iterations here, 100 s; 20 steps would take 8 minutes): the same iterations a
     step, and the end positions within 1e-9 of a diameter (measured: equal; both stop at the same
     check, and the GPU's sums differ from the CPU's by rounding only)."""
     runs = {}

@@ -340,17 +340,14 @@ class CudaContactOperator:
         """out (5m,) = S B Mbar^-1 u + c, every array on the device (inv_mass, s: ones, c: zeros if None)."""
         if not self.m:
             return
-        inv_mass = self._ones(6 * self.n) if inv_mass is None else inv_mass
-        s = self._ones(5 * self.m) if s is None else s
+        inv_mass = full_on_device(6 * self.n, 1.0) if inv_mass is None else inv_mass
+        s = full_on_device(5 * self.m, 1.0) if s is None else s
         c = full_on_device(5 * self.m, 0.0) if c is None else c
         gradient_on_device(self.geometry(s), u, inv_mass, c, out)
 
     def transpose_on_device(self, z, s, out) -> None:
         """out (6n,) = B' S z, every array on the device."""
         transpose_on_device(self.geometry(s), z, out)
-
-    def _ones(self, size: int):
-        return cuda.to_device(np.ones(size))
 
     def apply(self, u) -> np.ndarray:
         """(5m,) B u for u (6n,), from and to the host."""

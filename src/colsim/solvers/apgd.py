@@ -334,11 +334,17 @@ _power_start = np.zeros(0)
 def power_start(size: int) -> np.ndarray:
     """(size,) the power iteration's fixed random start (reproducible): standard normals from seed 0,
     drawn once for the longest size asked and kept (a step's draw took about 5-9 ms at r0 = 4)."""
+    return power_start_drawn(size)[:size].copy()
+
+
+def power_start_drawn(size: int) -> np.ndarray:
+    """(at least size,) read-only: every number of the power iteration's start drawn so far, drawn
+    further first where fewer than `size` (power_start(k) is its first k)."""
     global _power_start
     if size > len(_power_start):
         _power_start = np.random.default_rng(0).standard_normal(max(size, 2 * len(_power_start)))
         _power_start.flags.writeable = False
-    return _power_start[:size].copy()
+    return _power_start
 
 
 def lipschitz_estimate(v, apply_GT, dot, normalise, iterations: int = 12) -> float:

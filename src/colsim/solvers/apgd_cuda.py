@@ -31,8 +31,7 @@ from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, 
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
-from . import apgd
-from .apgd import decide, lipschitz_estimate, power_start
+from .apgd import decide, lipschitz_estimate, power_start_drawn
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
 #: estimate, Nesterov's theta and beta, lip's decay an iteration, whether the last trial step was
@@ -326,8 +325,7 @@ def _power_start_into(out) -> None:
     global _power_start_on_device
     size = out.shape[0]
     if _power_start_on_device is None or _power_start_on_device.shape[0] < size:
-        power_start(size)   # draws at least size numbers, the same every time
-        _power_start_on_device = cuda.to_device(apgd._power_start)
+        _power_start_on_device = cuda.to_device(power_start_drawn(size))
     out.copy_to_device(_power_start_on_device[:size])
 
 
@@ -379,12 +377,11 @@ class CudaIteration:
         self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
         self.g = cuda.device_array(5 * self.m, dtype=np.float64)
         gradient_on_device(self.geometry, hx, self.inv_mass, self.c, self.g)
-        self._read = np.zeros(CONTROL_SIZE)   # the control array as last read: the slots' roles, the iterations
         lip = self._lipschitz_estimate()
         start = np.zeros(CONTROL_SIZE)
         start[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self.control = cuda.to_device(start)
-        self._read = start.copy()
+        self._read = start.copy()   # the control array as last read: the slots' roles, the iterations
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
@@ -430,8 +427,8 @@ class CudaIteration:
         two buffers, so that v and G T v never share one; the norms stay on the device, so the one
         copy to the host is the last product's."""
         zero = full_on_device(5 * self.m, 0.0)
-        h = cuda.device_array_like(self.hx)
-        buffers = [cuda.device_array_like(self.x), cuda.device_array_like(self.x)]
+        h = cuda.device_array_like(self.h_slots[0])
+        buffers = [cuda.device_array_like(self.x_slots[0]), cuda.device_array_like(self.x_slots[0])]
 
         def apply_GT(v):
             out = buffers[1] if v is buffers[0] else buffers[0]
