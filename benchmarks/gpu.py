@@ -20,10 +20,10 @@ With --trajectories (finished `colsim collapse` files, e.g. the collapses to res
 gpu_machine.sh runs on the GPU), where their steps' wall time went (:func:`step_times`).
 With --columns (`colsim trim` files), also the first --steps steps of each column's collapse (the
 default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-started from the
-packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`: detection and the
-rest of a step on the CPU): seconds a step, APGD's share of them, iterations a step, and how far the
-two end positions are apart over a mean diameter (one step of each first, to compile the kernels),
-and where the GPU's step spends the rest (detection, assembly, the solver's setup); with --profile
+packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`): seconds a step,
+APGD's share of them, iterations a step, and how far the two end positions are apart over a mean
+diameter (one step of each first, to compile the kernels), and where the GPU's step spends the rest
+(detection, assembly, the warm start's matching, the solver's set-up, the overlap check); with --profile
 FOLDER, cProfile's statistics of each column's steps on each device.
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
@@ -291,10 +291,14 @@ def _timed_call(call, *args) -> float:
     return time.perf_counter() - begin
 
 
+#: the phases of a step that its diagnostics time (StepDiagnostics' <phase>_time), in the step's order
+PHASES = ("detection", "assembly", "matching", "setup", "solve", "check")
+
+
 def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
-    shares of the wall time of detection, assembly, the solver's setup and its solve (the rest: the
-    warm start's matching, the overlap check, redone attempts, the bookkeeping), iterations a step,
+    shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
+    and bookkeeping, the collapse's frames and checks between steps), iterations a step,
     the end positions; profile: a file for cProfile's statistics of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
@@ -311,8 +315,7 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
                        stop_after=steps)
     wall = time.perf_counter() - start
     d = run.diagnostics
-    shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall
-              for name in ("detection", "assembly", "setup", "solve")}
+    shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall for name in PHASES}
     last_step, last = run.frames[-1]
     assert last_step == len(d) == steps, (last_step, len(d), steps)   # the end state, not the column's
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
@@ -322,14 +325,15 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
 
 def step_times(trajectory: str) -> dict:
     """Where a finished collapse's steps spent their wall time, from its file's per-step diagnostics
-    (a `colsim collapse` trajectory): seconds, the shares of detection, assembly, the solver's setup
-    and its solve (the rest: the warm start's matching, the overlap check, redone attempts' other
-    work, the bookkeeping), mean iterations, steps redone, and seconds a step over each third."""
+    (a `colsim collapse` trajectory): seconds, the shares of the :data:`PHASES` its file times (a file
+    written before matching and check were timed lacks those two; the rest: redone attempts' other
+    work, the update and the bookkeeping), mean iterations, steps redone, and seconds a step over
+    each third."""
     import xarray as xr
 
     with xr.open_dataset(trajectory) as d:
         wall = d["step_wall_time"].values
-        parts = {name: float(d[f"step_{name}_time"].sum()) for name in ("detection", "assembly", "setup", "solve")}
+        parts = {name: float(d[f"step_{name}_time"].sum()) for name in PHASES if f"step_{name}_time" in d}
         iterations, redone = d["step_solver_iterations"].values, d["step_redone"].values
         spheres = int(d.sizes.get("particle", 0))
     total = float(wall.sum())
@@ -436,14 +440,15 @@ def main(argv=None):
                     f"{d['cpu_s'] / d['gpu_s']:.1f}", f"{d['difference']:.1e}",
                     data={**d, "device": device, "simulator": bool(numba_config.ENABLE_CUDASIM)})
     if args.trajectories:
-        spent = record.table(["trajectory", "spheres", "steps", "wall s", "detection, assembly, setup, solve, rest",
+        spent = record.table(["trajectory", "spheres", "steps", "wall s", ", ".join(PHASES) + ", rest",
                               "iterations a step", "steps redone", "s a step by third"],
                              title="where whole collapses spent their steps' time")
     for trajectory in args.trajectories:
         t = step_times(trajectory)
         shares = t["shares"]
         spent.row(Path(trajectory).name, t["spheres"], t["steps"], f"{t['wall_s']:.1f}",
-                  ", ".join(f"{x:.0%}" for x in (*shares.values(), 1.0 - sum(shares.values()))),
+                  ", ".join([f"{shares[name]:.0%}" if name in shares else "-" for name in PHASES]
+                            + [f"{1.0 - sum(shares.values()):.0%}"]),
                   f"{t['iterations']:.0f}", t["redone"], ", ".join(f"{x:.3f}" for x in t["s_a_step_by_third"]),
                   data={**t, "device": device})
     if args.columns:
@@ -457,7 +462,8 @@ def collapse_table(args, device: str) -> None:
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
                           f"GPU s a step ({device})", "APGD share (GPU)", "GPU vs CPU", "iterations a step (CPU; GPU)",
                           "end positions apart / mean diameter",
-                          "GPU's detection, assembly, setup, rest (shares)"], title=f"the first {args.steps} collapse steps")
+                          "GPU's " + ", ".join(name for name in PHASES if name != "solve") + ", rest (shares)"],
+                         title=f"the first {args.steps} collapse steps")
     if args.profile:
         Path(args.profile).mkdir(parents=True, exist_ok=True)
     for column in args.columns:
@@ -471,7 +477,7 @@ def collapse_table(args, device: str) -> None:
         steps.row(column, cpu["spheres"], f"{cpu['s_a_step']:.3f}", f"{cpu['solve_share']:.0%}", f"{gpu['s_a_step']:.3f}",
                   f"{gpu['solve_share']:.0%}", f"{cpu['s_a_step'] / gpu['s_a_step']:.1f}",
                   f"{cpu['iterations']:.0f}; {gpu['iterations']:.0f}", f"{apart:.1e}",
-                  ", ".join(f"{x:.0%}" for x in (shares["detection"], shares["assembly"], shares["setup"], rest)),
+                  ", ".join(f"{x:.0%}" for x in [shares[name] for name in PHASES if name != "solve"] + [rest]),
                   data={"column": column, "spheres": cpu["spheres"], "steps": args.steps, "device": device,
                         "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],

@@ -1,5 +1,5 @@
 """The time step (colsim.engine.stepper): its two failure modes, a missed contact (redone, or OverlapError)
-and a solver that does not converge (SolverError)."""
+and a solver that does not converge (SolverError); the phases it times."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -111,3 +111,15 @@ def test_unconverged_solver_raises_with_step_and_status():
     assert error.step == 17
     assert error.status == "MaxIterations"
     assert "step 17" in str(error) and "MaxIterations" in str(error)
+
+
+def test_a_step_times_its_phases_within_its_wall_time():
+    """Each timed phase of the accepted attempt (detection, assembly, matching, set-up, solve, the
+    overlap check) is a time, and together they fit in the step's wall time, which also holds the
+    redone attempt: perf_counter's clock, monotonic, so exact."""
+    state, settings = _train(max_redo=3)
+    solver = _RecordingApgd()
+    d = step(state, settings, solver, step_number=5).diagnostics
+    phases = [d.detection_time, d.assembly_time, d.matching_time, d.setup_time, d.solve_time, d.check_time]
+    assert d.redone >= 1 and all(t >= 0.0 for t in phases)
+    assert d.check_time > 0.0 and sum(phases) <= d.wall_time

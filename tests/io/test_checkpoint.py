@@ -3,6 +3,7 @@ other inputs, a damaged or foreign file, or an impossible saved state is refused
 run's nor replaced; the commits of every sitting are kept."""
 import logging
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -48,6 +49,22 @@ def test_a_checkpoint_comes_back_exactly(tmp_path):
     assert saved["carry"].margin == 0.01 and saved["elapsed"] == 12.5 and saved["cpu"] == 20.25
     for name in ("i", "j", "family", "force", "rolling"):
         np.testing.assert_array_equal(getattr(saved["carry"].warm_start, name), getattr(carry.warm_start, name))
+
+
+def test_a_checkpoint_from_before_the_matching_and_check_times_resumes(tmp_path):
+    """A checkpoint written before StepDiagnostics timed the matching and the overlap check (the
+    calibration's, say) still resumes: those two come back as NaN, every other field exactly."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "old.checkpoint.npz"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    with np.load(path, allow_pickle=False) as archive:
+        older = {name: archive[name] for name in archive.files
+                 if name not in ("diagnostic_matching_time", "diagnostic_check_time")}
+    np.savez(path, **older)
+    saved = load_checkpoint(path, "abc")["diagnostics"]
+    assert all(np.isnan(d.matching_time) and np.isnan(d.check_time) for d in saved)
+    for before, after in zip(diagnostics, saved):
+        assert after == replace(before, matching_time=after.matching_time, check_time=after.check_time)
 
 
 def test_no_warm_start_and_no_margin_come_back_as_none(tmp_path):

@@ -15,8 +15,10 @@ TEXT_DIAGNOSTICS = {"solver_status": "solver status per step",
 class StepDiagnostics:
     """What one step reports. Times in seconds (wall clock); energies in mass length^2/time^2.
 
-    The detection, assembly, setup and solve times are those of the accepted attempt; wall_time is
-    the whole step, redone attempts included. detection_margin: of the accepted attempt (length).
+    The detection, assembly, matching (the warm start's forces matched to the contacts), setup, solve
+    and check (the overlap check of the new positions) times are those of the accepted attempt;
+    wall_time is the whole step, redone attempts included (matching and check: NaN in steps saved by
+    a commit before they were timed). detection_margin: of the accepted attempt (length).
     solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`).
     solver_iterations: summed over the cone programs of the step; friction_iterations: how many
     cone programs the friction law solved (1, or the Coulomb fixed point's, :mod:`colsim.engine.friction`)."""
@@ -40,6 +42,8 @@ class StepDiagnostics:
     missed_contacts: int
     detection_margin: float
     wall_time: float
+    matching_time: float = float("nan")
+    check_time: float = float("nan")
 
 
 @dataclass

@@ -105,9 +105,12 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
         guess = None if start_from is None else start_from.match(found, state.n, solver.device)
+        t3 = time.perf_counter()
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
+        t4 = time.perf_counter()
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device)
+        t5 = time.perf_counter()
         if overlap.largest <= tolerance:
             break
         log.debug("step %d: overlap %.3g exceeds %.3g (%d pairs); redoing",
@@ -134,6 +137,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         setup_time=solution.setup_time, solve_time=solution.solve_time, redone=attempt,
         missed_contacts=missed,
         detection_margin=margin, wall_time=time.perf_counter() - started,
+        matching_time=t3 - t2, check_time=t5 - t4,
     )
     return StepResult(new_state, found, solution, diagnostics)
 

@@ -181,8 +181,8 @@ def _diagnostic_arrays(diagnostics) -> dict:
 
 
 def _diagnostics_of(arrays) -> list:
-    """The StepDiagnostics saved by :func:`_diagnostic_arrays`."""
-    fields = StepDiagnostics.__dataclass_fields__
+    """The StepDiagnostics saved by :func:`_diagnostic_arrays` (a field added since: its default)."""
+    fields = [name for name in StepDiagnostics.__dataclass_fields__ if f"diagnostic_{name}" in arrays]
     columns = {name: arrays[f"diagnostic_{name}"].tolist() for name in fields}
     return [StepDiagnostics(**{name: columns[name][k] for name in fields}) for k in range(len(columns["step"]))]
 

@@ -12,13 +12,16 @@ DIAGNOSTIC_FIELDS = [f for f in StepDiagnostics.__dataclass_fields__ if f not in
 STEP_LONG_NAMES = {"time": "simulation time at the end of the step",
                    "detection_time": "wall-clock time of the step's contact detection",
                    "assembly_time": "wall-clock time of the step's assembly",
+                   "matching_time": "wall-clock time of the warm start's matching in the step",
+                   "check_time": "wall-clock time of the step's overlap check",
                    "setup_time": "wall-clock time of the solver's set-up in the step",
                    "solve_time": "wall-clock time of the solver in the step",
                    "wall_time": "wall-clock time of the step"}
 
 STEP_UNITS = {"time": "time", "largest_overlap": "length", "kinetic_energy": "mass length^2/time^2",
               "rotational_energy": "mass length^2/time^2", "detection_time": "s", "assembly_time": "s",
-              "setup_time": "s", "solve_time": "s", "detection_margin": "length", "wall_time": "s"}
+              "setup_time": "s", "solve_time": "s", "detection_margin": "length", "wall_time": "s",
+              "matching_time": "s", "check_time": "s"}
 
 
 def step_variables(diagnostics) -> dict:
