@@ -48,6 +48,7 @@ import argparse
 import contextlib
 import cProfile
 import math
+import tempfile
 import time
 
 from pathlib import Path
@@ -319,6 +320,7 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     last_step, last = run.frames[-1]
     assert last_step == len(d) == steps, (last_step, len(d), steps)   # the end state, not the column's
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
+            "s_by_step": [x.wall_time for x in d],
             "iterations": float(np.mean([x.solver_iterations for x in d])), "end": last.position,
             "diameter": 2 * float(state.radius.mean())}
 
@@ -365,6 +367,10 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--columns", nargs="*", default=[], help="column files (colsim trim) to collapse")
     parser.add_argument("--steps", type=int, default=20, help="steps of each column's collapse")
+    parser.add_argument("--cpu-steps", type=int, default=None, help="steps of the CPU's collapse of each column "
+                        "(default: --steps; 0: the GPU's only)")
+    parser.add_argument("--tile", type=float, default=None, metavar="R0", help="collapse columns of radius R0 "
+                        "tiled from each of --columns (benchmarks/tiling.py: for timing, not a pour)")
     parser.add_argument("--trajectories", nargs="*", default=[], help="finished collapses (colsim collapse "
                         "files) whose steps' wall time to split by phase, as the rest stage's runs on a GPU")
     parser.add_argument("--profile", default=None, help="a folder for cProfile's statistics of each column's "
@@ -466,23 +472,48 @@ def collapse_table(args, device: str) -> None:
                          title=f"the first {args.steps} collapse steps")
     if args.profile:
         Path(args.profile).mkdir(parents=True, exist_ok=True)
+    cpu_steps = args.steps if args.cpu_steps is None else args.cpu_steps
     for column in args.columns:
-        for where in ("cpu", "cuda"):   # compiles each kernel set (numba's and the GPU's) before timing
+        if args.tile:
+            column = _tiled(column, args.tile)
+        runs = {"cpu": cpu_steps, "cuda": args.steps}
+        for where in (where for where, count in runs.items() if count):   # compiles each kernel set first
             collapse_steps(column, 1, where)
-        cpu, gpu = (collapse_steps(column, args.steps, where, args.profile and str(
-            Path(args.profile) / f"{Path(column).stem}-{where}.pstats")) for where in ("cpu", "cuda"))
+        cpu, gpu = (collapse_steps(column, runs[where], where, args.profile and str(
+            Path(args.profile) / f"{Path(column).stem}-{where}.pstats")) if runs[where] else None
+            for where in ("cpu", "cuda"))
         shares = gpu["shares"]
         rest = 1.0 - sum(shares.values())
-        apart = float(np.abs(cpu["end"] - gpu["end"]).max() / cpu["diameter"])
-        steps.row(column, cpu["spheres"], f"{cpu['s_a_step']:.3f}", f"{cpu['solve_share']:.0%}", f"{gpu['s_a_step']:.3f}",
-                  f"{gpu['solve_share']:.0%}", f"{cpu['s_a_step'] / gpu['s_a_step']:.1f}",
-                  f"{cpu['iterations']:.0f}; {gpu['iterations']:.0f}", f"{apart:.1e}",
+        if cpu is None:
+            cpu = {"s_a_step": math.nan, "solve_share": math.nan, "iterations": math.nan, "shares": {}}
+            apart = math.nan
+        else:
+            apart = float(np.abs(cpu["end"] - gpu["end"]).max() / cpu["diameter"]) if cpu_steps == args.steps else math.nan
+        steps.row(column, gpu["spheres"], _shown(cpu["s_a_step"], ".3f"), _shown(cpu["solve_share"], ".0%"),
+                  f"{gpu['s_a_step']:.3f}", f"{gpu['solve_share']:.0%}", _shown(cpu["s_a_step"] / gpu["s_a_step"], ".1f"),
+                  f"{_shown(cpu['iterations'], '.0f')}; {gpu['iterations']:.0f}", _shown(apart, ".1e"),
                   ", ".join(f"{x:.0%}" for x in [shares[name] for name in PHASES if name != "solve"] + [rest]),
-                  data={"column": column, "spheres": cpu["spheres"], "steps": args.steps, "device": device,
-                        "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
+                  data={"column": column, "spheres": gpu["spheres"], "steps": args.steps, "cpu_steps": cpu_steps,
+                        "device": device, "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
+                        "gpu_s_by_step": gpu["s_by_step"],
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
                         "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
                         "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares})
+
+
+def _shown(value: float, spec: str) -> str:
+    """value in format spec, or "-" for NaN (not measured)."""
+    return "-" if math.isnan(value) else format(value, spec)
+
+
+def _tiled(column: str, r0: float) -> str:
+    """A column of radius r0 tiled from `column` (benchmarks/tiling.py), written to the temporary folder."""
+    from tiling import tiled_column
+
+    out = Path(tempfile.gettempdir()) / f"{Path(column).stem}-tiled-r0_{r0:g}.nc"
+    spheres = tiled_column(column, r0, str(out))
+    print(f"{out}: {spheres} spheres tiled from {column} (r0 = {r0:g}; for timing, not a pour)", flush=True)
+    return str(out)
 
 
 if __name__ == "__main__":
