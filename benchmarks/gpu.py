@@ -58,7 +58,7 @@ import numpy as np
 import record
 from cuda_operator import DIAMETER, lattice_contacts, lattice_positions
 from colsim.engine.cones import scales_of_diagonal
-from colsim.engine.cuda_launch import Prepared, direct_launches, launch, plain_launches
+from colsim.engine.cuda_launch import launch, plain_launches
 from colsim.engine.contacts import swept_pairs
 from colsim.engine.state import ParticleState
 from colsim.engine.operator import ContactOperator
@@ -179,21 +179,6 @@ def launch_costs(cuda, repeat: int = 2000) -> dict:
     return costs
 
 
-def direct_launch_costs(cuda, repeat: int = 2000) -> dict:
-    """Microseconds of an empty kernel's launch (1 device array; 12 and a float), as
-    :func:`launch_costs` times them, through colsim.engine.cuda_launch.Prepared calling the driver
-    itself (its parameters packed once)."""
-    arrays, one, many = empty_kernels(cuda)
-    costs = {}
-    with direct_launches():
-        for what, prepared in (("1 argument, direct (Prepared)", Prepared(one, 1, 128, arrays[0])),
-                               ("13 arguments, direct (Prepared)", Prepared(many, 1, 128, *arrays, 1.0))):
-            prepared()   # compiles; the timing's first call packs
-            costs[what] = mean_launch_us(cuda, prepared, repeat)
-            costs[what + " went direct"] = bool(prepared._direct)
-    return costs
-
-
 def empty_kernels(cuda) -> tuple:
     """(12 device arrays of 1,024 float64, an empty kernel of one array, one of 12 arrays and a float)."""
     arrays = [cuda.to_device(np.zeros(1024)) for _ in range(12)]
@@ -219,38 +204,6 @@ def mean_launch_us(cuda, call, repeat: int) -> float:
         call()
     cuda.synchronize()
     return 1e6 * (time.perf_counter() - begin) / repeat
-
-
-def direct_iterations(spheres_list, iterations: int, cuda, device: str, simulator: bool) -> None:
-    """The iteration table's GPU time with APGD's trial-step launches made by the driver directly
-    (colsim.engine.cuda_launch.direct_launches) beside the same through cuda_launch's marshalled
-    launches, from the same start: the iterates must be the same bits. Last in the script: a wrong
-    launch would stop the process."""
-    from colsim.solvers.apgd_cuda import CudaIteration
-
-    costs = record.table(["what", f"us each ({device})"], title="direct launches: an empty kernel's")
-    for what, us in direct_launch_costs(cuda, 5 if simulator else 2000).items():
-        costs.row(what, us if isinstance(us, bool) else f"{us:.1f}", data={"what": what, "us": us, "device": device})
-    table = record.table(["spheres", "contacts", f"GPU ms an iteration ({device}), marshalled once",
-                          "GPU ms, direct launches", "direct vs marshalled", "same iterate"],
-                         title="APGD's iterations with direct launches")
-    for spheres in spheres_list:
-        cpu, operator, mu, mu_r = start_of(spheres)
-        for warm_up in range(2):   # the first compiles and packs; both start again from the same point
-            marshalled, direct = (CudaIteration.like(cpu, operator, mu, mu_r) for _ in range(2))
-            if not warm_up:
-                timed(marshalled, 1, mu, mu_r, cuda.synchronize)
-                with direct_launches():
-                    timed(direct, 2, mu, mu_r, cuda.synchronize)
-        marshalled_s = timed(marshalled, iterations, mu, mu_r, cuda.synchronize)
-        with direct_launches():
-            direct_s = timed(direct, iterations, mu, mu_r, cuda.synchronize)
-        same = bool(np.array_equal(marshalled.host_x(), direct.host_x()))
-        table.row(operator.n, operator.m, f"{1e3 * marshalled_s / iterations:.3f}",
-                  f"{1e3 * direct_s / iterations:.3f}", f"{marshalled_s / direct_s:.2f}", "yes" if same else "NO",
-                  data={"spheres": operator.n, "contacts": operator.m, "device": device, "iterations": iterations,
-                        "marshalled_gpu_ms": 1e3 * marshalled_s / iterations,
-                        "direct_gpu_ms": 1e3 * direct_s / iterations, "same_iterate": same})
 
 
 def detection(spheres: int, repeat: int = 3) -> dict:
@@ -375,8 +328,6 @@ def main(argv=None):
                         "files) whose steps' wall time to split by phase, as the rest stage's runs on a GPU")
     parser.add_argument("--profile", default=None, help="a folder for cProfile's statistics of each column's "
                         "collapse steps on each device (COLUMN-DEVICE.pstats)")
-    parser.add_argument("--direct", action="store_true", help="last, the iterations with APGD's launches made "
-                        "by the driver directly (colsim.engine.cuda_launch.Prepared), beside the marshalled ones")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
@@ -459,8 +410,6 @@ def main(argv=None):
                   data={**t, "device": device})
     if args.columns:
         collapse_table(args, device)
-    if args.direct and args.spheres:
-        direct_iterations(args.spheres, args.iterations, cuda, device, bool(numba_config.ENABLE_CUDASIM))
 
 
 def collapse_table(args, device: str) -> None:

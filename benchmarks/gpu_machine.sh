@@ -29,7 +29,7 @@ if [[ "$stages" == *" bench "* ]]; then
     if [ $# -eq 0 ]; then
         columns=(.gpu/*.nc)
         set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
-            --profile "${OUT:-results/benchmarks}/profiles" --direct
+            --profile "${OUT:-results/benchmarks}/profiles"
     fi
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
 fi

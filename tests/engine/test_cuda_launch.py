@@ -41,28 +41,8 @@ def test_a_launch_writes_what_the_plain_launch_writes():
         assert launcher, "on a GPU the launcher should have taken the kernel"
 
 
-def test_packed_parameters_point_at_each_word_s_value():
-    """The driver reads parameter i from the address at pointers[i]: every int word there as a
-    64-bit value (a pointer above 2^63 with the same bits), a ctypes scalar from its own storage."""
-    import ctypes
-    scalar, count = ctypes.c_double(2.5), ctypes.c_int64(-3)
-    words = [0, 0, 300, 8, 0x7F00_0000_1234, 300, 8, scalar, count, (1 << 63) + 5]
-    kept, pointers = cuda_launch.packed_parameters(words)
-    assert len(pointers) == len(words)
-    for pointer, word in zip(pointers, words):
-        if isinstance(word, int):
-            assert ctypes.c_uint64.from_address(pointer).value == word
-        else:
-            assert ctypes.addressof(word) == pointer and type(word).from_address(pointer).value == word.value
-    with pytest.raises(TypeError, match="bool"):
-        cuda_launch.packed_parameters([True])
-
-
-@pytest.mark.parametrize("direct", [False, True])
-def test_a_prepared_launch_writes_what_the_plain_launch_writes(direct, monkeypatch):
-    """A Prepared launch, called again and again, writes the plain launch's bits: on a GPU through the
-    driver itself where asked (direct), on the simulator the plain way either way."""
-    monkeypatch.setattr(cuda_launch, "direct_enabled", direct)
+def test_a_prepared_launch_writes_what_the_plain_launch_writes():
+    """A Prepared launch, called again and again, writes the plain launch's bits."""
     rng = np.random.default_rng(8)
     x, y = (cuda.to_device(rng.standard_normal(300)) for _ in range(2))
     ours, plain = cuda.device_array(300), cuda.device_array(300)
@@ -73,7 +53,3 @@ def test_a_prepared_launch_writes_what_the_plain_launch_writes(direct, monkeypat
         ours.copy_to_device(np.zeros(300))
         prepared()
         assert np.array_equal(ours.copy_to_host(), plain.copy_to_host())
-    if numba_config.ENABLE_CUDASIM or not direct:
-        assert prepared._direct is None   # never tried
-    else:
-        assert prepared._direct, "on a GPU the direct launch should have been made"

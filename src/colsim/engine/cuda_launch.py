@@ -14,22 +14,19 @@ numba-cuda calls (``cuda.core.launch``): the same kernel on the same words, so t
 any of that is not at hand (numba's simulator, a kernel not yet compiled or compiled for several
 signatures, a host array, a debug or extended kernel, another numba-cuda) it launches the plain way.
 
-:class:`Prepared` is one launch made again and again with the same arguments (APGD's trial step):
-through :func:`launch`, or, where :data:`direct_enabled`, by the driver's cuLaunchKernel with the
-parameters packed once (off until a GPU has timed it: `benchmarks gpu --direct`).
+:class:`Prepared` is one launch made again and again with the same arguments (APGD's trial step),
+through :func:`launch`. (A launch through the driver's cuLaunchKernel with the parameters packed once,
+skipping numba-cuda's and cuda.core's work, was tried and measured on an H200 at baf89b8: 10.2 us an
+empty launch against 9.8, and APGD's iterations 0.99x as fast, since the GPU's work paces them; it
+was removed. docs/performance.md, "The third GPU sitting".)
 """
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import weakref
 
 #: False: every launch the plain way (:func:`plain_launches`)
 enabled = True
-
-#: True: a :class:`Prepared` launch calls the driver itself with its parameters packed once (off
-#: until a GPU has shown it gives the same iterate, faster: `benchmarks gpu`'s iteration table)
-direct_enabled = False
 
 #: dispatcher -> its _Launcher, or False where the plain way is the only way
 _launchers: dict = {}
@@ -75,10 +72,6 @@ class _Launcher:
             config = self._configs[griddim, blockdim] = self._config(griddim, blockdim)
         self._core_launch(self._stream, config, self._function, *words)
         return True
-
-    def handle(self) -> int:
-        """The kernel's driver handle (a CUkernel or CUfunction), as an integer."""
-        return int(self._function.handle)
 
     def words(self, args) -> list | None:
         """The kernel's parameters for `args`, as numba-cuda marshals them (an array's words kept from
@@ -141,80 +134,12 @@ def plain_launches():
         enabled = before
 
 
-@contextlib.contextmanager
-def direct_launches():
-    """Every :class:`Prepared` launch inside the block calls the driver itself where it can
-    (:data:`direct_enabled`; to compare)."""
-    global direct_enabled
-    before, direct_enabled = direct_enabled, True
-    try:
-        yield
-    finally:
-        direct_enabled = before
-
-
-def packed_parameters(words) -> tuple[object, ctypes.Array]:
-    """The driver's kernelParams for a kernel's parameters `words` (numba-cuda's: each an int, one
-    pointer-sized word, or a ctypes scalar): (what must outlive the launches, the array of pointers
-    to the parameters' values). TypeError for any other kind of word."""
-    values = (ctypes.c_int64 * len(words))()
-    pointers = (ctypes.c_void_p * len(words))()
-    for index, word in enumerate(words):
-        if isinstance(word, ctypes._SimpleCData):
-            pointers[index] = ctypes.addressof(word)
-        elif isinstance(word, int) and not isinstance(word, bool):
-            values[index] = word - (1 << 64) if word >= 1 << 63 else word   # a pointer above 2^63 keeps its bits
-            pointers[index] = ctypes.addressof(values) + index * ctypes.sizeof(ctypes.c_int64)
-        else:
-            raise TypeError(f"a kernel parameter of type {type(word).__name__} cannot be packed")
-    return (values, list(words)), pointers
-
-
-def _driver_launch():
-    """The driver's cuLaunchKernel through ctypes (f, grid x y z, block x y z, shared memory bytes,
-    stream, kernelParams, extra) -> CUresult."""
-    function = ctypes.CDLL("libcuda.so.1").cuLaunchKernel
-    function.argtypes = [ctypes.c_void_p] + [ctypes.c_uint] * 7 + [ctypes.c_void_p] * 3
-    function.restype = ctypes.c_int
-    return function
-
-
 class Prepared:
     """``kernel[griddim, blockdim](*args)`` as a call without arguments, for a launch made again and
-    again with the same arguments (APGD's trial step). It launches through :func:`launch`, or, where
-    :data:`direct_enabled` and the driver and the kernel's internals are at hand, calls the driver's
-    cuLaunchKernel itself with the parameters packed at the first call after the kernel was compiled:
-    the same kernel on the same words as :func:`launch`, without numba-cuda's and cuda.core's work a
-    launch (an H200 took 9.1 us a launch and 1.3 us more an array argument that way)."""
+    again with the same arguments (APGD's trial step), through :func:`launch`."""
 
     def __init__(self, kernel, griddim: int, blockdim: int, *args):
         self.kernel, self.griddim, self.blockdim, self.args = kernel, griddim, blockdim, args
-        self._direct = None   # None: not tried yet; False: not possible
 
     def __call__(self) -> None:
-        if direct_enabled and enabled:
-            if self._direct is None and _launcher(self.kernel) is not None:
-                self._direct = self._make_direct()
-            if self._direct:
-                self._direct()
-                return
         launch(self.kernel, self.griddim, self.blockdim, *self.args)
-
-    def _make_direct(self):
-        """The direct launch, or False where it cannot be made."""
-        launcher = _launcher(self.kernel)
-        words = launcher.words(self.args)
-        if words is None:
-            return False
-        try:
-            self._kept, pointers = packed_parameters(words)   # kept: the pointers point into it
-            driver_launch, handle = _driver_launch(), launcher.handle()
-        except (OSError, AttributeError, TypeError):
-            return False
-        griddim, blockdim = self.griddim, self.blockdim
-
-        def direct():
-            code = driver_launch(handle, griddim, 1, 1, blockdim, 1, 1, 0, None, pointers, None)
-            if code:
-                raise RuntimeError(f"the driver's cuLaunchKernel failed: CUresult {code}")
-        return direct
