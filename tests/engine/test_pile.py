@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colsim.engine.contacts import detect
+from colsim.engine.contacts import detect, overlaps
 from colsim.engine.program import assemble, cone_violation
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import FLOOR, PARTICLE, FixedSpheres, ParticleState, StepSettings, Walls
-from colsim.engine.stepper import predicted_displacement, run, step
+from colsim.engine.stepper import base_margin, next_margin, predicted_displacement, run, step
 from colsim.engine.warm_start import WarmStart
 
 from helpers import COLLAPSE_LAW, DT, G, max_speed
@@ -212,3 +212,51 @@ def test_a_sphere_never_passes_into_a_fixed_one():
         assert gap >= -0.01 * 2 * radius
         touched |= bool(np.any(result.contacts.j == -2) and result.solution.forces[:, 0].max() > 0)
     assert touched
+
+
+def test_the_next_step_s_detection_holds_every_overlapping_pair(pile):
+    """The stepper's check measures the pairs of the next step's first detection instead of searching
+    (:func:`overlaps` with candidates): on the poured pile with three spheres pushed into their
+    neighbours, moving under gravity, both give the same overlapping pairs, normals and largest
+    overlaps, to the bit (the same arithmetic on the same pairs)."""
+    state = pile.poured
+    position = state.position.copy()
+    for k in (5, 40, 77):   # a tenth of a diameter into its nearest neighbour
+        nearest = np.argsort(np.linalg.norm(position - position[k], axis=1))[1]
+        position[k] += 0.1 * (position[nearest] - position[k])
+    moved = ParticleState(position, state.velocity + [0.0, 0.0, -0.3], state.angular_velocity, state.radius)
+    settings = collapse_settings(pile)
+    found = detect(moved, settings.walls, settings.law, predicted_displacement(moved, settings),
+                   0.05 * 2 * state.radius.min(), settings.detection_slack)
+    tolerance = 1e-3 * 2 * state.radius.min()
+    searched = overlaps(moved, settings.walls, tolerance)
+    measured = overlaps(moved, settings.walls, tolerance, candidates=found.particle_pairs())
+    assert measured.largest_pair == searched.largest_pair > 0.05 * state.radius.min()
+    assert measured.largest == searched.largest
+    order = np.lexsort((searched.pairs[1], searched.pairs[0]))   # the k-d tree's order; detection's is (i, j)
+    assert len(order) >= 3
+    for ours, theirs in zip(measured.pairs, searched.pairs):
+        np.testing.assert_array_equal(ours, theirs[order])
+
+
+def test_run_hands_each_step_its_first_contacts_and_takes_the_same_steps(pile):
+    """run() gives each step the detection its predecessor's check made (the same object, so no
+    search of its own), and the steps are those of step() detecting afresh each time, to the bit:
+    10 steps of the pile's collapse with the cylinder gone, warm-started APGD."""
+    from colsim.solvers.apgd import ApgdSolver
+
+    settings = collapse_settings(pile, cylinder=False)
+    solver = ApgdSolver(tolerance=1e-8)
+    handed = list(run(pile.settled, settings, 10, solver))
+    base = base_margin(pile.settled, settings)
+    state, warm, margin, taken = pile.settled, None, None, 0
+    for k, result in enumerate(handed, start=1):
+        alone = step(state, settings, solver, k, warm, margin)
+        np.testing.assert_array_equal(result.state.position, alone.state.position)
+        np.testing.assert_array_equal(result.solution.forces, alone.solution.forces)
+        if k > 1 and not handed[k - 2].diagnostics.redone and not result.diagnostics.redone:
+            assert result.contacts is handed[k - 2].upcoming.contacts
+            taken += 1
+        state, warm = alone.state, WarmStart.from_step(alone.contacts, alone.solution.forces)
+        margin = next_margin(alone.diagnostics, base)
+    assert taken >= 5

@@ -52,6 +52,11 @@ class Contacts:
     def m(self) -> int:
         return len(self.i)
 
+    def particle_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """(i, j): the contacts between two moving particles (not a wall, not a fixed sphere)."""
+        between = (self.family == PARTICLE) & (self.j >= 0)
+        return self.i[between], self.j[between]
+
 
 def tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents (m, 3) with (t1, t2, n) right-handed, for unit normals (m, 3)."""
@@ -317,11 +322,17 @@ class Overlaps:
                    float(self.cylinder.max(initial=0.0)))
 
 
-def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu") -> Overlaps:
+def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu",
+             candidates=None) -> Overlaps:
     """Measure every overlap of `state` (see :class:`Overlaps`). device 'cuda': the overlapping
     pairs found on the GPU (:func:`colsim.engine.cuda_contacts.swept_pairs_on_device` at rest with
-    no margin: the same pairs, sorted by (i, j))."""
-    if device == "cuda":
+    no margin: the same pairs, sorted by (i, j)). candidates: (i, j) particle pairs that hold every
+    overlapping one, measured instead of searching (e.g. :meth:`Contacts.particle_pairs` of a
+    detection at `state`, whose swept pairs hold every pair that overlaps there: the stepper's check)."""
+    if candidates is not None:
+        pi, pj = candidates
+        d = state.position[pj] - state.position[pi]
+    elif device == "cuda":
         from .cuda_contacts import swept_pairs_on_device
 
         pi, pj = swept_pairs_on_device(state, np.zeros_like(state.position), 0.0, 0.0)

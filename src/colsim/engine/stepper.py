@@ -17,6 +17,11 @@ still overlaps after `max_redo` redos fails with an :class:`OverlapError` naming
 The next step starts from the margin that caught a missed contact (at most 4x the base), halved
 after each clean step (:func:`next_margin`): the fast phase of a tall column's collapse redoes fewer
 steps (docs/performance.md, "Wall times with Clarabel").
+
+The overlap check measures the pairs of the next step's first detection, made at the attempt's end
+(:class:`Upcoming`): its swept pairs hold every pair that overlaps there, so the check needs no
+search of its own, and :func:`run` hands that detection to the next step (one neighbour search a
+step instead of two; the same contacts, overlaps and steps).
 """
 from __future__ import annotations
 
@@ -43,14 +48,25 @@ class OverlapError(RuntimeError):
 
 
 @dataclass
+class Upcoming:
+    """The first detection of the step after this one, made by this step's overlap check: the state
+    and the margin (length) it was made for, and its contacts."""
+
+    state: ParticleState
+    margin: float
+    contacts: contact_detection.Contacts
+
+
+@dataclass
 class StepResult:
-    """The new state, the contacts with their forces (m, 5), the step's diagnostics and, from
-    :func:`run`, what the next step starts from."""
+    """The new state, the contacts with their forces (m, 5), the step's diagnostics, the next step's
+    first detection (:class:`Upcoming`) and, from :func:`run`, what the next step starts from."""
 
     state: ParticleState
     contacts: contact_detection.Contacts
     solution: ConeSolution
     diagnostics: StepDiagnostics
+    upcoming: Upcoming | None = None
     carry: Carry | None = None
 
 
@@ -75,22 +91,38 @@ def next_margin(diagnostics: StepDiagnostics, base: float) -> float:
     margin that worked saves redoing each of them. (A redo for the cylinder's curvature alone is
     not a reason.) The limit matters while pouring: there every step misses some collision, and a
     margin carried without one grew to 14 candidate contacts per sphere."""
-    if diagnostics.missed_contacts:
-        return min(diagnostics.detection_margin, CARRIED_MARGIN_LIMIT * base)
-    return max(base, 0.5 * diagnostics.detection_margin)
+    return _next_margin(diagnostics.missed_contacts, diagnostics.detection_margin, base)
+
+
+def _next_margin(missed: int, margin: float, base: float) -> float:
+    """:func:`next_margin` of a step that missed `missed` contacts with margin `margin`."""
+    if missed:
+        return min(margin, CARRIED_MARGIN_LIMIT * base)
+    return max(base, 0.5 * margin)
+
+
+def _first_detection(state: ParticleState, settings: StepSettings, predicted: np.ndarray, margin: float,
+                     most_recovered: float, device: str) -> contact_detection.Contacts:
+    """The contacts of a step's first attempt (no cylinder margin, no given normals)."""
+    return contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
+                                    settings.detection_slack, np.zeros(state.n), None, most_recovered, device)
 
 
 def step(state: ParticleState, settings: StepSettings, solver: Solver, step_number: int = 0,
-         warm_start: WarmStart | None = None, margin: float | None = None) -> StepResult:
+         warm_start: WarmStart | None = None, margin: float | None = None,
+         upcoming: Upcoming | None = None) -> StepResult:
     """Advance `state` by one step of settings.dt; see the module docstring for the checks.
 
     warm_start: forces by contact pair, matched to each attempt's contacts (None: a cold start).
-    margin: detection margin of the first attempt (length); None: :func:`base_margin`."""
+    margin: detection margin of the first attempt (length); None: :func:`base_margin`.
+    upcoming: the last step's :attr:`StepResult.upcoming`, taken as the first attempt's contacts
+    when it was made for this state and margin (None, or another's: detected here)."""
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
     most_recovered = recovery_speed(settings, mean_diameter) * settings.dt
-    margin = base_margin(state, settings) if margin is None else margin
+    base = base_margin(state, settings)
+    margin = base if margin is None else margin
     started = time.perf_counter()
     predicted = predicted_displacement(state, settings)
     cylinder_margin = np.zeros(state.n)
@@ -98,9 +130,12 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     start_from = warm_start
     for attempt in range(settings.max_redo + 1):
         t0 = time.perf_counter()
-        found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
-                                         settings.detection_slack, cylinder_margin, renormal,
-                                         most_recovered, solver.device)
+        if attempt == 0 and upcoming is not None and upcoming.state is state and upcoming.margin == margin:
+            found = upcoming.contacts
+        else:
+            found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
+                                             settings.detection_slack, cylinder_margin, renormal,
+                                             most_recovered, solver.device)
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
@@ -109,7 +144,12 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
         t4 = time.perf_counter()
-        overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device)
+        following_margin = _next_margin(missed, margin, base)   # the next step's, if this attempt holds
+        following = Upcoming(new_state, following_margin, _first_detection(
+            new_state, settings, predicted_displacement(new_state, settings), following_margin, most_recovered,
+            solver.device))
+        overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device,
+                                             candidates=following.contacts.particle_pairs())
         t5 = time.perf_counter()
         if overlap.largest <= tolerance:
             break
@@ -139,7 +179,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         detection_margin=margin, wall_time=time.perf_counter() - started,
         matching_time=t3 - t2, check_time=t5 - t4,
     )
-    return StepResult(new_state, found, solution, diagnostics)
+    return StepResult(new_state, found, solution, diagnostics, following)
 
 
 def _merge_pairs(old, new, n):
@@ -175,8 +215,10 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
     warm start from an earlier stage); each result carries what the next step starts from."""
     carry = carry or Carry()
     base = base_margin(state, settings)
+    upcoming = None
     for k in range(first_step + 1, first_step + n_steps + 1):
-        result = step(state, settings, solver, k, carry.warm_start, carry.margin)
+        result = step(state, settings, solver, k, carry.warm_start, carry.margin, upcoming)
+        upcoming = result.upcoming
         warm = (WarmStart.from_step(result.contacts, result.solution.forces)
                 if solver.uses_warm_start else None)
         carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
