@@ -252,7 +252,7 @@ PHASES = ("detection", "assembly", "matching", "setup", "solve", "check")
 def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
-    and bookkeeping, the collapse's frames and checks between steps), iterations a step,
+    and bookkeeping, the collapse's frames and checkpoints between steps), iterations a step,
     the end positions; profile: a file for cProfile's statistics of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver

@@ -18,9 +18,9 @@ class StepDiagnostics:
     The detection, assembly, matching (the warm start's forces matched to the contacts), setup, solve
     and check (the overlap check of the new positions, which makes the next step's first detection;
     a step that takes that detection spends almost no detection time) times are those of the
-    accepted attempt;
-    wall_time is the whole step, redone attempts included (matching and check: NaN in steps saved by
-    a commit before they were timed). detection_margin: of the accepted attempt (length).
+    accepted attempt; wall_time is the whole step, redone attempts included (matching and check: NaN
+    in steps saved by a commit before they were timed). detection_margin: of the accepted attempt
+    (length).
     solver_backend: the back-end that solved the accepted attempt (see :class:`colsim.solvers.AutoSolver`).
     solver_iterations: summed over the cone programs of the step; friction_iterations: how many
     cone programs the friction law solved (1, or the Coulomb fixed point's, :mod:`colsim.engine.friction`)."""
