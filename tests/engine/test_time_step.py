@@ -72,12 +72,20 @@ def test_the_relaxation_keeps_the_cylinder_margin():
     assert plain.gap[0] == pytest.approx(-0.01 - 0.02)
 
 
-@pytest.mark.parametrize("scaled_step", [0.04, 0.004, 4e-4, 4e-5])
+@pytest.mark.parametrize("scaled_step", [1e-3, 4e-4, 4e-5])
 def test_a_column_at_rest_stays_at_rest_at_any_step(packing, scaled_step):
     """The packing, in its cylinder, under the collapse's friction, for 5 steps of dt/sqrt(h0/g) =
     scaled_step from its own contact forces: every sphere's kinetic energy stays below the pack
     stage's rest threshold, 1e-3 m g d. Before the cap, the packing's overlaps (up to 2e-5 d) came
-    out as speeds overlap/dt: at 4e-5, about 0.2 sqrt(g d), 20 times the threshold's energy."""
+    out as speeds overlap/dt: at 4e-5, about 0.2 sqrt(g d), 20 times the threshold's energy
+    (without the cap, measured: 1.1e-2 m g d at 4e-4, 1.07 at 4e-5).
+
+    The steps are those short enough that 5 of them of free fall from rest stay below the
+    threshold, (5 scaled_step)^2 h0 / (2 d) < 1e-3 (about 1e-4 here at most), so that only the overlaps
+    could carry a sphere past it. Over 5 longer steps a sphere the pour left loose may really move:
+    the pack stage's rest criterion holds 95 % of the spheres, not all, and of two pours that
+    differed only in rounding one had a top sphere reach 2.5e-3 m g d in 5 steps of 0.04, with and
+    without the cap."""
     dt = scaled_step * math.sqrt(H0 / G)
     settings = StepSettings(dt=dt, gravity=(0.0, 0.0, -G), walls=Walls(floor=True, cylinder_radius=R0),
                             law=COLLAPSE_LAW)
