@@ -49,7 +49,9 @@ PACK_APGD_TOLERANCE = 1e-3
 #: APGD's overlap tolerance under auto in a packing: none (its tolerance is already as loose)
 PACK_APGD_OVERLAP_TOLERANCE = 0.0
 
-#: device auto takes a visible GPU for a pour or a column of at least this many spheres: the smallest
-#: size at which the GPU's APGD iteration was measured faster than a node's CPU threads (issue 46's
-#: table, docs/performance.md "One GPU"); below it no crossover is measured, so the CPU
+#: device auto takes a visible GPU for a pour or a column of at least this many spheres (issue 46's
+#: first table: the smallest size at which the GPU's APGD iteration was measured faster than a node's
+#: CPU threads). Whole steps were faster on an H200 from 8,455 spheres on (2.8x its host's 16 threads,
+#: docs/performance.md "One GPU"), but a node's GPU runs its jobs one at a time while its cores run
+#: many, so a study's small columns are left to the cores
 GPU_FROM_SPHERES = 73_000
