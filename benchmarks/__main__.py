@@ -32,7 +32,8 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu")
+         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
+         "scatter")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -60,6 +61,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "study_cost": _study_results(),
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
             "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
+            "scatter": None,
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -70,6 +72,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "study_cost": _study_results(),
         "cuda_operator": _cuda([]),
         "gpu": _cuda([]),
+        "scatter": None,
     }[name]
 
 
@@ -119,7 +122,8 @@ def run_all(quick: bool) -> int:
             if argv is None:
                 why = {"study_cost": "no study's runs under results/",
                        "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
-                       "gpu": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator"}[name]
+                       "gpu": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
+                       "scatter": "a study of collapses on a given column and run settings, not a timing"}[name]
                 print(f"\n## {name}: skipped ({why})", flush=True)
                 continue
             print(f"\n## {name} {' '.join(argv)}", flush=True)

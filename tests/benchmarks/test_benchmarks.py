@@ -10,7 +10,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from colsim import io
 
 REPOSITORY = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPOSITORY / "benchmarks"))
@@ -18,7 +21,7 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 import record   # noqa: E402
 
 NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "gauss_seidel", "gpu", "packings",
-         "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
+         "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 
@@ -194,3 +197,43 @@ def test_study_cost_growth_is_the_log_log_slope_between_sizes():
     k = study_cost.growth(sizes)
     assert k[0] is None
     assert k[1:] == pytest.approx([1.25, 1.25], rel=1e-12)
+
+
+# scatter.py: the same-answer check's runs
+
+
+def test_scatter_collapses_the_column_and_its_perturbed_copies(tmp_path):
+    """`benchmarks scatter` on two stacked spheres: the settings' own run, one at another APGD tolerance
+    and one from moved positions, each collapsed and analysed in a child process, recorded one JSON
+    line each; a second call finds them all in the record and runs nothing."""
+    from helpers import tiny_state_files
+
+    tiny_state_files(tmp_path)
+    settings = tmp_path / "settings.yaml"
+    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
+    arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
+                 str(settings), "--tolerances", "1e-6", "--draws", "1", "--record", str(tmp_path / "scatter.jsonl")]
+    done = benchmarks(*arguments)
+    assert done.returncode == 0, done.stderr
+    runs = [json.loads(line) for line in (tmp_path / "scatter.jsonl").read_text().splitlines()]
+    assert sorted(r["kind"] for r in runs) == ["draw", "settings", "tolerance"]
+    for r in runs:   # two spheres at rest on the floor stay there: the stack's top at h0 = r0 = 1, its edge
+        assert r["steps"] == 5 and r["device"] == "cpu"   # at 0.25 (run-out -0.75), within the overlap
+        assert abs(r["h_inf_over_r0"] - 1.0) < 5e-5      # tolerance APGD stops at (1e-4 d, d = 0.5)
+        assert abs(r["runout_over_r0"] + 0.75) < 5e-5
+    assert "| cpu | 3 |" in done.stdout
+    again = benchmarks(*arguments)
+    assert again.returncode == 0 and len((tmp_path / "scatter.jsonl").read_text().splitlines()) == 3
+
+
+def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp_path):
+    import scatter
+    from helpers import tiny_state_files
+
+    tiny_state_files(tmp_path)
+    moved = scatter.perturbed(tmp_path / "column.nc", 3, 1e-3, tmp_path)
+    before, _ = io.read_state(tmp_path / "column.nc")
+    after, dataset = io.read_state(moved)
+    change = np.abs(after.position - before.position)
+    assert 0 < change.max() <= 1e-3 * 0.5 and "default_rng(3)" in dataset.attrs["scatter_perturbation"]
+    assert scatter.draws_of("1-3,7") == [1, 2, 3, 7]
