@@ -7,10 +7,14 @@
 #   bash benchmarks/gpu_machine.sh --spheres 100 --iterations 2   # any `benchmarks gpu` arguments
 #
 # Records go to $OUT (the device tool's folder that comes back), else results/benchmarks.
-# STAGES (default "bench rest pour") picks what runs, in that order: the benchmark, the collapses
-# of .gpu/rest/ to rest, the pours of .gpu/pour/ with their collapses; "big" (not by default, last)
+# STAGES (default "bench rest pour") picks what runs, in that order: the benchmark, "scatter" (not by
+# default: the same-answer runs on both devices at once), the collapses of .gpu/rest/ to rest, the
+# pours of .gpu/pour/ with their collapses; "big" (not by default, last)
 # adds the first BIG_STEPS (100) steps of an r0 = BIG_R0 (13) column on the GPU, tiled from
-# .gpu/rest/r0_6_a5_seed1.nc (benchmarks/tiling.py: about 657,000 spheres, a timing, not a pour).
+# BIG_SOURCE (benchmarks/tiling.py: about 657,000 spheres from r0 = 6, a timing, not a pour): by
+# default .gpu/rest/r0_6_a5_seed1.nc, else the column of a pour of r0 = 6 made on this machine
+# (results/gpu-pour/r0_6_seed1/column.nc: `STAGES=pour` in the same call, or in an earlier one while
+# the machine stayed warm). benchmarks/gpu_prepare.sh makes .gpu/ here.
 set -euo pipefail
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/colsim-site \
     .gpu/whl/*.whl
@@ -32,6 +36,30 @@ if [[ "$stages" == *" bench "* ]]; then
             --profile "${OUT:-results/benchmarks}/profiles"
     fi
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
+fi
+
+# The same answer (issue 46): `python -m benchmarks scatter` on SCATTER_COLUMN (default r0_3_a2_seed1 of
+# .gpu/rest/) with its settings, on both devices at once: the GPU's runs (the settings' own, each of
+# SCATTER_TOLERANCES, default "9e-6 1.1e-5", and each draw of SCATTER_GPU_DRAWS, default "1-2": positions
+# moved by 1e-12 d) one after another, and beside them the CPU's (the settings' own, the same
+# tolerances and SCATTER_CPU_DRAWS, default "1-10") on the host's other cores, one thread each. Both
+# scatters' tables (h_inf/r0 and run-out: range, mean, sd), then both together with each GPU run placed in
+# the CPU's scatter, come back as scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there).
+if [[ "$stages" == *" scatter "* ]]; then
+    column=.gpu/rest/${SCATTER_COLUMN:-r0_3_a2_seed1}
+    common=("$column.nc" --settings "$column.settings.yaml" --tolerances ${SCATTER_TOLERANCES:-9e-6 1.1e-5})
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cpu \
+        --draws "${SCATTER_CPU_DRAWS:-1-10}" --jobs "$(( $(nproc) - 2 ))" --record results/scatter-cpu.jsonl \
+        > /tmp/scatter-cpu.log 2>&1 &
+    cpu_scatter=$!
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
+        --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --record results/scatter-gpu.jsonl \
+        || echo "scatter on the GPU: failed (exit $?)"
+    wait "$cpu_scatter" || echo "scatter on the CPU: failed (exit $?)"
+    cat /tmp/scatter-cpu.log
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
+        --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl --also results/scatter-cpu.jsonl \
+        || echo "scatter: the tables of both failed (exit $?)"
 fi
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
@@ -69,16 +97,18 @@ done
 # minutes"): each .gpu/pour/NAME.pack.yaml (a study's packing settings.yaml) with NAME.collapse.yaml
 # (its run's settings.yaml), `colsim pack --device cuda` stopped after POUR_LIMIT seconds (default
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
-# and the analysis come back in pour.tgz; the files stay in /tmp there.
+# and the analysis come back in pour.tgz; the files stay in results/gpu-pour/NAME there (git-ignored:
+# kept on a warm machine between calls; a packing already there is not poured again).
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
-    name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=/tmp/pour/$name
+    name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
     mkdir -p "$out" "$work"
     start=$(date +%s)
+    [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
     timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
-    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"; tail -n 2 "$out/$name.pack.log"
+    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
@@ -98,7 +128,10 @@ done
 # pour fits one call, so the column is tiled from the r0 = 6 one; the GPU's steps only (the host's 16
 # threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres).
 if [[ "$stages" == *" big "* ]]; then
+    source=.gpu/rest/r0_6_a5_seed1.nc
+    [ -e "$source" ] || source=results/gpu-pour/r0_6_seed1/column.nc
+    echo "big: tiled from ${BIG_SOURCE:-$source}"
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu --spheres \
-        --columns "${BIG_SOURCE:-.gpu/rest/r0_6_a5_seed1.nc}" --tile "${BIG_R0:-13}" \
+        --columns "${BIG_SOURCE:-$source}" --tile "${BIG_R0:-13}" \
         --steps "${BIG_STEPS:-100}" --cpu-steps 0 || echo "benchmarks gpu (big): failed (exit $?)"
 fi
