@@ -87,3 +87,32 @@ def test_a_vector_normalised_on_the_device_has_unit_length_and_the_same_bits_eve
         runs.append(d_v.copy_to_host())
     np.testing.assert_allclose(runs[0], v / np.linalg.norm(v), rtol=1e-14, atol=0)
     assert np.array_equal(runs[0], runs[1])
+
+
+def test_each_bodys_contacts_are_listed_on_the_device_as_on_the_cpu(pile_with_every_contact):
+    """body_contacts_on_device: the CPU's lists (colsim.engine.operator.body_contacts) exactly, on a
+    pile with walls and fixed spheres (no second body) and on random pairs among bodies some of which
+    have none, over several blocks of bodies; integer sums and a sort, so equal, not close."""
+    from colsim.engine.operator import body_contacts
+
+    state, found, _ = pile_with_every_contact
+    rng = np.random.default_rng(5)
+    first = rng.integers(0, 300, 2000)
+    second = np.where(rng.random(2000) < 0.2, -1, (first + rng.integers(1, 300, 2000)) % 300)
+    for i, j, n in ((found.i, found.j, state.n), (first, second, 310), (np.zeros(0, int), np.zeros(0, int), 5)):
+        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        start, entry = cuda_operator.body_contacts_on_device(
+            cuda_operator.cuda.to_device(i), cuda_operator.cuda.to_device(j), n, len(i) + int(np.sum(j >= 0)))
+        expected_start, expected_entry = body_contacts(i, j, n)
+        np.testing.assert_array_equal(start.copy_to_host(), expected_start)
+        np.testing.assert_array_equal(entry.copy_to_host(), expected_entry)
+
+
+@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 40_000])
+def test_prefix_sums_on_the_device_are_numpys(n):
+    """prefix_sums_on_device: 0 then numpy's cumsum, exactly (integers), across block edges and with
+    more blocks (313 at 40,000) than a block has threads, so each thread of the blocks' scan sums a
+    stretch."""
+    count = np.random.default_rng(n).integers(0, 9, n).astype(np.int64)
+    ours = cuda_operator.prefix_sums_on_device(cuda_operator.cuda.to_device(count)).copy_to_host()
+    np.testing.assert_array_equal(ours, np.concatenate([[0], np.cumsum(count)]))

@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import THREADS, blocks_for, cuda, full_on_device
+from .cuda_operator import THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -150,8 +150,7 @@ def _cell_lists(midpoint, lower, dims, width, cells: int):
     cell = cuda.device_array(n, dtype=np.int64)
     count = full_on_device(cells, 0, np.int64)
     _cell_kernel[blocks_for(n), THREADS](midpoint, lower, dims, width, cell, count)
-    start = np.concatenate([[0], np.cumsum(count.copy_to_host())])
-    d_start = cuda.to_device(start)
+    d_start = prefix_sums_on_device(count)   # on the device: no round trip of the counts
     filled = full_on_device(cells, 0, np.int64)
     listed = cuda.device_array(n, dtype=np.int64)
     _list_kernel[blocks_for(n), THREADS](cell, d_start, filled, listed)

@@ -31,7 +31,7 @@ from numba import cuda  # noqa: E402 (after the alias)
 from . import cuda_simulator
 from .cones import project_point
 from .cuda_launch import launch
-from .operator import ContactGeometry, body_contacts
+from .operator import ContactGeometry
 
 if numba_config.ENABLE_CUDASIM:   # faster, and its shared arrays made under a lock
     cuda_simulator.use()
@@ -295,19 +295,152 @@ def transpose_on_device(geometry: ContactGeometry, z, out) -> None:
     launch(_transpose_kernel, blocks_for(g.start.shape[0] - 1), THREADS, g.work, g.start, g.entry, out)
 
 
+@cuda.jit
+def _count_entries_kernel(i, j, count):
+    """count[b] += 1 for each contact entry on body b (its first body i, its second j where j >= 0)."""
+    k = cuda.grid(1)
+    if k < i.shape[0]:
+        cuda.atomic.add(count, i[k], 1)
+        if j[k] >= 0:
+            cuda.atomic.add(count, j[k], 1)
+
+
+@cuda.jit
+def _block_totals_kernel(count, totals):
+    """totals[block] = the sum of count over the block's slice."""
+    cache = cuda.shared.array(THREADS, dtype=np.int64)
+    b = cuda.grid(1)
+    t = cuda.threadIdx.x
+    cache[t] = count[b] if b < count.shape[0] else 0
+    block_reduce(cache, t, False)
+    if t == 0:
+        totals[cuda.blockIdx.x] = cache[0]
+
+
+@cuda.jit(device=True)
+def _block_inclusive_scan(cache, t):
+    """cache (THREADS,) in shared memory -> its inclusive running sums (Hillis and Steele); every
+    thread of the block calls it, thread t with its own value at cache[t]."""
+    cuda.syncthreads()
+    step = 1
+    while step < THREADS:
+        before = cache[t - step] if t >= step else 0
+        cuda.syncthreads()
+        cache[t] += before
+        cuda.syncthreads()
+        step *= 2
+
+
+@cuda.jit
+def _exclusive_scan_kernel(totals):
+    """totals -> their exclusive running sums, in place, by one block: thread t sums its stretch of
+    totals, the block scans those sums, then each thread writes its stretch's running sums."""
+    cache = cuda.shared.array(THREADS, dtype=np.int64)
+    t = cuda.threadIdx.x
+    stretch = (totals.shape[0] + THREADS - 1) // THREADS
+    first, last = t * stretch, min((t + 1) * stretch, totals.shape[0])
+    total = 0
+    for b in range(first, last):
+        total += totals[b]
+    cache[t] = total
+    _block_inclusive_scan(cache, t)
+    running = cache[t] - total
+    for b in range(first, last):
+        here = totals[b]
+        totals[b] = running
+        running += here
+
+
+@cuda.jit
+def _starts_kernel(count, offsets, start):
+    """start[b + 1] = count[0] + ... + count[b]: the block's offset plus a scan of its slice in shared
+    memory (Hillis and Steele); start[0] = 0."""
+    cache = cuda.shared.array(THREADS, dtype=np.int64)
+    b = cuda.grid(1)
+    t = cuda.threadIdx.x
+    cache[t] = count[b] if b < count.shape[0] else 0
+    _block_inclusive_scan(cache, t)
+    if b < count.shape[0]:
+        start[b + 1] = offsets[cuda.blockIdx.x] + cache[t]
+    if b == 0:
+        start[0] = 0
+
+
+@cuda.jit
+def _place_entries_kernel(i, j, start, filled, entry):
+    """Each contact's entries (2 k on its first body, 2 k + 1 on its second) into a free place of
+    their body's range of entry, in the order the atomic additions come (sorted next)."""
+    k = cuda.grid(1)
+    if k < i.shape[0]:
+        entry[start[i[k]] + cuda.atomic.add(filled, i[k], 1)] = 2 * k
+        if j[k] >= 0:
+            entry[start[j[k]] + cuda.atomic.add(filled, j[k], 1)] = 2 * k + 1
+
+
+@cuda.jit
+def _sort_bodies_kernel(start, entry):
+    """Each body's entries in increasing order (contact order), one body a thread: an insertion sort
+    (a body has a few tens of contacts at most)."""
+    b = cuda.grid(1)
+    if b < start.shape[0] - 1:
+        for e in range(start[b] + 1, start[b + 1]):
+            value = entry[e]
+            f = e - 1
+            while f >= start[b] and entry[f] > value:
+                entry[f + 1] = entry[f]
+                f -= 1
+            entry[f + 1] = value
+
+
+def prefix_sums_on_device(count):
+    """(len(count) + 1,) int64 device array: 0 and the running sums of `count` ((n,) int64, on the
+    device), made there: each block's total, their exclusive sums by one block, then each block's
+    scan in shared memory. Integer sums, so exact and the same in any order."""
+    n = count.shape[0]
+    start = full_on_device(n + 1, 0, np.int64)
+    if n:
+        offsets = cuda.device_array(blocks_for(n), dtype=np.int64)
+        _block_totals_kernel[blocks_for(n), THREADS](count, offsets)
+        _exclusive_scan_kernel[1, THREADS](offsets)
+        _starts_kernel[blocks_for(n), THREADS](count, offsets, start)
+    return start
+
+
+def body_contacts_on_device(i, j, n: int, entries: int):
+    """:func:`colsim.engine.operator.body_contacts` made on the device, for contacts' (m,) int64 device
+    arrays i and j (j < 0: no second body) among n bodies with `entries` entries in all (m plus the
+    contacts with j >= 0): (start (n + 1,), entry (entries,)) as int64 device arrays. A counting
+    sort: each body's entries counted (atomic additions), the starts from their prefix sums
+    (:func:`prefix_sums_on_device`), the entries placed, then each body's sorted into contact order. Integer sums are exact and the sort
+    fixes the order, so the lists are the CPU's whatever order the atomic operations take."""
+    m = i.shape[0]
+    entry = cuda.device_array(max(entries, 1), dtype=np.int64)[:entries]
+    if m == 0 or n == 0:
+        return full_on_device(n + 1, 0, np.int64), entry
+    count = full_on_device(n, 0, np.int64)
+    _count_entries_kernel[blocks_for(m), THREADS](i, j, count)
+    start = prefix_sums_on_device(count)
+    filled = full_on_device(n, 0, np.int64)
+    _place_entries_kernel[blocks_for(m), THREADS](i, j, start, filled, entry)
+    _sort_bodies_kernel[blocks_for(n), THREADS](start, entry)
+    return start, entry
+
+
 class CudaContactOperator:
     """B of m contacts among n bodies on the GPU, its frames copied there once (the contacts of
     :class:`colsim.engine.operator.ContactOperator`: i, j, frames, radii, lever)."""
 
     def __init__(self, contacts, n_bodies: int):
+        """B of `contacts` (:class:`colsim.engine.contacts.Contacts`) among n_bodies bodies: each body's
+        contacts listed on the device (:func:`body_contacts_on_device`), so no list is made on the
+        host, nor copied."""
         self.n = int(n_bodies)
         i = np.ascontiguousarray(contacts.i, dtype=np.int64)
         j = np.ascontiguousarray(contacts.j, dtype=np.int64)
-        start, entry = body_contacts(i, j, self.n)
-        self._copy({"i": i, "j": j, "start": start, "entry": entry,
-                    **{name: getattr(contacts, attribute) for name, attribute in (
-                        ("normal", "normal"), ("tangent1", "tangent1"), ("tangent2", "tangent2"),
-                        ("radius_i", "radius_i"), ("radius_j", "radius_j"), ("lever", "lever"))}})
+        self._copy({"i": i, "j": j, **{name: getattr(contacts, name) for name in (
+            "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")}})
+        d = self.device
+        d["start"], d["entry"] = body_contacts_on_device(d["i"], d["j"], self.n, len(i) + int(np.count_nonzero(j >= 0)))
 
     @classmethod
     def from_operator(cls, operator) -> "CudaContactOperator":
