@@ -33,7 +33,7 @@ import record   # noqa: E402
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
          "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
-         "scatter")
+         "device_copies", "scatter")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -61,6 +61,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "study_cost": _study_results(),
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
             "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
+            "device_copies": _cuda(["--steps", "1"]),
             "scatter": None,
         }[name]
     r0, a = COLUMN["full"][:2]
@@ -72,6 +73,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "study_cost": _study_results(),
         "cuda_operator": _cuda([]),
         "gpu": _cuda([]),
+        "device_copies": _cuda([]),
         "scatter": None,
     }[name]
 
@@ -123,6 +125,7 @@ def run_all(quick: bool) -> int:
                 why = {"study_cost": "no study's runs under results/",
                        "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
                        "gpu": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
+                       "device_copies": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
                        "scatter": "a study of collapses on a given column and run settings, not a timing"}[name]
                 print(f"\n## {name}: skipped ({why})", flush=True)
                 continue

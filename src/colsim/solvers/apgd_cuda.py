@@ -358,8 +358,8 @@ class CudaIteration:
     host reads the control array once a round (:meth:`iterate`). x, x_prev and x_new are three slots
     that trade roles on the device (:data:`X`), and so are hx, hx_prev and h_new (y and hy = T y are
     made where they are read); `x`, `x_prev`, `x_new`, `hx` and `h_new` are the slots in those roles
-    at the last read, `lip`, `theta`, `beta`, `backtracks` and `restarts` read the control array
-    (each a copy from the device)."""
+    at the last read, `lip`, `theta`, `beta`, `backtracks` and `restarts` are the control array's
+    now (a copy from the device when a trial step ran since the last read)."""
 
     def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None):
         self.m = len(mu_s)
@@ -382,6 +382,7 @@ class CudaIteration:
         start[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self.control = cuda.to_device(start)
         self._read = start.copy()   # the control array as last read: the slots' roles, the iterations
+        self._stale = False          # launched trial steps since that read
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
         self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
@@ -398,7 +399,8 @@ class CudaIteration:
         (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic; only the
         frames, the masses, the free forces, the gaps, the coefficients and the warm start go there."""
         m = program.m
-        device = CudaContactOperator.from_operator(program.operator)
+        device = (CudaContactOperator.from_operator(program.operator) if program.contacts is None
+                  else CudaContactOperator(program.contacts, program.n_unknowns // 6))   # no host operator
         d_inv_mass, mu, mu_r = (_to_device(array) for array in (inv_mass, program.mu, program.mu_r))
         diagonal = device.diagonal_on_device(d_inv_mass)
         s = cuda.device_array(5 * m, dtype=np.float64)
@@ -451,12 +453,14 @@ class CudaIteration:
             for _ in range(int(target - self._read[ITERATIONS])):
                 self._trial()
             self._read = self.control.copy_to_host()
+            self._stale = False
 
     def _trial(self):
         """One trial step, its decision and the gradient at the new y when accepted: four launches, each
         with the same arguments every time (prepared once: :class:`colsim.engine.cuda_launch.Prepared`)."""
         for prepared in self._trial_launches:
             prepared()
+        self._stale = True
 
     def _launches_of_a_trial(self) -> list:
         """The trial step's two launches, its decision's and the gradient at the new y after an
@@ -483,7 +487,11 @@ class CudaIteration:
     h_new = property(lambda self: self._role(self.h_slots, X_NEW), doc="(6n,) device array: T x_new.")
 
     def _scalar(self, index: int) -> float:
-        self._read = self.control.copy_to_host()
+        """One of the control array's entries now: read from the device only if a trial step ran since
+        the last read (a solve's lip, backtracks and restarts after its last round: one copy, not three)."""
+        if self._stale:
+            self._read = self.control.copy_to_host()
+            self._stale = False
         return float(self._read[index])
 
     lip = property(lambda self: self._scalar(LIP), doc="The Lipschitz estimate now (read from the device).")
