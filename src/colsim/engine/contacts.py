@@ -257,16 +257,19 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
     :func:`pair_frames`) or 'cuda' (a grid on the GPU, :func:`colsim.engine.cuda_contacts.swept_pair_frames`:
-    the same pairs, the same arithmetic); the walls and fixed spheres stay on the host.
+    the same pairs, the same arithmetic; the frames' device copies stay there for the warm start
+    and the solver, :func:`colsim.engine.cuda_contacts.share_frames`); the walls and fixed spheres
+    stay on the host.
     """
     if device == "cuda":
         from .cuda_contacts import swept_pair_frames
 
-        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = swept_pair_frames(state, predicted, margin, slack,
-                                                                            most_recovered)
+        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap, on_device = swept_pair_frames(
+            state, predicted, margin, slack, most_recovered)
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
+        on_device = None
     if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
         n = state.n
@@ -293,6 +296,10 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
                                walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
     lever = contact_levers(radius_i, radius_j, law.rolling_lever)
+    if device == "cuda" and renormal is None and on_device is not None:   # the pairs' rows as found
+        from .cuda_contacts import share_frames
+
+        share_frames((normal, t1, t2), on_device, (wall_normal, wall_t1, wall_t2))
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
         radius_i=radius_i, radius_j=radius_j, lever=lever,

@@ -26,7 +26,7 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device
+from .cuda_operator import THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device, share_frame
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -47,22 +47,44 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
 
 def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float):
     """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, normal,
-    tangent1, tangent2 (m, 3), gap (m,)), the pairs of :func:`swept_pairs_on_device`, the unit normal
+    tangent1, tangent2 (m, 3), gap (m,), and the frames as device arrays (normal, tangent1, tangent2)
+    for :func:`share_frames`), the pairs of :func:`swept_pairs_on_device`, the unit normal
     from i to j, the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the
     normal, relaxed by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered
     (length; inf: none): the particle pairs of :func:`colsim.engine.contacts.detect`, in the same
     arithmetic (to rounding: a GPU fuses some multiply-adds)."""
     if state.n < 2:
-        return _no_pairs()
+        return (*_no_pairs(), None)
     found = _SweptPairs(state, predicted, margin, slack)
     m = max(found.m, 1)
     normal, tangent1, tangent2 = (cuda.device_array((m, 3), dtype=np.float64) for _ in range(3))
     gap = cuda.device_array(m, dtype=np.float64)
     _frames_kernel[blocks_for(state.n), THREADS](found.position, found.radius, found.offsets, found.partners,
                                                  float(most_recovered), normal, gap, tangent1, tangent2)
+    on_device = tuple(frame[:found.m] for frame in (normal, tangent1, tangent2))
     j, normal, tangent1, tangent2, gap = (array.copy_to_host()[:found.m] for array in (
         found.partners, normal, tangent1, tangent2, gap))
-    return found.i, j, normal, tangent1, tangent2, gap
+    return found.i, j, normal, tangent1, tangent2, gap, on_device
+
+
+def share_frames(frames, pair_frames, wall_frames) -> None:
+    """Give the contacts' frames (normal, tangent1, tangent2: host arrays (m, 3), the pairs' rows
+    first, then the walls' and fixed spheres') their device copies without copying them from the
+    host: the pairs' rows from detection's device arrays `pair_frames` (a copy on the device), the
+    few others' from `wall_frames` (host arrays, the three in one copy), so that the warm start's
+    matching and the solver's operator find them there
+    (:func:`colsim.engine.cuda_operator.frame_on_device`), the same numbers."""
+    walls = len(wall_frames[0])
+    if walls:   # the three in one copy from the host
+        wall_frames = cuda.to_device(np.ascontiguousarray(np.stack(wall_frames), dtype=np.float64))
+    for f, (frame, pairs) in enumerate(zip(frames, pair_frames)):
+        on_device = cuda.device_array(frame.shape, dtype=np.float64)
+        rows = pairs.shape[0]
+        if rows:
+            on_device[:rows].copy_to_device(pairs)
+        if walls:
+            on_device[rows:].copy_to_device(wall_frames[f])
+        share_frame(frame, on_device)
 
 
 def _no_pairs():
@@ -91,10 +113,9 @@ class _SweptPairs:
                 reach * reach, float(margin), float(slack))
         counts = full_on_device(n, 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
-        found = counts.copy_to_host()
-        offsets = np.concatenate([[0], np.cumsum(found)])
-        self.m = int(offsets[-1])
-        self.offsets = cuda.to_device(offsets)
+        found = counts.copy_to_host()   # each particle's count of partners, for i on the host
+        self.m = int(found.sum())
+        self.offsets = prefix_sums_on_device(counts)
         self.partners = full_on_device(max(self.m, 1), 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, self.offsets, self.partners, True)
         self.i = np.repeat(np.arange(n, dtype=np.int64), found)

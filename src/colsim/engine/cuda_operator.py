@@ -65,9 +65,17 @@ def frame_on_device(array: np.ndarray):
     key = id(array)
     copy = _frames_on_device.get(key)
     if copy is None:
-        copy = _frames_on_device[key] = cuda.to_device(np.ascontiguousarray(array, dtype=float))
-        weakref.finalize(array, _frames_on_device.pop, key, None)
+        copy = cuda.to_device(np.ascontiguousarray(array, dtype=float))
+        share_frame(array, copy)
     return copy
+
+
+def share_frame(array: np.ndarray, copy) -> None:
+    """Make `copy`, a device array that holds the same numbers as the host array `array` (m, 3), the
+    one :func:`frame_on_device` gives for it (detection's frames, made on the device: no copy back)."""
+    key = id(array)
+    _frames_on_device[key] = copy
+    weakref.finalize(array, _frames_on_device.pop, key, None)
 
 
 @cuda.jit
@@ -411,8 +419,9 @@ def body_contacts_on_device(i, j, n: int, entries: int):
     arrays i and j (j < 0: no second body) among n bodies with `entries` entries in all (m plus the
     contacts with j >= 0): (start (n + 1,), entry (entries,)) as int64 device arrays. A counting
     sort: each body's entries counted (atomic additions), the starts from their prefix sums
-    (:func:`prefix_sums_on_device`), the entries placed, then each body's sorted into contact order. Integer sums are exact and the sort
-    fixes the order, so the lists are the CPU's whatever order the atomic operations take."""
+    (:func:`prefix_sums_on_device`), the entries placed, then each body's sorted into contact order.
+    Integer sums are exact and the sort fixes the order, so the lists are the CPU's whatever order
+    the atomic operations take."""
     m = i.shape[0]
     entry = cuda.device_array(max(entries, 1), dtype=np.int64)[:entries]
     if m == 0 or n == 0:
@@ -439,8 +448,9 @@ class CudaContactOperator:
         j = np.ascontiguousarray(contacts.j, dtype=np.int64)
         self._copy({"i": i, "j": j, **{name: getattr(contacts, name) for name in (
             "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")}})
+        entries = len(i) + int(np.count_nonzero(j >= 0))   # each contact's first body, and its second if any
         d = self.device
-        d["start"], d["entry"] = body_contacts_on_device(d["i"], d["j"], self.n, len(i) + int(np.count_nonzero(j >= 0)))
+        d["start"], d["entry"] = body_contacts_on_device(d["i"], d["j"], self.n, entries)
 
     @classmethod
     def from_operator(cls, operator) -> "CudaContactOperator":
@@ -453,10 +463,16 @@ class CudaContactOperator:
         return self
 
     def _copy(self, host: dict) -> None:
+        """The contacts' arrays to the device: the frames shared (:func:`frame_on_device`), i and j in
+        one copy, the radii and levers in another, each other array (start, entry) on its own."""
         self.m = len(host["i"])
-        self.device = {name: frame_on_device(array) if name in SHARED_FRAMES else cuda.to_device(
-            np.ascontiguousarray(array, dtype=np.int64 if name in ("i", "j", "start", "entry") else float))
-            for name, array in host.items()}
+        bodies = cuda.to_device(np.stack([host.pop("i"), host.pop("j")]).astype(np.int64, copy=False))
+        lengths = cuda.to_device(np.stack([host.pop(name) for name in ("radius_i", "radius_j", "lever")]).astype(
+            float, copy=False))
+        self.device = {"i": bodies[0], "j": bodies[1], "radius_i": lengths[0], "radius_j": lengths[1],
+                       "lever": lengths[2]}
+        self.device.update({name: frame_on_device(array) if name in SHARED_FRAMES else cuda.to_device(
+            np.ascontiguousarray(array, dtype=np.int64)) for name, array in host.items()})
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
 
     def geometry(self, s) -> ContactGeometry:

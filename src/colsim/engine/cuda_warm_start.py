@@ -27,17 +27,20 @@ def match_on_device(warm: WarmStart, contacts, n_particles: int) -> np.ndarray:
     out = np.zeros((contacts.m, ROWS_PER_CONTACT))
     if warm.m == 0 or contacts.m == 0:
         return out
-    stored = _pair_keys(warm.i, warm.j, warm.family, n_particles)
+    # three copies to the device: the stored and the new keys, the stored forces, the coefficients
+    keys = cuda.to_device(np.concatenate([_pair_keys(warm.i, warm.j, warm.family, n_particles),
+                                          _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)]))
+    stored, keys = keys[:warm.m], keys[warm.m:]
+    forces = cuda.to_device(np.stack([warm.force, warm.rolling]).astype(float, copy=False))
+    coefficients = cuda.to_device(np.stack([contacts.mu, contacts.mu_r]).astype(float, copy=False))
     size = 1 << int(2 * warm.m - 1).bit_length()       # a power of two >= 2 m
     table_key = full_on_device(size, EMPTY, np.int64)
     table_row = cuda.device_array(size, dtype=np.int64)   # read only where a key was stored
-    _insert_kernel[blocks_for(warm.m), THREADS](cuda.to_device(stored), table_key, table_row)
-    keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
+    _insert_kernel[blocks_for(warm.m), THREADS](stored, table_key, table_row)
     d_out = full_on_device((contacts.m, ROWS_PER_CONTACT), 0.0)
     frames = [frame_on_device(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
-    frames += [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (contacts.mu, contacts.mu_r)]
-    forces = [cuda.to_device(np.ascontiguousarray(array, dtype=float)) for array in (warm.force, warm.rolling)]
-    _match_kernel[blocks_for(contacts.m), THREADS](cuda.to_device(keys), table_key, table_row, *forces, *frames, d_out)
+    _match_kernel[blocks_for(contacts.m), THREADS](keys, table_key, table_row, forces[0], forces[1], *frames,
+                                                   coefficients[0], coefficients[1], d_out)
     return d_out.copy_to_host()
 
 

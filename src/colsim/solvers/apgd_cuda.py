@@ -401,15 +401,17 @@ class CudaIteration:
         m = program.m
         device = (CudaContactOperator.from_operator(program.operator) if program.contacts is None
                   else CudaContactOperator(program.contacts, program.n_unknowns // 6))   # no host operator
-        d_inv_mass, mu, mu_r = (_to_device(array) for array in (inv_mass, program.mu, program.mu_r))
+        bodies = cuda.to_device(np.stack([inv_mass, program.fbar]).astype(float, copy=False))   # one copy each
+        d_inv_mass, fbar = bodies[0], bodies[1]
+        per_contact = cuda.to_device(np.stack([program.mu, program.mu_r, program.gap]).astype(float, copy=False))
+        mu, mu_r, gap = per_contact[0], per_contact[1], per_contact[2]
         diagonal = device.diagonal_on_device(d_inv_mass)
         s = cuda.device_array(5 * m, dtype=np.float64)
         mu_s, mu_r_s = cuda.device_array(m, dtype=np.float64), cuda.device_array(m, dtype=np.float64)
         _scales_kernel[blocks_for(m), THREADS](diagonal, bool(precondition), mu, mu_r, s, mu_s, mu_r_s)
         c = cuda.device_array(5 * m, dtype=np.float64)
-        gradient_on_device(device.geometry(full_on_device(5 * m, 1.0)), _to_device(program.fbar), d_inv_mass,
-                           full_on_device(5 * m, 0.0), c)
-        _offset_kernel[blocks_for(m), THREADS](c, _to_device(program.gap), s)
+        gradient_on_device(device.geometry(full_on_device(5 * m, 1.0)), fbar, d_inv_mass, full_on_device(5 * m, 0.0), c)
+        _offset_kernel[blocks_for(m), THREADS](c, gap, s)
         x = full_on_device(5 * m, 0.0)
         nonzero = full_on_device(1, 0, np.int64)
         if warm_start is not None and np.shape(warm_start) == (m, 5):
@@ -488,7 +490,8 @@ class CudaIteration:
 
     def _scalar(self, index: int) -> float:
         """One of the control array's entries now: read from the device only if a trial step ran since
-        the last read (a solve's lip, backtracks and restarts after its last round: one copy, not three)."""
+        the last read (after :meth:`iterate`, whose rounds end on a read, a solve's lip, backtracks and
+        restarts cost no copy; they cost three before)."""
         if self._stale:
             self._read = self.control.copy_to_host()
             self._stale = False
