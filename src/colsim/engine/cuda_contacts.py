@@ -57,13 +57,13 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
         return (*_no_pairs(), None)
     found = _SweptPairs(state, predicted, margin, slack)
     m = max(found.m, 1)
-    normal, tangent1, tangent2 = (cuda.device_array((m, 3), dtype=np.float64) for _ in range(3))
+    frames = cuda.device_array((3, m, 3), dtype=np.float64)   # normal, tangent1, tangent2: one copy back
     gap = cuda.device_array(m, dtype=np.float64)
     _frames_kernel[blocks_for(state.n), THREADS](found.position, found.radius, found.offsets, found.partners,
-                                                 float(most_recovered), normal, gap, tangent1, tangent2)
-    on_device = tuple(frame[:found.m] for frame in (normal, tangent1, tangent2))
-    j, normal, tangent1, tangent2, gap = (array.copy_to_host()[:found.m] for array in (
-        found.partners, normal, tangent1, tangent2, gap))
+                                                 float(most_recovered), frames[0], gap, frames[1], frames[2])
+    on_device = tuple(frames[f, :found.m] for f in range(3))
+    j, gap = (array.copy_to_host()[:found.m] for array in (found.partners, gap))
+    normal, tangent1, tangent2 = frames.copy_to_host()[:, :found.m]
     return found.i, j, normal, tangent1, tangent2, gap, on_device
 
 
@@ -106,10 +106,11 @@ class _SweptPairs:
         lower, dims, width = _grid(midpoint, reach)
         cells = int(np.prod(dims))
         lower, dims = cuda.to_device(lower), cuda.to_device(dims)   # device arrays: no copies at each launch
-        self.position, self.radius = cuda.to_device(position), cuda.to_device(radius)
-        d_midpoint = cuda.to_device(midpoint)
+        motion = cuda.to_device(np.stack([position, predicted, midpoint]))   # the three in one copy
+        self.position, d_predicted, d_midpoint = motion[0], motion[1], motion[2]
+        self.radius = cuda.to_device(radius)
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
-        args = (self.position, cuda.to_device(predicted), self.radius, d_midpoint, start, listed, lower, dims, width,
+        args = (self.position, d_predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
         counts = full_on_device(n, 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
