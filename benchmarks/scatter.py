@@ -154,6 +154,7 @@ def main(argv=None):
     plan += [{"kind": "tolerance", "value": t} for t in args.tolerances]
     plan += [{"kind": "draw", "value": d} for d in args.draws]
     plan = [run for run in plan if (args.device, run["kind"], run["value"]) not in done]
+    args.record.parent.mkdir(parents=True, exist_ok=True)
 
     def one(run):
         return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon)

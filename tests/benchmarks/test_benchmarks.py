@@ -211,11 +211,12 @@ def test_scatter_collapses_the_column_and_its_perturbed_copies(tmp_path):
     tiny_state_files(tmp_path)
     settings = tmp_path / "settings.yaml"
     settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
+    record_file = tmp_path / "records" / "scatter.jsonl"   # in a folder not there yet
     arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
-                 str(settings), "--tolerances", "1e-6", "--draws", "1", "--record", str(tmp_path / "scatter.jsonl")]
+                 str(settings), "--tolerances", "1e-6", "--draws", "1", "--record", str(record_file)]
     done = benchmarks(*arguments)
     assert done.returncode == 0, done.stderr
-    runs = [json.loads(line) for line in (tmp_path / "scatter.jsonl").read_text().splitlines()]
+    runs = [json.loads(line) for line in record_file.read_text().splitlines()]
     assert sorted(r["kind"] for r in runs) == ["draw", "settings", "tolerance"]
     for r in runs:   # two spheres at rest on the floor stay there: the stack's top at h0 = r0 = 1, its edge
         assert r["steps"] == 5 and r["device"] == "cpu"   # at 0.25 (run-out -0.75), within the overlap
@@ -223,7 +224,7 @@ def test_scatter_collapses_the_column_and_its_perturbed_copies(tmp_path):
         assert abs(r["runout_over_r0"] + 0.75) < 5e-5
     assert "| cpu | 3 |" in done.stdout
     again = benchmarks(*arguments)
-    assert again.returncode == 0 and len((tmp_path / "scatter.jsonl").read_text().splitlines()) == 3
+    assert again.returncode == 0 and len(record_file.read_text().splitlines()) == 3
 
 
 def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp_path):
