@@ -108,11 +108,19 @@ def test_each_bodys_contacts_are_listed_on_the_device_as_on_the_cpu(pile_with_ev
         np.testing.assert_array_equal(entry.copy_to_host(), expected_entry)
 
 
-@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 40_000])
+@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 1000])
 def test_prefix_sums_on_the_device_are_numpys(n):
-    """prefix_sums_on_device: 0 then numpy's cumsum, exactly (integers), across block edges and with
-    more blocks (313 at 40,000) than a block has threads, so each thread of the blocks' scan sums a
-    stretch."""
+    """prefix_sums_on_device: 0 then numpy's cumsum, exactly (integers), across block edges."""
     count = np.random.default_rng(n).integers(0, 9, n).astype(np.int64)
     ours = cuda_operator.prefix_sums_on_device(cuda_operator.cuda.to_device(count)).copy_to_host()
     np.testing.assert_array_equal(ours, np.concatenate([[0], np.cumsum(count)]))
+
+
+@pytest.mark.parametrize("blocks", [5, 300])
+def test_the_blocks_totals_are_scanned_by_one_block(blocks):
+    """The blocks' totals' exclusive running sums, by one block of THREADS threads: more totals than
+    threads (300: each thread sums a stretch of three) as well as fewer."""
+    totals = np.random.default_rng(blocks).integers(0, 1000, blocks).astype(np.int64)
+    on_device = cuda_operator.cuda.to_device(totals)
+    cuda_operator._exclusive_scan_kernel[1, cuda_operator.THREADS](on_device)
+    np.testing.assert_array_equal(on_device.copy_to_host(), np.concatenate([[0], np.cumsum(totals)[:-1]]))
