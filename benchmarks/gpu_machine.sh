@@ -128,10 +128,10 @@ done
 # pour fits one call, so the column is tiled from the r0 = 6 one; the GPU's steps only (the host's 16
 # threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres).
 if [[ "$stages" == *" big "* ]]; then
-    source=.gpu/rest/r0_6_a5_seed1.nc
-    [ -e "$source" ] || source=results/gpu-pour/r0_6_seed1/column.nc
-    echo "big: tiled from ${BIG_SOURCE:-$source}"
+    tiled_from=.gpu/rest/r0_6_a5_seed1.nc
+    [ -e "$tiled_from" ] || tiled_from=results/gpu-pour/r0_6_seed1/column.nc
+    echo "big: tiled from ${BIG_SOURCE:-$tiled_from}"
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu --spheres \
-        --columns "${BIG_SOURCE:-$source}" --tile "${BIG_R0:-13}" \
+        --columns "${BIG_SOURCE:-$tiled_from}" --tile "${BIG_R0:-13}" \
         --steps "${BIG_STEPS:-100}" --cpu-steps 0 || echo "benchmarks gpu (big): failed (exit $?)"
 fi

@@ -89,9 +89,14 @@ def label(r: dict) -> str:
     return f"tolerance {r['value']:g}" if r["kind"] == "tolerance" else f"positions moved, draw {r['value']}"
 
 
+def standard_deviation(values: np.ndarray) -> float:
+    """The sample standard deviation (NaN for fewer than two values)."""
+    return float(np.std(values, ddof=1)) if len(values) > 1 else float("nan")
+
+
 def placed(value: float, values: np.ndarray) -> str:
     """Where value lies in a scatter: standard deviations from its mean, and inside or outside its range."""
-    sd = float(np.std(values, ddof=1)) if len(values) > 1 else float("nan")
+    sd = standard_deviation(values)
     inside = "inside" if values.min() <= value <= values.max() else "outside"
     return f"{value:.3f}: {(value - values.mean()) / sd:+.1f} sd ({inside})"
 
@@ -102,17 +107,16 @@ def report(records: list[dict], compare: list[float] | None) -> None:
         table.row(r["device"], label(r), f"{r['h_inf_over_r0']:.3f}", f"{r['runout_over_r0']:.3f}", r["steps"],
                   f"{r['wall_s']:.0f}", data=r)
     print()
-    columns = ["device", "runs", "h_inf/r0 range", "mean (sd)", "run-out/r0 range", "mean (sd)"]
+    columns = ["device", "runs", "h_inf/r0 range", "h_inf/r0 mean (sd)", "run-out/r0 range", "run-out/r0 mean (sd)"]
     if compare:
         columns += ["compared h_inf/r0: sd from mean", "compared run-out: sd from mean"]
     table = record.table(columns, title="scatter")
     for device in sorted({r["device"] for r in records}):
         runs = [r for r in records if r["device"] == device]
         row = [device, len(runs)]
-        for i, name in enumerate(("h_inf_over_r0", "runout_over_r0")):
+        for name in ("h_inf_over_r0", "runout_over_r0"):
             values = np.array([r[name] for r in runs])
-            sd = float(np.std(values, ddof=1)) if len(values) > 1 else float("nan")
-            row += [f"{values.min():.3f}-{values.max():.3f}", f"{values.mean():.3f} ({sd:.3f})"]
+            row += [f"{values.min():.3f}-{values.max():.3f}", f"{values.mean():.3f} ({standard_deviation(values):.3f})"]
         if compare:
             row += [placed(value, np.array([r[name] for r in runs]))
                     for value, name in zip(compare, ("h_inf_over_r0", "runout_over_r0"))]

@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device, share_frame
+from .cuda_operator import (THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device, share_frame,
+                            sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -246,11 +247,4 @@ def _pairs_kernel(position, predicted, radius, midpoint, start, listed, lower, d
     if not write:
         counts[i] = found
         return
-    first = offsets[i]
-    for k in range(first + 1, first + found):   # insertion sort: a particle has a dozen partners or so
-        j = partners[k]
-        m = k - 1
-        while m >= first and partners[m] > j:
-            partners[m + 1] = partners[m]
-            m -= 1
-        partners[m + 1] = j
+    sort_range_on_device(partners, offsets[i], offsets[i] + found)   # a particle has a dozen partners or so

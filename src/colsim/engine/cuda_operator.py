@@ -385,19 +385,25 @@ def _place_entries_kernel(i, j, start, filled, entry):
             entry[start[j[k]] + cuda.atomic.add(filled, j[k], 1)] = 2 * k + 1
 
 
+@cuda.jit(device=True)
+def sort_range_on_device(values, first, end):
+    """values[first:end] in increasing order, in place, by one thread: an insertion sort (for the few
+    tens of entries of one body's contacts or one particle's partners)."""
+    for k in range(first + 1, end):
+        value = values[k]
+        f = k - 1
+        while f >= first and values[f] > value:
+            values[f + 1] = values[f]
+            f -= 1
+        values[f + 1] = value
+
+
 @cuda.jit
 def _sort_bodies_kernel(start, entry):
-    """Each body's entries in increasing order (contact order), one body a thread: an insertion sort
-    (a body has a few tens of contacts at most)."""
+    """Each body's entries in increasing order (contact order), one body a thread."""
     b = cuda.grid(1)
     if b < start.shape[0] - 1:
-        for e in range(start[b] + 1, start[b + 1]):
-            value = entry[e]
-            f = e - 1
-            while f >= start[b] and entry[f] > value:
-                entry[f + 1] = entry[f]
-                f -= 1
-            entry[f + 1] = value
+        sort_range_on_device(entry, start[b], start[b + 1])
 
 
 def prefix_sums_on_device(count):
