@@ -36,7 +36,7 @@ def first_step(column: Path):
     found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
                    base_margin(state, settings), settings.detection_slack)
     forces = io.contact_forces_of(source)
-    guess = None if forces is None else forces.match(found, state.n)
+    guess = None if forces is None else forces.match(found)
     return assemble(state, found, settings.dt, settings.gravity), guess, state.n
 
 

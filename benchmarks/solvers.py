@@ -178,7 +178,7 @@ def main(argv=None):
             if clarabel is not None:
                 reference, seconds, peak = measure(clarabel, program)
                 report("clarabel", reference, seconds, peak, spheres=state.n, stage=stage)
-            guess = warm.match(found, current.n) if stage == "mid" else None
+            guess = warm.match(found) if stage == "mid" else None
             for label, solver in (("apgd", apgd), ("admm", admm)):
                 if solver is None:
                     continue

@@ -93,13 +93,13 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         np.testing.assert_array_equal(gpu.normal[pairs][-3:], renormal[2])
     # a first attempt's frames stay on the device for the warm start and the solver: the same numbers
     # as the host's, found there without a copy (a redo's pairs are reordered: copied when asked for)
-    from colsim.engine.cuda_operator import _frames_on_device
+    from colsim.engine.cuda_operator import kept_device_copy
 
     for name in ("normal", "tangent1", "tangent2"):
         host = getattr(gpu, name)
-        assert (id(host) in _frames_on_device) is not redo
+        assert (kept_device_copy(host) is not None) is not redo
         if not redo:
-            np.testing.assert_array_equal(_frames_on_device[id(host)].copy_to_host(), host)
+            np.testing.assert_array_equal(kept_device_copy(host).copy_to_host(), host)
 
 
 def test_the_gpu_measures_the_cpu_s_overlaps():

@@ -47,19 +47,24 @@ def test_no_contacts_give_zero_forces():
     assert gpu.apply(np.ones(24)).shape == (0,) and gpu.diagonal(np.ones(24)).shape == (0, 5)
 
 
-def test_a_frame_goes_to_the_device_once_and_goes_with_its_array():
+def test_an_array_goes_to_the_device_once_and_goes_with_its_array():
     """The warm start's matching and the solver's operator share one device copy of each frame of
-    an attempt's contacts: the same host array gives the same device array, another array its own,
-    and the copy is dropped with the host array."""
+    an attempt's contacts (and of its pair keys, int64, kept as they are): the same host array gives
+    the same device array, another array its own, and the copy is dropped with the host array."""
     normal = np.random.default_rng(6).normal(size=(40, 3))
-    first = cuda_operator.frame_on_device(normal)
-    assert cuda_operator.frame_on_device(normal) is first and np.array_equal(first.copy_to_host(), normal)
+    first = cuda_operator.device_copy_of(normal)
+    assert cuda_operator.device_copy_of(normal) is first and np.array_equal(first.copy_to_host(), normal)
+    assert cuda_operator.kept_device_copy(normal) is first
     other = normal.copy()
-    assert cuda_operator.frame_on_device(other) is not first
+    assert cuda_operator.kept_device_copy(other) is None
+    assert cuda_operator.device_copy_of(other) is not first
+    keys = np.arange(-3, 37, dtype=np.int64) << 32
+    assert cuda_operator.device_copy_of(keys).dtype == np.int64
+    np.testing.assert_array_equal(cuda_operator.device_copy_of(keys).copy_to_host(), keys)
     key = id(normal)
     del normal
     gc.collect()
-    assert key not in cuda_operator._frames_on_device
+    assert key not in cuda_operator._device_copies
 
 
 @pytest.mark.parametrize("shape, value, dtype", [(300, 0.0, np.float64), ((7, 5), 2.5, np.float64),

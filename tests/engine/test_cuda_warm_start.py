@@ -4,8 +4,12 @@ cones. On numba's CUDA simulator here (conftest sets NUMBA_ENABLE_CUDASIM=1 unle
 
 Bound 1e-14 of the largest force: the same products, summed over three components in the same order,
 and the same projection (the CPU's vectorised, the GPU's the scalar code it mirrors)."""
+import dataclasses
+
 import numpy as np
 import pytest
+
+from colsim.engine.contacts import Contacts
 
 from colsim.solvers import WarmStart
 
@@ -15,7 +19,7 @@ pytest.importorskip("colsim.engine.cuda_warm_start", reason="numba.cuda is not i
 
 
 def _both(warm: WarmStart, contacts, n: int):
-    gpu, cpu = warm.match(contacts, n, "cuda"), warm.match(contacts, n)
+    gpu, cpu = warm.match(contacts, "cuda").copy_to_host(), warm.match(contacts)
     np.testing.assert_allclose(gpu, cpu, rtol=0, atol=1e-14 * max(np.abs(cpu).max(), 1.0))
     return gpu, cpu
 
@@ -45,4 +49,43 @@ def test_the_gpu_matches_the_cpu_s_pairs_and_forces(solver_pile):
 def test_nothing_stored_or_no_contacts_give_zeros(solver_pile):
     _, found = collapse_program(solver_pile)
     empty = WarmStart(*(np.zeros(0, dtype=np.int64) for _ in range(3)), np.zeros((0, 3)), np.zeros((0, 3)))
-    assert np.all(empty.match(found, solver_pile.n, "cuda") == 0.0)
+    assert np.all(empty.match(found, "cuda").copy_to_host() == 0.0)
+    none = WarmStart.from_step(found, np.ones((found.m, 5)))
+    nothing = Contacts(**{f.name: getattr(found, f.name)[:0] for f in dataclasses.fields(found)})
+    assert none.match(nothing, "cuda").copy_to_host().shape == (0, 5)
+
+
+def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monkeypatch):
+    """from_step on the GPU turns the forces into the global frame there (the CPU's sums; bound 4
+    ulps of the largest force, for the multiply-adds a GPU fuses) and keeps them there: read on the
+    host, they are the CPU's record; matched on the GPU, they give the CPU's match (1e-14, as
+    above); and a match copies to the device only the new contacts' keys, once (the next step finds
+    them there), and their coefficients: 8 + 16 bytes a contact, where a host record's matching
+    copies its stored keys and forces too (8 + 48 more)."""
+    from numba import cuda
+
+    from colsim.engine.cuda_warm_start import DeviceWarmStart
+
+    _, found = collapse_program(solver_pile)
+    forces = np.random.default_rng(47).uniform(0.0, 1.0, (found.m, 5)) * [1.0, 0.8, 0.8, 0.2, 0.2]
+    host = WarmStart.from_step(found, forces)
+    carried = WarmStart.from_step(found, forces, "cuda")   # the forces and frames go to the device here
+    assert isinstance(carried, DeviceWarmStart) and carried.m == host.m
+    largest = 4 * np.finfo(float).eps * np.abs(forces).max()
+    for name in ("force", "rolling"):
+        np.testing.assert_allclose(getattr(carried, name), getattr(host, name), rtol=0, atol=largest)
+    for name in ("i", "j", "family"):
+        np.testing.assert_array_equal(getattr(carried, name), getattr(host, name))
+    np.testing.assert_allclose(carried.match(found), host.match(found), rtol=0, atol=1e-14)   # on the CPU
+
+    copied = []
+    to_device = cuda.to_device
+    monkeypatch.setattr(cuda, "to_device", lambda array, *args, **kwargs: (
+        copied.append(np.asarray(array).nbytes), to_device(array, *args, **kwargs))[1])
+    again = WarmStart.from_step(found, forces, "cuda")      # the same arrays: nothing copied
+    first, second = (again.match(found, "cuda").copy_to_host() for _ in range(2))
+    monkeypatch.undo()
+    assert copied == [8 * found.m, 16 * found.m, 16 * found.m]
+    expected = host.match(found)
+    np.testing.assert_allclose(first, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+    assert np.array_equal(first, second)

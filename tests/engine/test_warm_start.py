@@ -12,12 +12,12 @@ def test_warm_start_by_pair(solver_pile):
     cold = ApgdSolver().solve(program)
     warm = WarmStart.from_step(found, cold.forces)
     # the stored forces come back in the same frames, and a restart from them is immediate
-    np.testing.assert_allclose(warm.match(found, solver_pile.n), cold.forces, atol=1e-12 * np.abs(cold.forces).max())
-    again = ApgdSolver().solve(program, warm_start=warm.match(found, solver_pile.n))
+    np.testing.assert_allclose(warm.match(found), cold.forces, atol=1e-12 * np.abs(cold.forces).max())
+    again = ApgdSolver().solve(program, warm_start=warm.match(found))
     assert again.info["start"] == "warm" and again.iterations < cold.iterations / 3
     # contacts that were not there before start from zero
     fewer = WarmStart(warm.i[:-5], warm.j[:-5], warm.family[:-5], warm.force[:-5], warm.rolling[:-5])
-    guess = fewer.match(found, solver_pile.n)
+    guess = fewer.match(found)
     assert np.count_nonzero(np.all(guess == 0, axis=1)) >= 5
 
 
@@ -30,7 +30,7 @@ def test_warm_start_survives_renumbering(solver_pile):
     keep[::3] = False
     column = solver_pile.subset(keep)
     _, found_after = collapse_program(column)
-    guess = warm.subset(keep).match(found_after, column.n)
+    guess = warm.subset(keep).match(found_after)
     # the same pair before and after, by the particles' old numbers
     old = np.flatnonzero(keep)
     before = {(i, j, f): row for i, j, f, row in zip(found.i, found.j, found.family, forces)}
@@ -83,3 +83,17 @@ def test_from_step_is_the_frames_sum_to_the_bit(solver_pile):
     expected_rolling = forces[:, 3:4] * found.tangent1 + forces[:, 4:5] * found.tangent2
     assert np.array_equal(warm.force, expected_force) and np.array_equal(warm.rolling, expected_rolling)
     assert np.array_equal(warm.i, found.i) and np.array_equal(warm.j, found.j)
+
+
+def test_pair_keys_tell_every_pair_apart():
+    """One key a pair of bodies, whatever the particles' number: particle pairs, the floor and the
+    cylinder (wall j = -1, told apart by family) and fixed spheres (j = -2 - k) of the same particle
+    all differ, and the same pair gives the same key."""
+    from colsim.engine.state import CYLINDER, FLOOR, PARTICLE, fixed_code, pair_keys
+
+    i = np.array([0, 0, 0, 0, 0, 0, 1, 7, 2**31 - 9])
+    j = np.array([1, 2, -1, -1, fixed_code(0), fixed_code(1), 0, fixed_code(2**31 - 11), 2**31 - 10])
+    family = np.array([PARTICLE, PARTICLE, FLOOR, CYLINDER, PARTICLE, PARTICLE, PARTICLE, PARTICLE, PARTICLE])
+    keys = pair_keys(i, j, family)
+    assert keys.dtype == np.int64 and len(np.unique(keys)) == len(keys) and np.all(keys >= 0)
+    assert np.array_equal(pair_keys(i, j, family), keys)

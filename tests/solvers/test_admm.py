@@ -24,7 +24,7 @@ def test_warm_start_from_the_solution_converges_at_once(solver_pile):
     program, found = collapse_program(solver_pile)
     solver = AdmmSolver()
     cold = solver.solve(program)
-    guess = WarmStart.from_step(found, cold.forces).match(found, solver_pile.n)
+    guess = WarmStart.from_step(found, cold.forces).match(found)
     warm = solver.solve(program, warm_start=guess)
     assert warm.info["start"] == "warm" and warm.iterations < cold.iterations
     assert solver.uses_warm_start

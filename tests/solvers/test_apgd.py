@@ -80,7 +80,7 @@ def test_length_floor_bounds_each_gap_in_diameters(solver_pile):
     tolerance times that length (here 1e-5 x 0.1 d = 1e-6 d, far inside the 1 % overlap check)."""
     program, found = collapse_program(solver_pile)
     exact = ClarabelSolver(tolerance=1e-10).solve(program)
-    warm = WarmStart.from_step(found, exact.forces).match(found, solver_pile.n) * 0.9   # an imperfect start
+    warm = WarmStart.from_step(found, exact.forces).match(found) * 0.9   # an imperfect start
     d = 2 * solver_pile.radius.mean()
     free = ApgdSolver().solve(program, warm_start=warm)
     floored = ApgdSolver(length_floor=0.1).solve(program, warm_start=warm)
@@ -106,7 +106,7 @@ def test_overlap_tolerance_bounds_the_largest_violation_in_diameters(solver_pile
     relative tolerance; the step stops no later, and no gap is off by more than the tolerance."""
     program, found = collapse_program(solver_pile)
     exact = ClarabelSolver(tolerance=1e-10).solve(program)
-    warm = WarmStart.from_step(found, exact.forces).match(found, solver_pile.n) * 0.9
+    warm = WarmStart.from_step(found, exact.forces).match(found) * 0.9
     d = 2 * solver_pile.radius.mean()
     tight = ApgdSolver(length_floor=0.1).solve(program, warm_start=warm)
     loose = ApgdSolver(length_floor=0.1, overlap_tolerance=1e-4).solve(program, warm_start=warm)

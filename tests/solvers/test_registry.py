@@ -14,7 +14,7 @@ from solver_cases import COLLAPSE, collapse_program
 def test_auto_picks_apgd_for_small_steps_warm_or_cold(solver_pile):
     program, found = collapse_program(solver_pile)
     reference = ClarabelSolver().solve(program)
-    warm = WarmStart.from_step(found, reference.forces).match(found, solver_pile.n)
+    warm = WarmStart.from_step(found, reference.forces).match(found)
     assert AutoSolver().solve(program, warm_start=warm).backend == "apgd"
     assert AutoSolver(scaled_time_step=0.04).solve(program, warm_start=warm).backend == "apgd"
     assert AutoSolver(scaled_time_step=0.08).solve(program, warm_start=warm).backend == "clarabel"

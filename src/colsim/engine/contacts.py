@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .compiled import HAVE_NUMBA, numba, prange
-from .state import CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, rolling_lever
+from .state import (CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, pair_keys,
+                    rolling_lever)
 
 WALL = -1  # index of the other body for a particle-wall contact
 
@@ -51,6 +53,12 @@ class Contacts:
     @property
     def m(self) -> int:
         return len(self.i)
+
+    @cached_property
+    def keys(self) -> np.ndarray:
+        """(m,) int64: each contact's pair of bodies as one number (:func:`colsim.engine.state.pair_keys`),
+        made once (a step's matching and the next step's both take them: the contacts never change)."""
+        return pair_keys(self.i, self.j, self.family)
 
     def particle_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """(i, j): the contacts between two moving particles (not a wall, not a fixed sphere)."""

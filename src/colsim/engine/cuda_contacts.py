@@ -26,8 +26,8 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import (THREADS, blocks_for, cuda, full_on_device, prefix_sums_on_device, share_frame,
-                            sort_range_on_device)
+from .cuda_operator import (THREADS, blocks_for, cuda, device_copy_of, full_on_device, keep_device_copy,
+                            prefix_sums_on_device, sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -74,7 +74,7 @@ def share_frames(frames, pair_frames, wall_frames) -> None:
     host: the pairs' rows from detection's device arrays `pair_frames` (a copy on the device), the
     few others' from `wall_frames` (host arrays, the three in one copy), so that the warm start's
     matching and the solver's operator find them there
-    (:func:`colsim.engine.cuda_operator.frame_on_device`), the same numbers."""
+    (:func:`colsim.engine.cuda_operator.device_copy_of`), the same numbers."""
     walls = len(wall_frames[0])
     if walls:   # the three in one copy from the host
         wall_frames = cuda.to_device(np.ascontiguousarray(np.stack(wall_frames), dtype=np.float64))
@@ -85,7 +85,7 @@ def share_frames(frames, pair_frames, wall_frames) -> None:
             on_device[:rows].copy_to_device(pairs)
         if walls:
             on_device[rows:].copy_to_device(wall_frames[f])
-        share_frame(frame, on_device)
+        keep_device_copy(frame, on_device)
 
 
 def _no_pairs():
@@ -106,10 +106,10 @@ class _SweptPairs:
         midpoint, reach = swept_midpoints(state, predicted, margin, slack)
         lower, dims, width = _grid(midpoint, reach)
         cells = int(np.prod(dims))
-        lower, dims = cuda.to_device(lower), cuda.to_device(dims)   # device arrays: no copies at each launch
+        lower, dims = tuple(float(x) for x in lower), tuple(int(c) for c in dims)   # by value: no copies
         motion = cuda.to_device(np.stack([position, predicted, midpoint]))   # the three in one copy
         self.position, d_predicted, d_midpoint = motion[0], motion[1], motion[2]
-        self.radius = cuda.to_device(radius)
+        self.radius = device_copy_of(radius)   # the particles' radii never change: one copy a run
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
         args = (self.position, d_predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
@@ -168,7 +168,7 @@ def _grid(midpoint: np.ndarray, reach: float):
 def _cell_lists(midpoint, lower, dims, width, cells: int):
     """(start (cells + 1,), listed (n,)) on the device: the particles of cell c are
     listed[start[c]:start[c + 1]]; lower (3,), dims (3,): the grid's corner and cells along each axis,
-    on the device (`cells` their product)."""
+    tuples (`cells` their product)."""
     n = midpoint.shape[0]
     cell = cuda.device_array(n, dtype=np.int64)
     count = full_on_device(cells, 0, np.int64)

@@ -49,33 +49,38 @@ def blocks_for(count: int) -> int:
     return max(1, math.ceil(count / THREADS))
 
 
-#: the contacts' frames already on the device, by the host array's identity (:func:`frame_on_device`)
-_frames_on_device: dict = {}
+#: device copies of host arrays that never change once made, by the host array's identity
+#: (:func:`device_copy_of`)
+_device_copies: dict = {}
 
 #: the contact arrays a step never changes once made, which may share one device copy
 SHARED_FRAMES = ("normal", "tangent1", "tangent2")
 
 
-def frame_on_device(array: np.ndarray):
-    """The device's copy of one of a step's contact frames (m, 3), made at the first call for that
-    host array and shared by the later ones (the warm start's matching and the solver's operator
-    both take the frames: one copy from the host an attempt instead of two). Only for arrays that
-    are not changed after they are made (detection's :data:`SHARED_FRAMES`); the copy goes when the
-    host array does."""
-    key = id(array)
-    copy = _frames_on_device.get(key)
+def device_copy_of(array: np.ndarray):
+    """The device's copy of a host array that is not changed after it is made (a step's contact
+    frames, its contacts' pair keys, the solver's forces), made at the first call for that array
+    (or given by :func:`keep_device_copy`) and shared by the later ones: the warm start's matching,
+    the solver's operator and the next step's matching take the same copy, one copy from the host
+    at most. The copy goes when the host array does."""
+    copy = _device_copies.get(id(array))
     if copy is None:
-        copy = cuda.to_device(np.ascontiguousarray(array, dtype=float))
-        share_frame(array, copy)
+        copy = cuda.to_device(np.ascontiguousarray(array))
+        keep_device_copy(array, copy)
     return copy
 
 
-def share_frame(array: np.ndarray, copy) -> None:
-    """Make `copy`, a device array that holds the same numbers as the host array `array` (m, 3), the
-    one :func:`frame_on_device` gives for it (detection's frames, made on the device: no copy back)."""
+def kept_device_copy(array: np.ndarray):
+    """The device copy of `array` that :func:`device_copy_of` would give, if one is kept (else None)."""
+    return _device_copies.get(id(array))
+
+
+def keep_device_copy(array: np.ndarray, copy) -> None:
+    """Make `copy`, a device array that holds the same numbers as the host array `array`, the one
+    :func:`device_copy_of` gives for it (arrays made on the device and copied back: no copy there)."""
     key = id(array)
-    _frames_on_device[key] = copy
-    weakref.finalize(array, _frames_on_device.pop, key, None)
+    _device_copies[key] = copy
+    weakref.finalize(array, _device_copies.pop, key, None)
 
 
 @cuda.jit
@@ -469,7 +474,7 @@ class CudaContactOperator:
         return self
 
     def _copy(self, host: dict) -> None:
-        """The contacts' arrays to the device: the frames shared (:func:`frame_on_device`), i and j in
+        """The contacts' arrays to the device: the frames shared (:func:`device_copy_of`), i and j in
         one copy, the radii and levers in another, each other array (start, entry) on its own."""
         self.m = len(host["i"])
         bodies = cuda.to_device(np.stack([host.pop("i"), host.pop("j")]).astype(np.int64, copy=False))
@@ -477,7 +482,7 @@ class CudaContactOperator:
             float, copy=False))
         self.device = {"i": bodies[0], "j": bodies[1], "radius_i": lengths[0], "radius_j": lengths[1],
                        "lever": lengths[2]}
-        self.device.update({name: frame_on_device(array) if name in SHARED_FRAMES else cuda.to_device(
+        self.device.update({name: device_copy_of(array) if name in SHARED_FRAMES else cuda.to_device(
             np.ascontiguousarray(array, dtype=np.int64)) for name, array in host.items()})
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
 

@@ -1,47 +1,104 @@
-"""The warm start's matching on one GPU (issue 46, item 3): :meth:`colsim.engine.warm_start.WarmStart.match`
-with the last step's pairs in a hash table on the device instead of a sorted array on the host.
+"""The warm start on one GPU (issue 46, item 3): :meth:`colsim.engine.warm_start.WarmStart.match`
+with the last step's pairs in a hash table on the device instead of a sorted array on the host, and
+the step's forces carried to the next step there (:class:`DeviceWarmStart`).
 
-The stored pairs' keys (the CPU's: particle i and the other body, one int64 each) go into an
-open-addressing table of a power-of-two size at least twice their number (linear probing, each
-slot claimed by an atomic compare-and-swap), with their row beside them. Then one thread a new
-contact looks its key up, and where it is found re-expresses the stored force and rolling force in
-the contact's frame and projects them onto its cone (the same scalar projection the CPU's match
-runs, :func:`colsim.engine.cones.project_point`). A key is stored once (a pair carries one force),
-so which slot holds it does not change the answer: the same every run, whatever the order of the
-atomic operations. Without a GPU the kernels run on numba's CUDA simulator (the tests).
+The stored pairs' keys (:func:`colsim.engine.state.pair_keys`) go into an open-addressing table of
+a power-of-two size at least twice their number (linear probing, each slot claimed by an atomic
+compare-and-swap), with their row beside them. Then one thread a new contact looks its key up, and
+where it is found re-expresses the stored force and rolling force in the contact's frame and
+projects them onto its cone (the same scalar projection the CPU's match runs,
+:func:`colsim.engine.cones.project_point`). A key is stored once (a pair carries one force), so which
+slot holds it does not change the answer: the same every run, whatever the order of the atomic
+operations. The matched forces stay on the device, where the solver's first iterate takes them.
+
+What a step leaves for the next also stays there: its forces turned into the global frame on the
+device, from the solver's forces and the contacts' frames already there, and its contacts' keys,
+which went to the device for the step's own matching
+(:func:`colsim.engine.cuda_operator.device_copy_of`). So a step's matching copies to the device
+only its new contacts' keys and coefficients (24 bytes a contact), and nothing back; before, the
+stored keys and forces went out and the matched forces came back and went out again (153 bytes a
+contact, four more copies). Without a GPU the kernels run on numba's CUDA simulator (the tests).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .cuda_operator import THREADS, blocks_for, cuda, frame_on_device, full_on_device, project_point_on_device
+from .cuda_operator import THREADS, blocks_for, cuda, device_copy_of, full_on_device, project_point_on_device
+from .operator import global_force_row
 from .program import ROWS_PER_CONTACT
-from .warm_start import WarmStart, _pair_keys
+from .state import pair_keys
+from .warm_start import WarmStart
 
 EMPTY = -1   # a free slot of the table (keys are >= 0)
 
+_global_force_row = cuda.jit(device=True)(getattr(global_force_row, "py_func", global_force_row))
 
-def match_on_device(warm: WarmStart, contacts, n_particles: int) -> np.ndarray:
+
+class DeviceWarmStart(WarmStart):
+    """A :class:`WarmStart` whose forces are on the device: i, j, family (m,) on the host as the
+    record's, keys (m,) the pairs' keys on the host (their device copy made by the matching that
+    took them, :func:`colsim.engine.cuda_operator.device_copy_of`), on_device (2, m, 3) the force and
+    rolling force in the global frame. `force` and `rolling` are copied to the host when first read
+    (a checkpoint, a file, a match on the CPU); the GPU's matching reads them where they are."""
+
+    def __init__(self, i, j, family, keys, on_device):
+        self.i, self.j, self.family, self.keys, self.on_device = i, j, family, keys, on_device
+        self._on_host = None
+
+    def _host(self) -> np.ndarray:
+        if self._on_host is None:
+            self._on_host = self.on_device.copy_to_host()
+        return self._on_host
+
+    force = property(lambda self: self._host()[0], doc="(m, 3) the force in the global frame (copied once).")
+    rolling = property(lambda self: self._host()[1], doc="(m, 3) the rolling force in the global frame.")
+
+
+def carried_on_device(contacts, forces: np.ndarray) -> DeviceWarmStart:
+    """:meth:`WarmStart.from_step` of m > 0 `contacts` and their forces (m, 5) on the GPU: the forces
+    from their device copy (the solver's, when it solved on the GPU: no copy), turned by the frames'
+    (detection's) in the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds)."""
+    m = contacts.m
+    frames = [device_copy_of(frame) for frame in (contacts.normal, contacts.tangent1, contacts.tangent2)]
+    on_device = cuda.device_array((2, m, 3), dtype=np.float64)
+    _global_forces_kernel[blocks_for(m), THREADS](device_copy_of(np.ascontiguousarray(forces, dtype=float)), *frames,
+                                                  on_device[0], on_device[1])
+    return DeviceWarmStart(contacts.i, contacts.j, contacts.family, contacts.keys, on_device)
+
+
+def match_on_device(warm: WarmStart, contacts):
     """(m, 5) = :meth:`WarmStart.match` (the stored forces of the pairs in `contacts`, in their frames,
-    projected onto their cones; zeros for new pairs), matched on the GPU."""
-    out = np.zeros((contacts.m, ROWS_PER_CONTACT))
+    projected onto their cones; zeros for new pairs), matched on the GPU: a device array. The new
+    contacts' keys go to the device once (:func:`colsim.engine.cuda_operator.device_copy_of`: the next
+    step finds them there), and their coefficients; a :class:`DeviceWarmStart`'s keys and forces are
+    there already, a host one's go in two copies."""
+    out = full_on_device((contacts.m, ROWS_PER_CONTACT), 0.0)
     if warm.m == 0 or contacts.m == 0:
         return out
-    # three copies to the device: the stored and the new keys, the stored forces, the coefficients
-    keys = cuda.to_device(np.concatenate([_pair_keys(warm.i, warm.j, warm.family, n_particles),
-                                          _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)]))
-    stored, keys = keys[:warm.m], keys[warm.m:]
-    forces = cuda.to_device(np.stack([warm.force, warm.rolling]).astype(float, copy=False))
+    keys = device_copy_of(contacts.keys)
+    if isinstance(warm, DeviceWarmStart):
+        stored, forces = device_copy_of(warm.keys), warm.on_device
+    else:
+        stored = cuda.to_device(pair_keys(warm.i, warm.j, warm.family))
+        forces = cuda.to_device(np.stack([warm.force, warm.rolling]).astype(float, copy=False))
     coefficients = cuda.to_device(np.stack([contacts.mu, contacts.mu_r]).astype(float, copy=False))
     size = 1 << int(2 * warm.m - 1).bit_length()       # a power of two >= 2 m
     table_key = full_on_device(size, EMPTY, np.int64)
     table_row = cuda.device_array(size, dtype=np.int64)   # read only where a key was stored
     _insert_kernel[blocks_for(warm.m), THREADS](stored, table_key, table_row)
-    d_out = full_on_device((contacts.m, ROWS_PER_CONTACT), 0.0)
-    frames = [frame_on_device(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
+    frames = [device_copy_of(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
     _match_kernel[blocks_for(contacts.m), THREADS](keys, table_key, table_row, forces[0], forces[1], *frames,
-                                                   coefficients[0], coefficients[1], d_out)
-    return d_out.copy_to_host()
+                                                   coefficients[0], coefficients[1], out)
+    return out
+
+
+@cuda.jit
+def _global_forces_kernel(forces, normal, tangent1, tangent2, force, rolling):
+    """Contact k's force (m, 3) and rolling force (m, 3) in the global frame from its forces (m, 5)
+    (:func:`colsim.engine.operator.global_forces`), one contact a thread."""
+    k = cuda.grid(1)
+    if k < force.shape[0]:
+        _global_force_row(k, forces, normal, tangent1, tangent2, force, rolling)
 
 
 @cuda.jit(device=True)

@@ -57,14 +57,20 @@ def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, lever, work):
             work[k, 6 + d] = rj[k] * sliding + rolling
 
 
+def global_force_row(k, forces, nrm, t1, t2, force, rolling):
+    """Contact k's row of :func:`global_forces` (scalar code: compiled by numba, and for the GPU by
+    numba.cuda, :mod:`colsim.engine.cuda_warm_start`)."""
+    for d in range(3):
+        force[k, d] = forces[k, 0] * nrm[k, d] + forces[k, 1] * t1[k, d] + forces[k, 2] * t2[k, d]
+        rolling[k, d] = forces[k, 3] * t1[k, d] + forces[k, 4] * t2[k, d]
+
+
 def global_forces(forces, nrm, t1, t2, force, rolling):
     """force (m, 3) = p n + q1 t1 + q2 t2 and rolling (m, 3) = r1 t1 + r2 t2: the contacts' forces
     (m, 5) = (p, q1, q2, r1, r2) in the global frame, one pass (numpy's broadcast form made eight
     (m, 3) temporaries: 17 ms at 245,000 contacts); summed in the same order, so the same bits."""
     for k in prange(len(force)):
-        for d in range(3):
-            force[k, d] = forces[k, 0] * nrm[k, d] + forces[k, 1] * t1[k, d] + forces[k, 2] * t2[k, d]
-            rolling[k, d] = forces[k, 3] * t1[k, d] + forces[k, 4] * t2[k, d]
+        global_force_row(k, forces, nrm, t1, t2, force, rolling)
 
 
 def apply_transpose(z, s, nrm, t1, t2, ri, rj, lever, start, entry, work, out):
@@ -148,6 +154,7 @@ if HAVE_NUMBA:
     apply_transpose = _parallel(apply_transpose)
     apply_gradient = _parallel(apply_gradient)
     jacobian_diagonal = _parallel(jacobian_diagonal)
+    global_force_row = numba.njit(cache=True, inline="always")(global_force_row)
     global_forces = _parallel(global_forces)
 
 

@@ -33,11 +33,11 @@ class ParticleState:
     time: float = 0.0
 
     def __post_init__(self):
-        self.position = np.ascontiguousarray(self.position, dtype=float).reshape(-1, 3)
+        self.position = _contiguous(self.position, (-1, 3))
         n = len(self.position)
-        self.velocity = np.ascontiguousarray(self.velocity, dtype=float).reshape(n, 3)
-        self.angular_velocity = np.ascontiguousarray(self.angular_velocity, dtype=float).reshape(n, 3)
-        self.radius = np.ascontiguousarray(self.radius, dtype=float).reshape(n)
+        self.velocity = _contiguous(self.velocity, (n, 3))
+        self.angular_velocity = _contiguous(self.angular_velocity, (n, 3))
+        self.radius = _contiguous(self.radius, (n,))
         if n and np.any(self.radius <= 0):
             raise ValueError("every particle radius must be positive")
         if self.density <= 0:
@@ -109,9 +109,32 @@ class FixedSpheres:
         return len(self.radius)
 
 
+def _contiguous(array, shape: tuple) -> np.ndarray:
+    """`array` as a contiguous float64 array of `shape` (-1: any length): the same object when it is
+    one already, so that a state made from another (dataclasses.replace) shares its unchanged arrays,
+    and their device copies (:func:`colsim.engine.cuda_operator.device_copy_of`: the radii)."""
+    array = np.ascontiguousarray(array, dtype=float)
+    reshaped = array.reshape(shape)
+    return array if reshaped.shape == array.shape else reshaped
+
+
 def fixed_code(k: np.ndarray) -> np.ndarray:
     """The body index j = -2 - k of a contact with fixed sphere k (and back: k = -2 - j)."""
     return -2 - np.asarray(k, dtype=np.int64)
+
+
+#: the pair keys' codes of the other body from here on: walls, then fixed spheres (:func:`pair_keys`)
+OTHER_BODIES = 1 << 31
+
+
+def pair_keys(i, j, family) -> np.ndarray:
+    """(m,) int64: one number for each contact's pair of bodies, particle i and its other body j
+    (a particle, a wall of `family`, or fixed sphere -2 - j), the same whatever the number of
+    particles; i, j and the fixed spheres' k below 2^31 - 8."""
+    j = np.asarray(j, dtype=np.int64)
+    other = np.where(j >= 0, j, np.where(j == -1, OTHER_BODIES + np.asarray(family, dtype=np.int64),
+                                         OTHER_BODIES + 8 + fixed_code(j)))
+    return np.asarray(i, dtype=np.int64) * (1 << 32) + other
 
 
 @dataclass(frozen=True)

@@ -139,7 +139,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         t1 = time.perf_counter()
         program = assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
-        guess = None if start_from is None else start_from.match(found, state.n, solver.device)
+        guess = None if start_from is None else start_from.match(found, solver.device)
         t3 = time.perf_counter()
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
         new_state = _advance(state, solution.increments, settings.dt)
@@ -161,7 +161,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
         if solver.uses_warm_start:   # the redo's contacts hold the attempt's, with the missed ones added
-            start_from = WarmStart.from_step(found, solution.forces)
+            start_from = WarmStart.from_step(found, solution.forces, solver.device)
     else:
         raise OverlapError(
             f"step {step_number}: largest overlap {overlap.largest:.3g} exceeds the tolerance "
@@ -219,7 +219,7 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
     for k in range(first_step + 1, first_step + n_steps + 1):
         result = step(state, settings, solver, k, carry.warm_start, carry.margin, upcoming)
         upcoming = result.upcoming
-        warm = (WarmStart.from_step(result.contacts, result.solution.forces)
+        warm = (WarmStart.from_step(result.contacts, result.solution.forces, solver.device)
                 if solver.uses_warm_start else None)
         carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
         state = result.state

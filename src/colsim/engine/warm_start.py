@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .state import fixed_code
+from .state import fixed_code, pair_keys
 
 
 @dataclass
@@ -41,9 +41,15 @@ class WarmStart:
         return len(self.i)
 
     @classmethod
-    def from_step(cls, contacts, forces: np.ndarray) -> "WarmStart":
+    def from_step(cls, contacts, forces: np.ndarray, device: str = "cpu") -> "WarmStart":
         """The forces (m, 5) = (p, q1, q2, r1, r2) of a step's `contacts`, in the global frame
-        (:func:`colsim.engine.operator.global_forces`)."""
+        (:func:`colsim.engine.operator.global_forces`). device 'cuda': turned on the GPU and kept
+        there for the next step's matching; the host's arrays are copied only when read
+        (:class:`colsim.engine.cuda_warm_start.DeviceWarmStart`)."""
+        if device == "cuda" and contacts.m:
+            from .cuda_warm_start import carried_on_device
+
+            return carried_on_device(contacts, forces)
         from .operator import global_forces
 
         m = len(forces)
@@ -56,23 +62,24 @@ class WarmStart:
         """Whether any stored pair pushes (a start worth warming from)."""
         return bool(np.any(np.einsum("ij,ij->i", self.force, self.force) > 0.0))
 
-    def match(self, contacts, n_particles: int, device: str = "cpu") -> np.ndarray:
+    def match(self, contacts, device: str = "cpu"):
         """(m, 5) the stored forces of the pairs in `contacts`, in their frames, projected onto their
-        cones; zeros for new pairs. device 'cuda': matched on the GPU (:mod:`colsim.engine.cuda_warm_start`)."""
+        cones; zeros for new pairs. device 'cuda': matched on the GPU and left there, a device array
+        for the solver's first iterate (:mod:`colsim.engine.cuda_warm_start`)."""
         if device == "cuda":
             from .cuda_warm_start import match_on_device
 
-            return match_on_device(self, contacts, n_particles)
+            return match_on_device(self, contacts)
         from .cones import project_coupled_cone
         from .program import ROWS_PER_CONTACT
 
         out = np.zeros((contacts.m, ROWS_PER_CONTACT))
         if self.m == 0 or contacts.m == 0:
             return out
-        stored = _pair_keys(self.i, self.j, self.family, n_particles)
+        stored = pair_keys(self.i, self.j, self.family)
         order = np.argsort(stored, kind="stable")
         stored = stored[order]
-        keys = _pair_keys(contacts.i, contacts.j, contacts.family, n_particles)
+        keys = contacts.keys
         pos = np.clip(np.searchsorted(stored, keys), 0, len(stored) - 1)
         found = stored[pos] == keys
         f, r = self.force[order[pos[found]]], self.rolling[order[pos[found]]]
@@ -128,10 +135,3 @@ class WarmStart:
         return WarmStart(*(np.concatenate([getattr(self, name), getattr(other, name)])
                            for name in ("i", "j", "family", "force", "rolling")))
 
-
-def _pair_keys(i, j, family, n_particles: int) -> np.ndarray:
-    """(m,) int64 key unique to each (i, j, wall family or fixed sphere) among n_particles particles
-    (fewer than 2^31, as fixed spheres)."""
-    j = np.asarray(j, dtype=np.int64)
-    other = np.where(j >= 0, j, np.where(j == -1, n_particles + family, n_particles + 1 - j))
-    return np.asarray(i, dtype=np.int64) * (1 << 32) + other

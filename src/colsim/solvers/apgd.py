@@ -266,6 +266,11 @@ class _Iteration:
         """:func:`colsim.engine.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
         return scaled_residuals(self.gradient_at_x(), self.x, self.scaling.ravel(), mu, mu_r, scale, floor)
 
+    def iterate_and_check(self, n: int, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
+        """:meth:`iterate` n, then :meth:`residuals` there (the GPU's twin reads both in one copy)."""
+        self.iterate(n)
+        return self.residuals(mu, mu_r, scale, floor)
+
     def host_x(self) -> np.ndarray:
         """(5m,) the scaled iterate z."""
         return self.x
@@ -499,9 +504,8 @@ class ApgdSolver(Solver):
         converged = False
         while k < max_iter:
             n = min(self.check_every, max_iter - k)
-            run.iterate(n)
+            res = run.iterate_and_check(n, program.mu, program.mu_r, scale, floor)
             k += n
-            res = run.residuals(program.mu, program.mu_r, scale, floor)
             if self.verbose:
                 log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],
                          res["complementarity"], run.lip)

@@ -27,8 +27,9 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, cuda, dot, full_on_device,         # on numpy 2.5
-                                    gradient_on_device, gradient_row, normalise_on_device,
-                                    project_point_on_device, transpose_on_device, wrench_on_device)
+                                    gradient_on_device, gradient_row, keep_device_copy, kept_device_copy,
+                                    normalise_on_device, project_point_on_device, transpose_on_device,
+                                    wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
 from .apgd import decide, lipschitz_estimate, power_start_drawn
@@ -205,10 +206,21 @@ def _extrapolated_gradient_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, c
 
 
 @cuda.jit
-def _residual_kernel(g, x, s, mu, mu_r, parts):
+def _gradient_at_x_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g):
+    """g (5m,) = S B Mbar^-1 hx + c at the iterate x, one contact a thread, hx the slot of h that the
+    control names now (:func:`colsim.engine.cuda_operator.gradient_row`, not extrapolated)."""
+    k = cuda.grid(1)
+    if k >= ci.shape[0]:
+        return
+    hx = _slot(h_0, h_1, h_2, control, X)
+    gradient_row(k, hx, hx, 0.0, False, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g)
+
+
+@cuda.jit
+def _residual_kernel(g, x_0, x_1, x_2, control, s, mu, mu_r, parts):
     """parts[0..3] (per block): the largest cone violation of the gaps y = g / s and of the forces
-    lam = s x, the sum of the positive normal forces and sum_k |lam_k . y_k|
-    (colsim.engine.cones._residual_parts)."""
+    lam = s x (x the slot the control names now), the sum of the positive normal forces and
+    sum_k |lam_k . y_k| (colsim.engine.cones._residual_parts)."""
     primal = cuda.shared.array(THREADS, dtype=np.float64)
     dual = cuda.shared.array(THREADS, dtype=np.float64)
     total = cuda.shared.array(THREADS, dtype=np.float64)
@@ -220,6 +232,7 @@ def _residual_kernel(g, x, s, mu, mu_r, parts):
     total[t] = 0.0
     comp[t] = 0.0
     if k < mu.shape[0]:
+        x = _slot(x_0, x_1, x_2, control, X)
         o = 5 * k
         y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
         y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
@@ -308,6 +321,15 @@ def _first_iterate_kernel(warm, s, mu_s, mu_r_s, x, nonzero):
 
 
 @cuda.jit
+def _start_control_kernel(control, lip, lip_decay):
+    """The control array of a new iteration: the Lipschitz estimate, theta 1, beta 0, lip's decay,
+    slot 0 and no iterations yet (one thread)."""
+    for index in range(control.shape[0]):
+        control[index] = 0.0
+    control[LIP], control[THETA], control[LIP_DECAY] = lip, 1.0, lip_decay
+
+
+@cuda.jit
 def _forces_kernel(s, x, forces):
     """forces (5m,) = S x."""
     i = cuda.grid(1)
@@ -378,14 +400,16 @@ class CudaIteration:
         self.g = cuda.device_array(5 * self.m, dtype=np.float64)
         gradient_on_device(self.geometry, hx, self.inv_mass, self.c, self.g)
         lip = self._lipschitz_estimate()
-        start = np.zeros(CONTROL_SIZE)
-        start[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
-        self.control = cuda.to_device(start)
-        self._read = start.copy()   # the control array as last read: the slots' roles, the iterations
+        # what the host reads: the control array, then the residual check's block sums (one copy a check)
+        self.readout = cuda.device_array(CONTROL_SIZE + 4 * blocks_for(self.m), dtype=np.float64)
+        self.control = self.readout[:CONTROL_SIZE]
+        self.residual_parts = self.readout[CONTROL_SIZE:].reshape(4, blocks_for(self.m))
+        _start_control_kernel[1, 1](self.control, lip, float(lip_decay))   # made there: no copy
+        self._read = np.zeros(CONTROL_SIZE)   # the control array as last read: the slots' roles, the iterations
+        self._read[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self._stale = False          # launched trial steps since that read
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
-        self.parts = cuda.to_device(np.zeros((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6)))))
-        self.residual_parts = cuda.device_array((4, blocks_for(self.m)), dtype=np.float64)
+        self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
         self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
         self._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
                                 for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
@@ -397,7 +421,9 @@ class CudaIteration:
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
         (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic; only the
-        frames, the masses, the free forces, the gaps, the coefficients and the warm start go there."""
+        masses, the free forces, the gaps, the coefficients and the contacts' bodies and radii go
+        there (the frames and a warm start matched on the GPU are there already, and so are the
+        forces of the solve before, in a Coulomb fixed point)."""
         m = program.m
         device = (CudaContactOperator.from_operator(program.operator) if program.contacts is None
                   else CudaContactOperator(program.contacts, program.n_unknowns // 6))   # no host operator
@@ -415,7 +441,9 @@ class CudaIteration:
         x = full_on_device(5 * m, 0.0)
         nonzero = full_on_device(1, 0, np.int64)
         if warm_start is not None and np.shape(warm_start) == (m, 5):
-            _first_iterate_kernel[blocks_for(m), THREADS](_to_device(warm_start), s, mu_s, mu_r_s, x, nonzero)
+            kept = kept_device_copy(warm_start)   # a Coulomb fixed point's last forces, from the device
+            warm = _to_device(warm_start if kept is None else kept)
+            _first_iterate_kernel[blocks_for(m), THREADS](warm, s, mu_s, mu_r_s, x, nonzero)
         return cls(c, mu_s, mu_r_s, d_inv_mass, x, s, lip_decay, device, mu, mu_r,
                    warm=bool(nonzero.copy_to_host()[0]))
 
@@ -446,16 +474,51 @@ class CudaIteration:
         return lipschitz_estimate(buffers[0], apply_GT, lambda u, v: dot(u, v, partial),
                                   lambda v: normalise_on_device(v, partial, square))
 
-    def iterate(self, n: int):
+    def iterate(self, n: int, check: bool = False):
         """n more APGD iterations (accepted trial steps): rounds of as many trial steps as iterations
         are left, each round launched without waiting and followed by one read of the control array
-        (a rejected trial step leaves one iteration for the next round)."""
+        (a rejected trial step leaves one iteration for the next round). check: each round also
+        launches the residual check at the iterate it reaches, read in the same copy, so that
+        :meth:`iterate_and_check` waits for the host once a check (a round short of its iterations
+        wastes its check: a backtrack in its last trial step)."""
         target = self._read[ITERATIONS] + n
-        while self._read[ITERATIONS] < target:
+        while True:
             for _ in range(int(target - self._read[ITERATIONS])):
                 self._trial()
+            if check:
+                self._launch_check()
+            self._read_back(check)
+            if self._read[ITERATIONS] >= target:
+                return
+
+    def iterate_and_check(self, n: int, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
+        """:meth:`iterate` n, then :meth:`residuals` there: one copy from the device a round."""
+        self.iterate(n, check=True)
+        return self._residuals_read(scale, floor)
+
+    def _launch_check(self) -> None:
+        """The residual check's kernels at the iterate the control names (no wait)."""
+        geo = self.geometry
+        launch(_gradient_at_x_kernel, blocks_for(self.m), THREADS, self.control, *self.h_slots, self.inv_mass, geo.s,
+               geo.i, geo.j, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, self.c,
+               self.gap)
+        launch(_residual_kernel, blocks_for(self.m), THREADS, self.gap, *self.x_slots, self.control, geo.s, self.mu,
+               self.mu_r, self.residual_parts)
+
+    def _read_back(self, check: bool) -> None:
+        """Copy the control array (and with `check` the residual check's sums, in the same copy)."""
+        if check:
+            self._readout = self.readout.copy_to_host()
+            self._read = self._readout[:CONTROL_SIZE].copy()
+        else:
             self._read = self.control.copy_to_host()
-            self._stale = False
+        self._stale = False
+
+    def _residuals_read(self, scale: float, floor: float) -> dict[str, float]:
+        """The relative residuals from the check's block sums of the last read."""
+        parts = self._readout[CONTROL_SIZE:].reshape(4, -1)
+        return combine_residuals(max(0.0, float(parts[0].max())), max(0.0, float(parts[1].max())),
+                                 float(parts[2].sum()), float(parts[3].sum()), self.m, scale, floor)
 
     def _trial(self):
         """One trial step, its decision and the gradient at the new y when accepted: four launches, each
@@ -506,12 +569,9 @@ class CudaIteration:
     def residuals(self, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
         """The relative residuals at the iterate (colsim.engine.cones.relative_residuals), on the
         device; mu, mu_r: the program's (those given at construction are used)."""
-        gradient_on_device(self.geometry, self.hx, self.inv_mass, self.c, self.gap)
-        launch(_residual_kernel, blocks_for(self.m), THREADS, self.gap, self.x, self.geometry.s, self.mu, self.mu_r,
-               self.residual_parts)
-        parts = self.residual_parts.copy_to_host()
-        return combine_residuals(max(0.0, float(parts[0].max())), max(0.0, float(parts[1].max())),
-                                 float(parts[2].sum()), float(parts[3].sum()), self.m, scale, floor)
+        self._launch_check()
+        self._read_back(True)
+        return self._residuals_read(scale, floor)
 
     def host_x(self) -> np.ndarray:
         """(5m,) the scaled iterate z on the host."""
@@ -527,7 +587,10 @@ class CudaIteration:
         return (program.fbar + self.hx.copy_to_host()) / program.mass
 
     def forces(self) -> np.ndarray:
-        """(m, 5) the contact forces S z of the iterate, on the host."""
+        """(m, 5) the contact forces S z of the iterate, on the host; their device copy is kept
+        (:func:`colsim.engine.cuda_operator.keep_device_copy`) for the warm start the step leaves."""
         out = cuda.device_array(5 * self.m, dtype=np.float64)
         _forces_kernel[blocks_for(5 * self.m), THREADS](self.geometry.s, self.x, out)
-        return out.copy_to_host().reshape(self.m, 5)
+        forces = out.copy_to_host().reshape(self.m, 5)
+        keep_device_copy(forces, out.reshape(self.m, 5))
+        return forces
