@@ -33,7 +33,7 @@ import record   # noqa: E402
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
          "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
-         "device_copies", "scatter")
+         "device_copies", "host_work", "scatter")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -62,6 +62,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
             "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
             "device_copies": _cuda(["--steps", "1"]),
+            "host_work": [*c, "--repeat", "1"],
             "scatter": None,
         }[name]
     r0, a = COLUMN["full"][:2]
@@ -74,6 +75,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "cuda_operator": _cuda([]),
         "gpu": _cuda([]),
         "device_copies": _cuda([]),
+        "host_work": c,
         "scatter": None,
     }[name]
 

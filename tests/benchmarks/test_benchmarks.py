@@ -20,8 +20,8 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 
 import record   # noqa: E402
 
-NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "packings",
-         "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
+NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "host_work",
+         "packings", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 

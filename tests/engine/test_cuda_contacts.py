@@ -65,7 +65,7 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     where the CPU rounds twice: a few units in the last place of numbers of order 1). Some pairs
     overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts; a
     redo passes three pairs with given normals (the stepper's missed pairs), which go last."""
-    from colsim.engine.contacts import detect
+    from colsim.engine.contacts import detect, overlaps
     from colsim.engine.state import ContactLaw, Walls
 
     state = starting_cloud(60, 1.0, seed=3)
@@ -89,6 +89,15 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name))
     for name in ("normal", "tangent1", "tangent2", "gap"):
         np.testing.assert_allclose(getattr(gpu, name), getattr(cpu, name), rtol=0, atol=1e-14)
+    # a first attempt's largest pair overlap, measured on the device for the stepper's check: the
+    # host's measure of the same pairs (overlaps()), to 1e-14 as the gaps; a redo's is not measured
+    assert cpu.largest_pair_overlap is None
+    if redo:
+        assert gpu.largest_pair_overlap is None
+    else:
+        np.testing.assert_allclose(gpu.largest_pair_overlap, overlap.max(), rtol=0, atol=1e-14)
+        checked = overlaps(state, walls, overlap.max() + 1e-9, detected=gpu)   # within the tolerance: not measured
+        assert checked.largest_pair == gpu.largest_pair_overlap and len(checked.pairs[0]) == 0
     if redo:
         np.testing.assert_array_equal(gpu.normal[pairs][-3:], renormal[2])
     # a first attempt's frames stay on the device for the warm start and the solver: the same numbers

@@ -216,7 +216,7 @@ def test_a_sphere_never_passes_into_a_fixed_one():
 
 def test_the_next_step_s_detection_holds_every_overlapping_pair(pile):
     """The stepper's check measures the pairs of the next step's first detection instead of searching
-    (:func:`overlaps` with candidates): on the poured pile with three spheres pushed into their
+    (:func:`overlaps` of a detection): on the poured pile with three spheres pushed into their
     neighbours, moving under gravity, both give the same overlapping pairs, normals and largest
     overlaps, to the bit (the same arithmetic on the same pairs)."""
     state = pile.poured
@@ -230,7 +230,7 @@ def test_the_next_step_s_detection_holds_every_overlapping_pair(pile):
                    0.05 * 2 * state.radius.min(), settings.detection_slack)
     tolerance = 1e-3 * 2 * state.radius.min()
     searched = overlaps(moved, settings.walls, tolerance)
-    measured = overlaps(moved, settings.walls, tolerance, candidates=found.particle_pairs())
+    measured = overlaps(moved, settings.walls, tolerance, detected=found)
     assert measured.largest_pair == searched.largest_pair > 0.05 * state.radius.min()
     assert measured.largest == searched.largest
     order = np.lexsort((searched.pairs[1], searched.pairs[0]))   # the k-d tree's order; detection's is (i, j)

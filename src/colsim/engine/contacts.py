@@ -35,6 +35,8 @@ class Contacts:
     lever: (m,) float, length, the lever L of the rolling moment L r (law.rolling_lever:
         the paper's 2 R_i R_j/(R_i + R_j) or R_eff = R_i R_j/(R_i + R_j)), R_i for a wall
     mu, mu_r: (m,) float, sliding and rolling coefficients
+    largest_pair_overlap: the largest overlap R_i + R_j - |x_j - x_i| (length) of the swept particle
+        pairs, where detection measured it (the GPU's first attempts: -inf without pairs), else None
     """
 
     i: np.ndarray
@@ -49,6 +51,7 @@ class Contacts:
     lever: np.ndarray
     mu: np.ndarray
     mu_r: np.ndarray
+    largest_pair_overlap: float | None = None
 
     @property
     def m(self) -> int:
@@ -272,14 +275,15 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     if device == "cuda":
         from .cuda_contacts import swept_pair_frames
 
-        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap, on_device = swept_pair_frames(
+        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap, on_device, largest_pair_overlap = swept_pair_frames(
             state, predicted, margin, slack, most_recovered)
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
-        on_device = None
+        on_device = largest_pair_overlap = None
     if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
+        largest_pair_overlap = None   # of the pairs found, not of these
         n = state.n
         keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
         given = pair_frames(state, ri, rj, rnormal, most_recovered)
@@ -311,7 +315,7 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
         radius_i=radius_i, radius_j=radius_j, lever=lever,
-        mu=np.asarray(law.mu)[family], mu_r=np.asarray(law.mu_r)[family],
+        mu=np.asarray(law.mu)[family], mu_r=np.asarray(law.mu_r)[family], largest_pair_overlap=largest_pair_overlap,
     )
 
 
@@ -338,14 +342,19 @@ class Overlaps:
 
 
 def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu",
-             candidates=None) -> Overlaps:
+             detected: Contacts | None = None) -> Overlaps:
     """Measure every overlap of `state` (see :class:`Overlaps`). device 'cuda': the overlapping
     pairs found on the GPU (:func:`colsim.engine.cuda_contacts.swept_pairs_on_device` at rest with
-    no margin: the same pairs, sorted by (i, j)). candidates: (i, j) particle pairs that hold every
-    overlapping one, measured instead of searching (e.g. :meth:`Contacts.particle_pairs` of a
-    detection at `state`, whose swept pairs hold every pair that overlaps there: the stepper's check)."""
-    if candidates is not None:
-        pi, pj = candidates
+    no margin: the same pairs, sorted by (i, j)). detected: a detection at `state`, whose swept pairs
+    hold every pair that overlaps there (the stepper's check): its particle pairs are measured instead
+    of searching, or not at all when it measured their largest overlap and that is within the
+    tolerance (the GPU's detection: :attr:`Contacts.largest_pair_overlap`; no pair to report then)."""
+    measured = None if detected is None else detected.largest_pair_overlap
+    if measured is not None and measured <= tolerance:
+        pi = pj = np.zeros(0, dtype=np.int64)
+        d = np.zeros((0, 3))
+    elif detected is not None:
+        pi, pj = detected.particle_pairs()
         d = state.position[pj] - state.position[pi]
     elif device == "cuda":
         from .cuda_contacts import swept_pairs_on_device
@@ -366,8 +375,8 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device:
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
     _, _, _, fixed_gap = fixed_pairs(state, walls.fixed, np.zeros(state.n))
-    return Overlaps(pairs, max(0.0, float(overlap.max(initial=0.0))), largest_floor, cylinder,
-                    max(0.0, float(-fixed_gap.min(initial=0.0))))
+    largest_pair = max(0.0, float(overlap.max(initial=0.0)) if measured is None else measured)
+    return Overlaps(pairs, largest_pair, largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))))
 
 
 def touching_pairs(state: ParticleState, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -26,8 +26,8 @@ import math
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
-from .cuda_operator import (THREADS, blocks_for, cuda, device_copy_of, full_on_device, keep_device_copy,
-                            prefix_sums_on_device, sort_range_on_device)
+from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
+                            keep_device_copy, prefix_sums_on_device, sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -48,24 +48,27 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
 
 def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float):
     """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, normal,
-    tangent1, tangent2 (m, 3), gap (m,), and the frames as device arrays (normal, tangent1, tangent2)
-    for :func:`share_frames`), the pairs of :func:`swept_pairs_on_device`, the unit normal
+    tangent1, tangent2 (m, 3), gap (m,), the frames as device arrays (normal, tangent1, tangent2)
+    for :func:`share_frames`, and the largest overlap R_i + R_j - |x_j - x_i| of the pairs (length;
+    -inf without pairs)), the pairs of :func:`swept_pairs_on_device`, the unit normal
     from i to j, the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the
     normal, relaxed by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered
     (length; inf: none): the particle pairs of :func:`colsim.engine.contacts.detect`, in the same
-    arithmetic (to rounding: a GPU fuses some multiply-adds)."""
+    arithmetic (to rounding: a GPU fuses some multiply-adds). The largest overlap is
+    :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
+    check need not measure them on the host (its blocks' largest come back with the gaps, one copy)."""
     if state.n < 2:
-        return (*_no_pairs(), None)
+        return (*_no_pairs(), None, -math.inf)
     found = _SweptPairs(state, predicted, margin, slack)
-    m = max(found.m, 1)
-    frames = cuda.device_array((3, m, 3), dtype=np.float64)   # normal, tangent1, tangent2: one copy back
-    gap = cuda.device_array(m, dtype=np.float64)
-    _frames_kernel[blocks_for(state.n), THREADS](found.position, found.radius, found.offsets, found.partners,
-                                                 float(most_recovered), frames[0], gap, frames[1], frames[2])
-    on_device = tuple(frames[f, :found.m] for f in range(3))
-    j, gap = (array.copy_to_host()[:found.m] for array in (found.partners, gap))
-    normal, tangent1, tangent2 = frames.copy_to_host()[:, :found.m]
-    return found.i, j, normal, tangent1, tangent2, gap, on_device
+    m, blocks = found.m, blocks_for(state.n)
+    frames = cuda.device_array((3, max(m, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2: one copy back
+    gap = cuda.device_array(m + blocks, dtype=np.float64)             # the gaps, then each block's largest overlap
+    _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
+                                    float(most_recovered), frames[0], gap, frames[1], frames[2])
+    on_device = tuple(frames[f, :m] for f in range(3))
+    j, gap = found.partners.copy_to_host()[:m], gap.copy_to_host()
+    normal, tangent1, tangent2 = frames.copy_to_host()[:, :m]
+    return found.i, j, normal, tangent1, tangent2, gap[:m], on_device, float(gap[m:].max())
 
 
 def share_frames(frames, pair_frames, wall_frames) -> None:
@@ -128,16 +131,31 @@ def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, 
     """Each pair (i, j) of particle i (one thread a particle): the unit normal from i to j, the gap
     along it relaxed by max(0, -(|d| - R_i - R_j) - most_recovered), and the tangents of
     colsim.engine.contacts.tangent_basis (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
-    normalised; t2 = n x t1), in the CPU's arithmetic."""
+    normalised; t2 = n x t1), in the CPU's arithmetic; and gap[m + b] (m pairs) the largest overlap
+    R_i + R_j - |d| of block b's particles' pairs (-inf: none)."""
+    largest = cuda.shared.array(THREADS, dtype=np.float64)
     i = cuda.grid(1)
-    if i >= offsets.shape[0] - 1:
-        return
+    t = cuda.threadIdx.x
+    largest[t] = -math.inf
+    if i < offsets.shape[0] - 1:
+        largest[t] = _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1,
+                                  tangent2)
+    block_reduce(largest, t, True)
+    if t == 0:
+        gap[offsets[offsets.shape[0] - 1] + cuda.blockIdx.x] = largest[0]
+
+
+@cuda.jit(device=True)
+def _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2):
+    """:func:`_frames_kernel`'s work for particle i's pairs; returns their largest overlap."""
+    largest = -math.inf
     for k in range(offsets[i], offsets[i + 1]):
         j = partners[k]
         d0 = position[j, 0] - position[i, 0]
         d1 = position[j, 1] - position[i, 1]
         d2 = position[j, 2] - position[i, 2]
         distance = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        largest = max(largest, radius[i] + radius[j] - distance)
         n0, n1, n2 = d0 / distance, d1 / distance, d2 / distance
         g = n0 * d0 + n1 * d1 + n2 * d2 - radius[i] - radius[j]
         gap[k] = g + max(0.0, -(distance - radius[i] - radius[j]) - most_recovered)
@@ -150,13 +168,14 @@ def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, 
         tangent2[k, 0] = n1 * a2 - n2 * a1
         tangent2[k, 1] = n2 * a0 - n0 * a2
         tangent2[k, 2] = n0 * a1 - n1 * a0
+    return largest
 
 
 def _grid(midpoint: np.ndarray, reach: float):
     """(lower corner (3,), cells along x, y, z (3,) int64, cell width): cubes at least `reach`
     wide over the midpoints, at most CELLS_PER_PARTICLE of them a particle."""
-    lower = midpoint.min(axis=0)
-    extent = midpoint.max(axis=0) - lower
+    lower = np.array([midpoint[:, d].min() for d in range(3)])   # a column at a time: numpy's min along
+    extent = np.array([midpoint[:, d].max() for d in range(3)]) - lower   # axis 0 of (n, 3) is 20x slower
     width = max(reach, 1e-300)
     while True:
         dims = np.floor(extent / width).astype(np.int64) + 1

@@ -21,7 +21,8 @@ steps (docs/performance.md, "Wall times with Clarabel").
 The overlap check measures the pairs of the next step's first detection, made at the attempt's end
 (:class:`Upcoming`): its swept pairs hold every pair that overlaps there, so the check needs no
 search of its own, and :func:`run` hands that detection to the next step (one neighbour search a
-step instead of two; the same contacts, overlaps and steps).
+step instead of two; the same contacts, overlaps and steps). On the GPU that detection measures
+the pairs' largest overlap itself, so the host measures them only when it exceeds the tolerance.
 """
 from __future__ import annotations
 
@@ -149,7 +150,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
             new_state, settings, predicted_displacement(new_state, settings), following_margin, most_recovered,
             solver.device))
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device,
-                                             candidates=following.contacts.particle_pairs())
+                                             detected=following.contacts)
         t5 = time.perf_counter()
         if overlap.largest <= tolerance:
             break

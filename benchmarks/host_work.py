@@ -1,0 +1,118 @@
+"""The host's work in a GPU collapse step, timed on the CPU: what is left to move for "kernels at 80 %".
+
+    python -m benchmarks host_work COLUMN [--tile R0] [--repeat 5]
+
+A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host. That is detection's
+walls, joins, levers and coefficients, the grid's bounds, the assembly, the warm start's keys, the
+update, the overlap check's walls and the kinetic energy. Each is timed here (best of `--repeat`)
+on the column (`colsim trim`), or on a column of radius R0 tiled from it (benchmarks/tiling.py),
+with velocities drawn at 0.01 so that every particle moves. Two pieces are timed both ways: the
+overlap check with the pairs measured on the host (as before the check's pairs came measured by the
+GPU's detection) and as the GPU's step runs it now, and the warm start's global forces and keys,
+which the GPU's step now makes on the device. No GPU is needed: nothing here launches a kernel.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import record
+
+
+def best_ms(repeat: int, call, *args) -> float:
+    """The best wall time of call(*args) over `repeat` calls (ms)."""
+    times = []
+    for _ in range(repeat):
+        begin = time.perf_counter()
+        call(*args)
+        times.append(time.perf_counter() - begin)
+    return 1e3 * min(times)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("column", help="a column file (colsim trim)")
+    parser.add_argument("--tile", type=float, metavar="R0", help="time a column of radius R0 tiled from it")
+    parser.add_argument("--repeat", type=int, default=5)
+    args = parser.parse_args(argv)
+
+    from colsim import io
+    from colsim.engine import contacts as detection
+    from colsim.engine.cuda_contacts import _grid
+    from colsim.engine.program import assemble
+    from colsim.engine.state import ContactLaw, StepSettings, Walls, pair_keys
+    from colsim.engine.stepper import _advance, predicted_displacement
+    from colsim.engine.warm_start import WarmStart
+
+    column = args.column
+    with tempfile.TemporaryDirectory() as scratch:
+        if args.tile:
+            import tiling
+
+            column = str(Path(scratch) / "tiled.nc")
+            tiling.tiled_column(args.column, args.tile, column)
+        state, _ = io.read_state(column)
+    state.velocity[:] = np.random.default_rng(1).normal(scale=0.01, size=state.velocity.shape)
+    settings = StepSettings(dt=0.001, law=ContactLaw.uniform(0.577, 0.12), walls=Walls(floor=True))
+    predicted = predicted_displacement(state, settings)
+    margin = 0.05 * 2.0 * float(state.radius.min())
+    pairs = detection.swept_pairs(state, predicted, margin, settings.detection_slack)
+    frames = detection.pair_frames(state, *pairs, None, 0.01)
+    r = args.repeat
+
+    def detect_given_pairs():   # detect, with the swept pairs and their frames given (the GPU's part)
+        found_pairs, found_frames = detection.swept_pairs, detection.pair_frames
+        detection.swept_pairs, detection.pair_frames = (lambda *a, **k: pairs), (lambda *a, **k: frames)
+        try:
+            return detection.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
+                                    np.zeros(state.n), None, 0.01)
+        finally:
+            detection.swept_pairs, detection.pair_frames = found_pairs, found_frames
+
+    found = detect_given_pairs()
+    program = assemble(state, found, settings.dt, settings.gravity)
+    midpoint, reach = detection.swept_midpoints(state, predicted, margin, settings.detection_slack)
+    moved = _advance(state, 1e-9 * np.ones(6 * state.n), settings.dt)
+    forces = np.random.default_rng(2).uniform(size=(found.m, 5))
+    measured = dataclasses.replace(found, largest_pair_overlap=0.0)   # as the GPU's detection measures it
+
+    def keys():
+        found.__dict__.pop("keys", None)
+        return found.keys
+
+    print(f"{column if not args.tile else f'r0 = {args.tile:g} tiled from {args.column}'}: "
+          f"{state.n} spheres, {found.m} contacts")
+    table = record.table(["phase (host)", "ms", "on the GPU's step"])
+    rows = [
+        ("detection's walls, joins, levers, coefficients", best_ms(r, detect_given_pairs), "on the host"),
+        ("the grid's bounds", best_ms(r, _grid, midpoint, reach), "on the host"),
+        ("midpoints", best_ms(r, detection.swept_midpoints, state, predicted, margin, settings.detection_slack),
+         "on the host"),
+        ("predicted motion", best_ms(r, predicted_displacement, state, settings), "on the host"),
+        ("the assembly", best_ms(r, assemble, state, found, settings.dt, settings.gravity), "on the host"),
+        ("increments (fbar + B' lam) / mass", best_ms(r, lambda: (program.fbar + program.fbar) / program.mass),
+         "on the host"),
+        ("the update", best_ms(r, _advance, state, 1e-9 * np.ones(6 * state.n), settings.dt), "on the host"),
+        ("the overlap check, pairs measured on the host",
+         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", found), "before"),
+        ("the overlap check, pairs measured by detection",
+         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", measured), "now"),
+        ("the kinetic energy", best_ms(r, moved.kinetic_energy), "on the host"),
+        ("the warm start's global forces", best_ms(r, WarmStart.from_step, found, forces), "on the device"),
+        ("the warm start's keys, stored and new",
+         best_ms(r, lambda: (pair_keys(found.i, found.j, found.family), pair_keys(found.i, found.j, found.family))),
+         "before"),
+        ("the new contacts' keys, once", best_ms(r, keys), "now"),
+    ]
+    for phase, ms, where in rows:
+        table.row(phase, f"{ms:.1f}", where, data={"phase": phase, "ms": ms, "gpu_step": where,
+                                                   "spheres": state.n, "contacts": found.m})
+
+
+if __name__ == "__main__":
+    record.run("host_work", main)
