@@ -2,14 +2,24 @@
 
     python -m benchmarks host_work COLUMN [--tile R0] [--repeat 5]
 
-A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host. That is detection's
-walls, joins, levers and coefficients, the grid's bounds, the assembly, the warm start's keys, the
-update, the overlap check's walls and the kinetic energy. Each is timed here (best of `--repeat`)
-on the column (`colsim trim`), or on a column of radius R0 tiled from it (benchmarks/tiling.py),
-with velocities drawn at 0.01 so that every particle moves. Two pieces are timed both ways: the
-overlap check with the pairs measured on the host (as before the check's pairs came measured by the
-GPU's detection) and as the GPU's step runs it now, and the warm start's global forces and keys,
-which the GPU's step now makes on the device. No GPU is needed: nothing here launches a kernel.
+A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host:
+- detection's walls, joins, levers and coefficients, with the GPU's part given (its pairs, gaps
+  and frames);
+- the grid's bounds and the assembly;
+- the warm start's keys;
+- the update, the overlap check's walls and the kinetic energy.
+
+Each is timed here, best of `--repeat`, on the column (`colsim trim`) or on a column of radius R0
+tiled from it (benchmarks/tiling.py). Velocities are drawn at 0.01, so that every particle moves.
+
+Some pieces are timed both ways, as 93f3a2a's GPU step ran them and as it runs them now:
+- the overlap check, with the pairs measured on the host, or measured by the GPU's detection;
+- the warm start's global forces and keys, which the GPU's step now makes on the device;
+- detection's joins, whose frames the device now joins.
+
+No GPU is needed: nothing here launches a kernel. glibc's allocator makes the figures depend on the
+process's history (docs/performance.md): set MALLOC_MMAP_THRESHOLD_ and MALLOC_TRIM_THRESHOLD_ to
+compare runs.
 """
 from __future__ import annotations
 
@@ -65,7 +75,7 @@ def main(argv=None):
     frames = detection.pair_frames(state, *pairs, None, 0.01)
     r = args.repeat
 
-    def detect_given_pairs():   # detect, with the swept pairs and their frames given (the GPU's part)
+    def detect_given_pairs():   # detect on the CPU, with the swept pairs and their frames given
         found_pairs, found_frames = detection.swept_pairs, detection.pair_frames
         detection.swept_pairs, detection.pair_frames = (lambda *a, **k: pairs), (lambda *a, **k: frames)
         try:
@@ -75,6 +85,19 @@ def main(argv=None):
             detection.swept_pairs, detection.pair_frames = found_pairs, found_frames
 
     found = detect_given_pairs()
+    on_the_gpu = (*pairs, np.stack([found.normal, found.tangent1, found.tangent2]), frames[3], None, 0.0)
+
+    def detect_given_the_gpu_s():   # detect as the GPU's step runs it, with what the device returns given
+        from colsim.engine import cuda_contacts
+
+        device_part = cuda_contacts.swept_pair_frames
+        cuda_contacts.swept_pair_frames = lambda *a, **k: on_the_gpu
+        try:
+            return detection.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
+                                    np.zeros(state.n), None, 0.01, "cuda")
+        finally:
+            cuda_contacts.swept_pair_frames = device_part
+
     program = assemble(state, found, settings.dt, settings.gravity)
     midpoint, reach = detection.swept_midpoints(state, predicted, margin, settings.detection_slack)
     moved = _advance(state, 1e-9 * np.ones(6 * state.n), settings.dt)
@@ -89,7 +112,10 @@ def main(argv=None):
           f"{state.n} spheres, {found.m} contacts")
     table = record.table(["phase (host)", "ms", "on the GPU's step"])
     rows = [
-        ("detection's walls, joins, levers, coefficients", best_ms(r, detect_given_pairs), "on the host"),
+        ("detection's walls, joins, levers, coefficients (the frames joined on the host)",
+         best_ms(r, detect_given_pairs), "before"),
+        ("detection's walls, joins, levers, coefficients (the frames joined on the device)",
+         best_ms(r, detect_given_the_gpu_s), "now"),
         ("the grid's bounds", best_ms(r, _grid, midpoint, reach), "on the host"),
         ("midpoints", best_ms(r, detection.swept_midpoints, state, predicted, margin, settings.detection_slack),
          "on the host"),

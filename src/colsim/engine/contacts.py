@@ -268,50 +268,57 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
     :func:`pair_frames`) or 'cuda' (a grid on the GPU, :func:`colsim.engine.cuda_contacts.swept_pair_frames`:
-    the same pairs, the same arithmetic; the frames' device copies stay there for the warm start
-    and the solver, :func:`colsim.engine.cuda_contacts.share_frames`); the walls and fixed spheres
-    stay on the host.
+    the same pairs, the same arithmetic; the walls' and fixed spheres' frames join the pairs' there,
+    and the device copies stay there for the warm start and the solver,
+    :func:`colsim.engine.cuda_operator.keep_device_copy`); the walls and fixed spheres are found on
+    the host.
     """
+    speed = np.linalg.norm(predicted, axis=1)
+    reach = margin + (1.0 + slack) * speed
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
+    fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
+    fgap = fgap + recovery_relaxation(fgap, most_recovered)
+    wall_normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
+    wall_t1, wall_t2 = tangent_basis(wall_normal)
+
+    joined = on_device = largest_pair_overlap = None   # joined: the GPU's frames of pairs and walls, (3, m, 3)
     if device == "cuda":
         from .cuda_contacts import swept_pair_frames
 
-        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap, on_device, largest_pair_overlap = swept_pair_frames(
-            state, predicted, margin, slack, most_recovered)
+        pi, pj, joined, pair_gap, on_device, largest_pair_overlap = swept_pair_frames(
+            state, predicted, margin, slack, most_recovered, (wall_normal, wall_t1, wall_t2))
+        pair_normal, pair_t1, pair_t2 = (joined[f, :len(pi)] for f in range(3))
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
-        on_device = largest_pair_overlap = None
     if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
-        largest_pair_overlap = None   # of the pairs found, not of these
+        joined = on_device = largest_pair_overlap = None   # of the pairs found, not of these
         n = state.n
         keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
         given = pair_frames(state, ri, rj, rnormal, most_recovered)
         pi, pj = np.concatenate([pi[keep], ri]), np.concatenate([pj[keep], rj])
         pair_normal, pair_t1, pair_t2, pair_gap = (np.concatenate([ours[keep], theirs]) for ours, theirs in zip(
             (pair_normal, pair_t1, pair_t2, pair_gap), given))
-    speed = np.linalg.norm(predicted, axis=1)
-    reach = margin + (1.0 + slack) * speed
-    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
-    fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
-    fgap = fgap + recovery_relaxation(fgap, most_recovered)
 
     i = np.concatenate([pi, wi, fi]).astype(np.int64)
     j = np.concatenate([pj, np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64)
     family = np.concatenate([np.full(len(pi), PARTICLE), wfamily, np.full(len(fi), PARTICLE)]).astype(np.int64)
-    wall_normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
-    wall_t1, wall_t2 = tangent_basis(wall_normal)
-    normal, t1, t2 = (np.concatenate([pair.reshape(-1, 3), wall]) for pair, wall in (
-        (pair_normal, wall_normal), (pair_t1, wall_t1), (pair_t2, wall_t2)))
+    if joined is None:
+        normal, t1, t2 = (np.concatenate([pair.reshape(-1, 3), wall]) for pair, wall in (
+            (pair_normal, wall_normal), (pair_t1, wall_t1), (pair_t2, wall_t2)))
+    else:
+        normal, t1, t2 = joined
+    if on_device is not None:   # the GPU's frames stay there for the warm start and the solver
+        from .cuda_operator import keep_device_copy
+
+        for frame, copy in zip((normal, t1, t2), on_device):
+            keep_device_copy(frame, copy)
     gap = np.concatenate([pair_gap, wgap, fgap])
     radius_i = state.radius[i]
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
                                walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
     lever = contact_levers(radius_i, radius_j, law.rolling_lever)
-    if device == "cuda" and renormal is None and on_device is not None:   # the pairs' rows as found
-        from .cuda_contacts import share_frames
-
-        share_frames((normal, t1, t2), on_device, (wall_normal, wall_t1, wall_t2))
     return Contacts(
         i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
         radius_i=radius_i, radius_j=radius_j, lever=lever,

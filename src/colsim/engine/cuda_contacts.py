@@ -15,7 +15,9 @@ as the k-d tree's reach, so that every candidate pair lies in neighbouring cells
 
 So the pairs come out sorted by (i, j) as the CPU's do, and the same every run: no order depends on
 the atomic adds. For detect, :func:`swept_pair_frames` then gives each pair its normal, tangents and
-gap there (3. one thread a particle over its partners), so that only the results come back. The prefix sums run on the host (one copy of the counts each way). Without a GPU
+gap there (3. one thread a particle over its partners), so that only the results come back. The
+prefix sums run on the device; the partners' counts come to the host once, for each pair's first
+particle. Without a GPU
 the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), where the tests compare the
 pairs with the CPU's.
 """
@@ -27,7 +29,7 @@ import numpy as np
 
 from .contacts import swept_close, swept_midpoints
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
-                            keep_device_copy, prefix_sums_on_device, sort_range_on_device)
+                            prefix_sums_on_device, sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -46,49 +48,39 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
     return found.i, found.partners.copy_to_host()[:found.m]
 
 
-def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float):
-    """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, normal,
-    tangent1, tangent2 (m, 3), gap (m,), the frames as device arrays (normal, tangent1, tangent2)
-    for :func:`share_frames`, and the largest overlap R_i + R_j - |x_j - x_i| of the pairs (length;
-    -inf without pairs)), the pairs of :func:`swept_pairs_on_device`, the unit normal
-    from i to j, the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the
-    normal, relaxed by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered
-    (length; inf: none): the particle pairs of :func:`colsim.engine.contacts.detect`, in the same
-    arithmetic (to rounding: a GPU fuses some multiply-adds). The largest overlap is
+def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
+                      wall_frames=None):
+    """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, frames
+    (3, m + w, 3): the normals, tangent1 and tangent2 of the pairs, then of the w other contacts
+    whose frames `wall_frames` gives (normal, tangent1, tangent2 (w, 3): the walls' and fixed
+    spheres', made on the host), gap (m,), the frames' device copy (None without pairs), and the
+    largest overlap R_i + R_j - |x_j - x_i| of the pairs (length; -inf without pairs)): the pairs of
+    :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
+    :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed by
+    :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none): the
+    particle pairs of :func:`colsim.engine.contacts.detect`, in the same arithmetic (to rounding: a
+    GPU fuses some multiply-adds). The other contacts' rows go to the device in one copy and the
+    whole frames come back in one, so the host joins nothing and the device holds the contacts'
+    frames for the warm start and the solver. The largest overlap is
     :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
     check need not measure them on the host (its blocks' largest come back with the gaps, one copy)."""
+    walls = np.zeros((3, 0, 3)) if wall_frames is None else np.ascontiguousarray(np.stack(wall_frames), dtype=float)
+    w = walls.shape[1]
     if state.n < 2:
-        return (*_no_pairs(), None, -math.inf)
+        i, j, _, _, _, gap = _no_pairs()
+        return i, j, walls, gap, None, -math.inf
     found = _SweptPairs(state, predicted, margin, slack)
     m, blocks = found.m, blocks_for(state.n)
-    frames = cuda.device_array((3, max(m, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2: one copy back
+    frames = cuda.device_array((3, max(m + w, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2
+    if w:   # the other contacts' rows, in one copy from the host
+        on_host = cuda.to_device(walls)
+        for f in range(3):
+            frames[f, m:m + w].copy_to_device(on_host[f])
     gap = cuda.device_array(m + blocks, dtype=np.float64)             # the gaps, then each block's largest overlap
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
                                     float(most_recovered), frames[0], gap, frames[1], frames[2])
-    on_device = tuple(frames[f, :m] for f in range(3))
     j, gap = found.partners.copy_to_host()[:m], gap.copy_to_host()
-    normal, tangent1, tangent2 = frames.copy_to_host()[:, :m]
-    return found.i, j, normal, tangent1, tangent2, gap[:m], on_device, float(gap[m:].max())
-
-
-def share_frames(frames, pair_frames, wall_frames) -> None:
-    """Give the contacts' frames (normal, tangent1, tangent2: host arrays (m, 3), the pairs' rows
-    first, then the walls' and fixed spheres') their device copies without copying them from the
-    host: the pairs' rows from detection's device arrays `pair_frames` (a copy on the device), the
-    few others' from `wall_frames` (host arrays, the three in one copy), so that the warm start's
-    matching and the solver's operator find them there
-    (:func:`colsim.engine.cuda_operator.device_copy_of`), the same numbers."""
-    walls = len(wall_frames[0])
-    if walls:   # the three in one copy from the host
-        wall_frames = cuda.to_device(np.ascontiguousarray(np.stack(wall_frames), dtype=np.float64))
-    for f, (frame, pairs) in enumerate(zip(frames, pair_frames)):
-        on_device = cuda.device_array(frame.shape, dtype=np.float64)
-        rows = pairs.shape[0]
-        if rows:
-            on_device[:rows].copy_to_device(pairs)
-        if walls:
-            on_device[rows:].copy_to_device(wall_frames[f])
-        keep_device_copy(frame, on_device)
+    return found.i, j, frames.copy_to_host()[:, :m + w], gap[:m], frames[:, :m + w], float(gap[m:].max())
 
 
 def _no_pairs():

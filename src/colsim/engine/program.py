@@ -155,13 +155,19 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
 def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> ConeProgram:
     """The cone program of one step of length dt (time) from `state` with `contacts` (B is built
     when a back-end first asks for it: :attr:`ConeProgram.jacobian`)."""
-    m_i, inertia = state.mass, state.inertia
-    mass = np.concatenate([np.repeat(m_i, 3), np.repeat(inertia, 3)]) / dt**2
-    f_ext = m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]
-    fbar = np.concatenate([
-        (f_ext + m_i[:, None] * state.velocity / dt).ravel(),
-        (inertia[:, None] * state.angular_velocity / dt).ravel(),
-    ])
+    n = state.n
+    m_i = state.mass
+    inertia = 0.4 * m_i * state.radius**2   # state.inertia, without making the masses again
+    mass, fbar = np.empty(6 * n), np.empty(6 * n)   # filled in place: numpy's temporaries took most
+    for first, per_body in ((0, m_i), (3 * n, inertia)):   # of the time (the same operations, the same bits)
+        mass[first:first + 3 * n].reshape(n, 3)[:] = per_body[:, None]
+    mass /= dt**2
+    translation, rotation = fbar[:3 * n].reshape(n, 3), fbar[3 * n:].reshape(n, 3)
+    np.multiply(m_i[:, None], state.velocity, out=translation)
+    translation /= dt
+    translation += m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]   # f_ext + m v / dt
+    np.multiply(inertia[:, None], state.angular_velocity, out=rotation)
+    rotation /= dt
     return ConeProgram(mass=mass, fbar=fbar, gap=contacts.gap.copy(), mu=contacts.mu.copy(),
                        mu_r=contacts.mu_r.copy(), contacts=contacts)
 
