@@ -312,8 +312,8 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     if on_device is not None:   # the GPU's frames stay there for the warm start and the solver
         from .cuda_operator import keep_device_copy
 
-        for frame, copy in zip((normal, t1, t2), on_device):
-            keep_device_copy(frame, copy)
+        for f, frame in enumerate((normal, t1, t2)):
+            keep_device_copy(frame, on_device[f])
     gap = np.concatenate([pair_gap, wgap, fgap])
     radius_i = state.radius[i]
     radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),

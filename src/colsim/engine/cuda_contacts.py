@@ -53,7 +53,8 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, frames
     (3, m + w, 3): the normals, tangent1 and tangent2 of the pairs, then of the w other contacts
     whose frames `wall_frames` gives (normal, tangent1, tangent2 (w, 3): the walls' and fixed
-    spheres', made on the host), gap (m,), the frames' device copy (None without pairs), and the
+    spheres', made on the host), gap (m,), the frames' device copy (None for fewer than two
+    particles), and the
     largest overlap R_i + R_j - |x_j - x_i| of the pairs (length; -inf without pairs)): the pairs of
     :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
     :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed by

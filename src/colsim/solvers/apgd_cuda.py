@@ -408,6 +408,7 @@ class CudaIteration:
         self._read = np.zeros(CONTROL_SIZE)   # the control array as last read: the slots' roles, the iterations
         self._read[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self._stale = False          # launched trial steps since that read
+        self._readout = None         # the whole readout as last read with a residual check
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
         self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
@@ -492,7 +493,8 @@ class CudaIteration:
                 return
 
     def iterate_and_check(self, n: int, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
-        """:meth:`iterate` n, then :meth:`residuals` there: one copy from the device a round."""
+        """:meth:`iterate` n, then :meth:`residuals` there (mu, mu_r: as there): one copy from the
+        device a round."""
         self.iterate(n, check=True)
         return self._residuals_read(scale, floor)
 
