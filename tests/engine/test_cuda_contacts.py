@@ -129,3 +129,19 @@ def test_the_gpu_measures_the_cpu_s_overlaps():
     assert (gpu.largest_pair, gpu.largest_floor, gpu.largest_fixed) == (cpu.largest_pair, cpu.largest_floor,
                                                                         cpu.largest_fixed)
     np.testing.assert_array_equal(gpu.cylinder, cpu.cylinder)
+
+
+def test_detect_on_the_gpu_without_contacts():
+    """Two spheres far apart with no walls: no contacts, no frames kept on the device, and no pair
+    overlap measured (-inf), which the overlap check takes as within any tolerance."""
+    from colsim.engine.contacts import detect, overlaps
+    from colsim.engine.cuda_operator import kept_device_copy
+    from colsim.engine.state import ContactLaw, Walls
+
+    state = ParticleState.at_rest([[0.0, 0.0, 5.0], [3.0, 0.0, 5.0]], [0.5, 0.5])
+    walls = Walls(floor=False)
+    found = detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05, device="cuda")
+    assert found.m == 0 and found.largest_pair_overlap == -np.inf
+    assert kept_device_copy(found.normal) is None
+    checked = overlaps(state, walls, 0.0, detected=found)
+    assert checked.largest == 0.0 and len(checked.pairs[0]) == 0

@@ -54,7 +54,7 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     (3, m + w, 3): the normals, tangent1 and tangent2 of the pairs, then of the w other contacts
     whose frames `wall_frames` gives (normal, tangent1, tangent2 (w, 3): the walls' and fixed
     spheres', made on the host), gap (m,), the frames' device copy (None for fewer than two
-    particles), and the
+    particles or no contacts), and the
     largest overlap R_i + R_j - |x_j - x_i| of the pairs (length; -inf without pairs)): the pairs of
     :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
     :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed by
@@ -81,7 +81,8 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
                                     float(most_recovered), frames[0], gap, frames[1], frames[2])
     j, gap = found.partners.copy_to_host()[:m], gap.copy_to_host()
-    return found.i, j, frames.copy_to_host()[:, :m + w], gap[:m], frames[:, :m + w], float(gap[m:].max())
+    on_device = frames[:, :m + w] if m + w else None   # no zero-length views of device arrays
+    return found.i, j, frames.copy_to_host()[:, :m + w], gap[:m], on_device, float(gap[m:].max())
 
 
 def _no_pairs():
