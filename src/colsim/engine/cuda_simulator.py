@@ -10,9 +10,16 @@ The simulator runs each GPU thread of a block as a Python thread.
   with nothing to stop two threads from asking at once. Both then make one, and a tree sum mixes
   the two (a CI run's dot product came out 1.2e49). A shorter switch interval makes that likelier;
   :func:`use` has them made as the simulator makes them, but under a lock.
+- A device function sees the simulator's `cuda` (syncthreads, shared arrays) because each call
+  swaps it into its module's globals and puts numba.cuda back on return. With many threads in one
+  device function at once, the thread that swapped can put numba.cuda back while another is about
+  to call cuda.syncthreads (a simulated APGD solve failed so: "module 'numba.cuda' has no attribute
+  'syncthreads'"). :func:`use` has the swap counted under the lock: made by the first thread in,
+  undone by the last one out.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import threading
 import traceback
@@ -28,7 +35,8 @@ _lock = threading.Lock()
 
 
 def use() -> None:
-    """Set the switch interval and guard the making of shared arrays (once a process is enough)."""
+    """Set the switch interval, and guard the making of shared arrays and the swap of a device
+    function's cuda module (once a process is enough)."""
     from numba.cuda.simulator import kernelapi
 
     sys.setswitchinterval(SWITCH_INTERVAL)
@@ -49,6 +57,37 @@ def use() -> None:
 
     array.guarded = True
     kernelapi.FakeCUDAShared.array = array
+    from numba.cuda.simulator import kernel
+
+    kernelapi.swapped_cuda_module = kernel.swapped_cuda_module = swapped_cuda_module
+
+
+#: the modules' globals whose numba.cuda is swapped now, by id: [threads inside, the names swapped]
+_swapped: dict = {}
+
+
+@contextlib.contextmanager
+def swapped_cuda_module(fn, fake_cuda_module):
+    """numba's swapped_cuda_module (fn's module sees `fake_cuda_module` for numba.cuda while a thread
+    runs it), counted: the first thread in swaps, the last one out puts numba.cuda back."""
+    from numba import cuda
+
+    names = fn.__globals__
+    with _lock:
+        entry = _swapped.get(id(names))
+        if entry is None:
+            real = {name: value for name, value in names.items() if value is cuda}
+            names.update({name: fake_cuda_module for name in real})
+            entry = _swapped[id(names)] = [0, real]
+        entry[0] += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            entry[0] -= 1
+            if entry[0] == 0:
+                names.update(entry[1])
+                del _swapped[id(names)]
 
 
 def plain_array(shape, dtype):
