@@ -53,7 +53,7 @@ def main(argv=None):
 
     from colsim import io
     from colsim.engine import contacts as detection
-    from colsim.engine.cuda_contacts import _grid
+    from colsim.engine.cuda_contacts import PairFrames, _grid
     from colsim.engine.program import assemble
     from colsim.engine.state import ContactLaw, StepSettings, Walls, pair_keys
     from colsim.engine.stepper import _advance, predicted_displacement
@@ -85,7 +85,7 @@ def main(argv=None):
             detection.swept_pairs, detection.pair_frames = found_pairs, found_frames
 
     found = detect_given_pairs()
-    on_the_gpu = (*pairs, np.stack([found.normal, found.tangent1, found.tangent2]), frames[3], None, 0.0)
+    on_the_gpu = PairFrames(*pairs, frames[3], np.stack([found.normal, found.tangent1, found.tangent2]), None, 0.0)
 
     def detect_given_the_gpu_s():   # detect as the GPU's step runs it, with what the device returns given
         from colsim.engine import cuda_contacts

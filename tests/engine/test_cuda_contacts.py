@@ -63,16 +63,20 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     contacts, pairs, walls and all, in the same order; the pairs' normals, tangents and gaps are made
     on the device, in the CPU's arithmetic: equal to 1e-14 (a GPU fuses multiply-adds, rounding once
     where the CPU rounds twice: a few units in the last place of numbers of order 1). Some pairs
-    overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts; a
-    redo passes three pairs with given normals (the stepper's missed pairs), which go last."""
+    overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts; two
+    fixed spheres touch the lowest particles; a redo passes three pairs with given normals (the
+    stepper's missed pairs), which go last."""
     from colsim.engine.contacts import detect, overlaps
-    from colsim.engine.state import ContactLaw, Walls
+    from colsim.engine.state import ContactLaw, FixedSpheres, Walls
 
     state = starting_cloud(60, 1.0, seed=3)
     state.position[:, 2] *= 0.45
     state.position[:, 2] -= (state.position[:, 2] - state.radius).min() - 0.01   # the bottom layer on the floor
     predicted = _moving(state, 0.02, seed=8)
-    walls, law = Walls(floor=True, cylinder_radius=1.0), ContactLaw.uniform(0.5, 0.1)
+    lowest = np.argsort(state.position[:, 2])[:2]   # two fixed spheres just under the two lowest
+    below = state.position[lowest] - [[0.0, 0.0, 1e-3]] - 2.0 * state.radius[lowest, None] * [[0.0, 0.0, 1.0]]
+    walls = Walls(floor=True, cylinder_radius=1.0, fixed=FixedSpheres(below, state.radius[lowest]))
+    law = ContactLaw.uniform(0.5, 0.1)
     renormal = None
     if redo:
         i, j = swept_pairs(state, predicted, 0.05, 0.5)
@@ -81,6 +85,7 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     gpu, cpu = (detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device=device)
                 for device in ("cuda", "cpu"))
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
+    assert np.count_nonzero(cpu.j <= -2) == 2                                           # the fixed spheres
     pairs = cpu.j >= 0
     overlap = -(np.linalg.norm(state.position[cpu.j[pairs]] - state.position[cpu.i[pairs]], axis=1)
                 - cpu.radius_i[pairs] - cpu.radius_j[pairs])
@@ -92,6 +97,18 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     # a first attempt's largest pair overlap, measured on the device for the stepper's check: the
     # host's measure of the same pairs (overlaps()), to 1e-14 as the gaps; a redo's is not measured
     assert cpu.largest_pair_overlap is None
+    # a first attempt's arrays stay on the device for the warm start and the solver: every contact's
+    # (pairs', walls', fixed spheres'), the same numbers as the host's, bit for bit (the same values
+    # moved, or the CPU's lever arithmetic, which has no multiply-add to fuse); a redo's are copied
+    # when asked for
+    from colsim.engine.contacts import DEVICE_ARRAYS
+    from colsim.engine.cuda_operator import kept_device_copy
+
+    for name in DEVICE_ARRAYS:
+        kept = kept_device_copy(getattr(gpu, name))
+        assert (kept is None) == redo, name
+        if not redo:
+            np.testing.assert_array_equal(kept.copy_to_host(), getattr(gpu, name), err_msg=name)
     if redo:
         assert gpu.largest_pair_overlap is None
     else:
@@ -100,35 +117,6 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         assert checked.largest_pair == gpu.largest_pair_overlap and len(checked.pairs[0]) == 0
     if redo:
         np.testing.assert_array_equal(gpu.normal[pairs][-3:], renormal[2])
-    # a first attempt's frames stay on the device for the warm start and the solver: the same numbers
-    # as the host's, found there without a copy (a redo's pairs are reordered: copied when asked for)
-    from colsim.engine.cuda_operator import kept_device_copy
-
-    for name in ("normal", "tangent1", "tangent2"):
-        host = getattr(gpu, name)
-        assert (kept_device_copy(host) is not None) is not redo
-        if not redo:
-            np.testing.assert_array_equal(kept_device_copy(host).copy_to_host(), host)
-
-
-def test_the_gpu_measures_the_cpu_s_overlaps():
-    """overlaps(device='cuda') (the stepper's check after a step on the GPU): the same overlapping
-    pairs (the CPU's, which come in the k-d tree's order, sorted here), the same normals and largest
-    overlaps, on the cloud pressed together so that about half its neighbours overlap."""
-    from colsim.engine.contacts import overlaps
-    from colsim.engine.state import Walls
-
-    state = starting_cloud(60, 1.0, seed=3)
-    state.position[:, 2] *= 0.45
-    walls = Walls(floor=True, cylinder_radius=1.0)
-    gpu, cpu = overlaps(state, walls, 1e-3, "cuda"), overlaps(state, walls, 1e-3)
-    order = np.lexsort((cpu.pairs[1], cpu.pairs[0]))
-    assert len(order) >= 20
-    for ours, theirs in zip(gpu.pairs, cpu.pairs):
-        np.testing.assert_array_equal(ours, theirs[order])
-    assert (gpu.largest_pair, gpu.largest_floor, gpu.largest_fixed) == (cpu.largest_pair, cpu.largest_floor,
-                                                                        cpu.largest_fixed)
-    np.testing.assert_array_equal(gpu.cylinder, cpu.cylinder)
 
 
 def test_detect_on_the_gpu_without_contacts():

@@ -268,32 +268,28 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
     :func:`pair_frames`) or 'cuda' (a grid on the GPU, :func:`colsim.engine.cuda_contacts.swept_pair_frames`:
-    the same pairs, the same arithmetic; the walls' and fixed spheres' frames join the pairs' there,
-    and the device copies stay there for the warm start and the solver,
-    :func:`colsim.engine.cuda_operator.keep_device_copy`); the walls and fixed spheres are found on
-    the host.
+    the same pairs, the same arithmetic; the walls' and fixed spheres' rows join the pairs' there,
+    and the device's copies of the contacts' arrays (:data:`DEVICE_ARRAYS`) stay there for the warm
+    start and the solver, :func:`colsim.engine.cuda_operator.keep_device_copy`); the walls and fixed
+    spheres are found on the host.
     """
     speed = np.linalg.norm(predicted, axis=1)
-    reach = margin + (1.0 + slack) * speed
-    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
-    fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
-    fgap = fgap + recovery_relaxation(fgap, most_recovered)
-    wall_normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
-    wall_t1, wall_t2 = tangent_basis(wall_normal)
+    others = _other_contacts(state, walls, law, margin + (1.0 + slack) * speed, cylinder_margin, most_recovered)
 
-    joined = on_device = largest_pair_overlap = None   # joined: the GPU's frames of pairs and walls, (3, m, 3)
+    on_device = largest_pair_overlap = None   # on_device: the GPU's arrays of every contact, by name
     if device == "cuda":
         from .cuda_contacts import swept_pair_frames
 
-        pi, pj, joined, pair_gap, on_device, largest_pair_overlap = swept_pair_frames(
-            state, predicted, margin, slack, most_recovered, (wall_normal, wall_t1, wall_t2))
-        pair_normal, pair_t1, pair_t2 = (joined[f, :len(pi)] for f in range(3))
+        found = swept_pair_frames(state, predicted, margin, slack, most_recovered, others, law)
+        pi, pj, pair_gap = found.i, found.j, found.gap
+        on_device, largest_pair_overlap = found.on_device, found.largest_overlap
+        pair_normal, pair_t1, pair_t2 = (found.frames[f, :len(pi)] for f in range(3))
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
     if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
-        joined = on_device = largest_pair_overlap = None   # of the pairs found, not of these
+        on_device = largest_pair_overlap = None   # of the pairs found, not of these
         n = state.n
         keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
         given = pair_frames(state, ri, rj, rnormal, most_recovered)
@@ -301,29 +297,48 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
         pair_normal, pair_t1, pair_t2, pair_gap = (np.concatenate([ours[keep], theirs]) for ours, theirs in zip(
             (pair_normal, pair_t1, pair_t2, pair_gap), given))
 
-    i = np.concatenate([pi, wi, fi]).astype(np.int64)
-    j = np.concatenate([pj, np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64)
-    family = np.concatenate([np.full(len(pi), PARTICLE), wfamily, np.full(len(fi), PARTICLE)]).astype(np.int64)
-    if joined is None:
-        normal, t1, t2 = (np.concatenate([pair.reshape(-1, 3), wall]) for pair, wall in (
-            (pair_normal, wall_normal), (pair_t1, wall_t1), (pair_t2, wall_t2)))
+    pairs = {"i": pi, "j": pj, "family": np.full(len(pi), PARTICLE), "gap": pair_gap, "radius_i": state.radius[pi],
+             "radius_j": state.radius[pj]}
+    arrays = {name: np.concatenate([pairs[name], others[name]]) for name in pairs}
+    for name in ("i", "j", "family"):
+        arrays[name] = arrays[name].astype(np.int64)
+    if device == "cuda" and renormal is None:   # the GPU's frames: the pairs' and the others' rows, as one
+        arrays["normal"], arrays["tangent1"], arrays["tangent2"] = found.frames
     else:
-        normal, t1, t2 = joined
-    if on_device is not None:   # the GPU's frames stay there for the warm start and the solver
+        for name, pair in (("normal", pair_normal), ("tangent1", pair_t1), ("tangent2", pair_t2)):
+            arrays[name] = np.concatenate([pair.reshape(-1, 3), others[name]])
+    arrays["lever"] = contact_levers(arrays["radius_i"], arrays["radius_j"], law.rolling_lever)
+    arrays["mu"], arrays["mu_r"] = np.asarray(law.mu)[arrays["family"]], np.asarray(law.mu_r)[arrays["family"]]
+    if on_device is not None:   # the GPU's copies of the same numbers, for the warm start and the solver
         from .cuda_operator import keep_device_copy
 
-        for f, frame in enumerate((normal, t1, t2)):
-            keep_device_copy(frame, on_device[f])
-    gap = np.concatenate([pair_gap, wgap, fgap])
-    radius_i = state.radius[i]
-    radius_j = np.concatenate([state.radius[pj], np.zeros(len(wi)),
-                               walls.fixed.radius[fk] if len(fk) else np.zeros(0)])
-    lever = contact_levers(radius_i, radius_j, law.rolling_lever)
-    return Contacts(
-        i=i, j=j, family=family, normal=normal, tangent1=t1, tangent2=t2, gap=gap,
-        radius_i=radius_i, radius_j=radius_j, lever=lever,
-        mu=np.asarray(law.mu)[family], mu_r=np.asarray(law.mu_r)[family], largest_pair_overlap=largest_pair_overlap,
-    )
+        for name, copy in on_device.items():
+            keep_device_copy(arrays[name], copy)
+    return Contacts(**arrays, largest_pair_overlap=largest_pair_overlap)
+
+
+#: the arrays of every contact that the GPU's detection also makes on the device
+#: (:func:`colsim.engine.cuda_contacts.swept_pair_frames`)
+DEVICE_ARRAYS = ("i", "j", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
+
+
+def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: np.ndarray, cylinder_margin,
+                    most_recovered: float) -> dict:
+    """The contacts with the floor, the cylinder and the fixed spheres (see :func:`detect`), by name:
+    i, j, family, normal, tangent1, tangent2, gap, radius_i, radius_j, mu, mu_r (the lever is made
+    with the pairs')."""
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
+    fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
+    normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
+    tangent1, tangent2 = tangent_basis(normal)
+    family = np.concatenate([wfamily, np.full(len(fi), PARTICLE)]).astype(np.int64)
+    i = np.concatenate([wi, fi]).astype(np.int64)
+    return {"i": i, "j": np.concatenate([np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64),
+            "family": family, "normal": normal, "tangent1": tangent1, "tangent2": tangent2,
+            "gap": np.concatenate([wgap, fgap + recovery_relaxation(fgap, most_recovered)]),
+            "radius_i": state.radius[i],
+            "radius_j": np.concatenate([np.zeros(len(wi)), walls.fixed.radius[fk] if len(fk) else np.zeros(0)]),
+            "mu": np.asarray(law.mu)[family], "mu_r": np.asarray(law.mu_r)[family]}
 
 
 @dataclass

@@ -24,10 +24,12 @@ pairs with the CPU's.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from .contacts import swept_close, swept_midpoints
+from .state import PARTICLE
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
                             prefix_sums_on_device, sort_range_on_device)
 
@@ -48,41 +50,103 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
     return found.i, found.partners.copy_to_host()[:found.m]
 
 
+class PairFrames(NamedTuple):
+    """What :func:`swept_pair_frames` finds: the pairs i, j (m,) int64 and their gaps (m,) on the
+    host; frames (3, M, 3) on the host, the normals, tangent1 and tangent2 of the M = m + w contacts
+    (the pairs', then the w others'); on_device: each of the M contacts' arrays on the device, by
+    the name of :data:`colsim.engine.contacts.DEVICE_ARRAYS` (None for fewer than two particles or
+    no contacts); largest_overlap: the pairs' largest R_i + R_j - |x_j - x_i| (length; -inf: none)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    gap: np.ndarray
+    frames: np.ndarray
+    on_device: dict | None
+    largest_overlap: float
+
+
 def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
-                      wall_frames=None):
-    """The swept pairs and their contact geometry, all found on the GPU: (i, j (m,) int64, frames
-    (3, m + w, 3): the normals, tangent1 and tangent2 of the pairs, then of the w other contacts
-    whose frames `wall_frames` gives (normal, tangent1, tangent2 (w, 3): the walls' and fixed
-    spheres', made on the host), gap (m,), the frames' device copy (None for fewer than two
-    particles or no contacts), and the
-    largest overlap R_i + R_j - |x_j - x_i| of the pairs (length; -inf without pairs)): the pairs of
-    :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
+                      others: dict, law) -> PairFrames:
+    """The swept pairs and their contact geometry, all found on the GPU (:class:`PairFrames`): the
+    pairs of :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
     :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed by
     :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none): the
     particle pairs of :func:`colsim.engine.contacts.detect`, in the same arithmetic (to rounding: a
-    GPU fuses some multiply-adds). The other contacts' rows go to the device in one copy and the
-    whole frames come back in one, so the host joins nothing and the device holds the contacts'
-    frames for the warm start and the solver. The largest overlap is
-    :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
-    check need not measure them on the host (its blocks' largest come back with the gaps, one copy)."""
-    walls = np.zeros((3, 0, 3)) if wall_frames is None else np.ascontiguousarray(np.stack(wall_frames), dtype=float)
-    w = walls.shape[1]
+    GPU fuses some multiply-adds).
+
+    others: the other contacts' arrays by name (detect's walls and fixed spheres, made on the host);
+    their rows go to the device in two copies (the numbers, the bodies) and join the pairs' there,
+    so that the device holds every contact's arrays for the warm start and the solver (the pairs'
+    bodies, radii, coefficients (from `law`, a ContactLaw) and every lever made there, in the CPU's
+    arithmetic), and the frames come back whole in one copy: the host joins no frame.
+    The largest overlap is :func:`colsim.engine.contacts.overlaps`' of these pairs, in its
+    arithmetic, so that the stepper's check need not measure them on the host (its blocks' largest
+    come back with the gaps, one copy)."""
+    w = len(others["i"])
+    others_frames = np.stack([others["normal"], others["tangent1"], others["tangent2"]]).reshape(3, w, 3)
     if state.n < 2:
         i, j, _, _, _, gap = _no_pairs()
-        return i, j, walls, gap, None, -math.inf
+        return PairFrames(i, j, gap, others_frames, None, -math.inf)
     found = _SweptPairs(state, predicted, margin, slack)
-    m, blocks = found.m, blocks_for(state.n)
-    frames = cuda.device_array((3, max(m + w, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2
-    if w:   # the other contacts' rows, in one copy from the host
-        on_host = cuda.to_device(walls)
+    m, blocks, total = found.m, blocks_for(state.n), found.m + w
+    frames = cuda.device_array((3, max(total, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2
+    numbers = cuda.device_array((len(_NUMBERS), max(total, 1)), dtype=np.float64)   # gap, radii, lever, mu, mu_r
+    bodies = cuda.device_array((2, max(total, 1)), dtype=np.int64)   # i, j
+    if w:   # the others' rows: the numbers in one copy, the bodies in another
+        rows = cuda.to_device(np.concatenate([others_frames.reshape(-1)] + [
+            np.asarray(others[name], dtype=float) for name in _NUMBERS if name != "lever"]))
         for f in range(3):
-            frames[f, m:m + w].copy_to_device(on_host[f])
+            frames[f, m:total].copy_to_device(rows[3 * w * f:3 * w * (f + 1)].reshape(w, 3))
+        for k, name in enumerate(name for name in _NUMBERS if name != "lever"):
+            numbers[_NUMBERS.index(name), m:total].copy_to_device(rows[9 * w + k * w:9 * w + (k + 1) * w])
+        ids = cuda.to_device(np.stack([others["i"], others["j"]]).astype(np.int64))
+        for b in range(2):
+            bodies[b, m:total].copy_to_device(ids[b])
     gap = cuda.device_array(m + blocks, dtype=np.float64)             # the gaps, then each block's largest overlap
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
                                     float(most_recovered), frames[0], gap, frames[1], frames[2])
+    if m:
+        numbers[_NUMBERS.index("gap"), :m].copy_to_device(gap[:m])
+    mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
+    _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, bodies, numbers)
+    if total:
+        _lever_kernel[blocks_for(total), THREADS](numbers, 2.0 if law.rolling_lever == "paper" else 1.0, total)
     j, gap = found.partners.copy_to_host()[:m], gap.copy_to_host()
-    on_device = frames[:, :m + w] if m + w else None   # no zero-length views of device arrays
-    return found.i, j, frames.copy_to_host()[:, :m + w], gap[:m], on_device, float(gap[m:].max())
+    on_device = None
+    if total:   # no zero-length views of device arrays
+        on_device = {"i": bodies[0, :total], "j": bodies[1, :total],
+                     **{name: frames[f, :total] for f, name in enumerate(("normal", "tangent1", "tangent2"))},
+                     **{name: numbers[k, :total] for k, name in enumerate(_NUMBERS)}}
+    return PairFrames(found.i, j, gap[:m], frames.copy_to_host()[:, :total], on_device, float(gap[m:].max()))
+
+
+#: the rows of the device's per-contact numbers (:func:`swept_pair_frames`)
+_NUMBERS = ("gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
+
+
+@cuda.jit
+def _pair_rows_kernel(offsets, partners, radius, mu, mu_r, bodies, numbers):
+    """Each pair (i, j) of particle i (one thread a particle): its bodies, its radii R_i and R_j and
+    the particles' coefficients, into the rows of bodies (i, j) and numbers (:data:`_NUMBERS`)."""
+    i = cuda.grid(1)
+    if i >= offsets.shape[0] - 1:
+        return
+    for k in range(offsets[i], offsets[i + 1]):
+        j = partners[k]
+        bodies[0, k], bodies[1, k] = i, j
+        numbers[1, k], numbers[2, k] = radius[i], radius[j]
+        numbers[4, k], numbers[5, k] = mu, mu_r
+
+
+@cuda.jit
+def _lever_kernel(numbers, scale, total):
+    """Each contact's rolling lever from its radii, in the CPU's arithmetic
+    (:func:`colsim.engine.contacts.contact_levers`: scale R_i R_j / (R_i + R_j), or R_i for a wall)."""
+    k = cuda.grid(1)
+    if k >= total:
+        return
+    radius_i, radius_j = numbers[1, k], numbers[2, k]
+    numbers[3, k] = scale * (radius_i * radius_j / (radius_i + radius_j)) if radius_j > 0 else radius_i
 
 
 def _no_pairs():

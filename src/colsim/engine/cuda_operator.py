@@ -474,14 +474,18 @@ class CudaContactOperator:
         return self
 
     def _copy(self, host: dict) -> None:
-        """The contacts' arrays to the device: the frames shared (:func:`device_copy_of`), i and j in
-        one copy, the radii and levers in another, each other array (start, entry) on its own."""
+        """The contacts' arrays to the device: the copies kept there (the GPU's detection made them:
+        :func:`kept_device_copy`) where there are, else the frames shared (:func:`device_copy_of`), i and
+        j in one copy, the radii and levers in another, each other array (start, entry) on its own."""
         self.m = len(host["i"])
-        bodies = cuda.to_device(np.stack([host.pop("i"), host.pop("j")]).astype(np.int64, copy=False))
-        lengths = cuda.to_device(np.stack([host.pop(name) for name in ("radius_i", "radius_j", "lever")]).astype(
-            float, copy=False))
-        self.device = {"i": bodies[0], "j": bodies[1], "radius_i": lengths[0], "radius_j": lengths[1],
-                       "lever": lengths[2]}
+        self.device = {}
+        for group, dtype in ((("i", "j"), np.int64), (("radius_i", "radius_j", "lever"), float)):
+            kept = [kept_device_copy(host[name]) for name in group]
+            if any(copy is None for copy in kept):
+                kept = cuda.to_device(np.stack([host[name] for name in group]).astype(dtype, copy=False))
+            self.device.update(zip(group, kept))
+            for name in group:
+                del host[name]
         self.device.update({name: device_copy_of(array) if name in SHARED_FRAMES else cuda.to_device(
             np.ascontiguousarray(array, dtype=np.int64)) for name, array in host.items()})
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)

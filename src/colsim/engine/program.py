@@ -168,8 +168,9 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
     translation += m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]   # f_ext + m v / dt
     np.multiply(inertia[:, None], state.angular_velocity, out=rotation)
     rotation /= dt
-    return ConeProgram(mass=mass, fbar=fbar, gap=contacts.gap.copy(), mu=contacts.mu.copy(),
-                       mu_r=contacts.mu_r.copy(), contacts=contacts)
+    # the contacts' own gaps and coefficients (no array of a step is changed in place): their device
+    # copies, where the GPU's detection kept them, serve the program too
+    return ConeProgram(mass=mass, fbar=fbar, gap=contacts.gap, mu=contacts.mu, mu_r=contacts.mu_r, contacts=contacts)
 
 
 def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> dict[str, float]:

@@ -430,7 +430,9 @@ class CudaIteration:
                   else CudaContactOperator(program.contacts, program.n_unknowns // 6))   # no host operator
         bodies = cuda.to_device(np.stack([inv_mass, program.fbar]).astype(float, copy=False))   # one copy each
         d_inv_mass, fbar = bodies[0], bodies[1]
-        per_contact = cuda.to_device(np.stack([program.mu, program.mu_r, program.gap]).astype(float, copy=False))
+        per_contact = [kept_device_copy(array) for array in (program.mu, program.mu_r, program.gap)]
+        if any(copy is None for copy in per_contact):   # not the GPU detection's (kept there), one copy
+            per_contact = cuda.to_device(np.stack([program.mu, program.mu_r, program.gap]).astype(float, copy=False))
         mu, mu_r, gap = per_contact[0], per_contact[1], per_contact[2]
         diagonal = device.diagonal_on_device(d_inv_mass)
         s = cuda.device_array(5 * m, dtype=np.float64)
