@@ -119,6 +119,26 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         np.testing.assert_array_equal(gpu.normal[pairs][-3:], renormal[2])
 
 
+def test_the_gpu_measures_the_cpu_s_overlaps():
+    """overlaps(device='cuda') (the stepper's check after a step on the GPU): the same overlapping
+    pairs (the CPU's, which come in the k-d tree's order, sorted here), the same normals and largest
+    overlaps, on the cloud pressed together so that about half its neighbours overlap."""
+    from colsim.engine.contacts import overlaps
+    from colsim.engine.state import Walls
+
+    state = starting_cloud(60, 1.0, seed=3)
+    state.position[:, 2] *= 0.45
+    walls = Walls(floor=True, cylinder_radius=1.0)
+    gpu, cpu = overlaps(state, walls, 1e-3, "cuda"), overlaps(state, walls, 1e-3)
+    order = np.lexsort((cpu.pairs[1], cpu.pairs[0]))
+    assert len(order) >= 20
+    for ours, theirs in zip(gpu.pairs, cpu.pairs):
+        np.testing.assert_array_equal(ours, theirs[order])
+    assert (gpu.largest_pair, gpu.largest_floor, gpu.largest_fixed) == (cpu.largest_pair, cpu.largest_floor,
+                                                                        cpu.largest_fixed)
+    np.testing.assert_array_equal(gpu.cylinder, cpu.cylinder)
+
+
 def test_detect_on_the_gpu_without_contacts():
     """Two spheres far apart with no walls: no contacts, no frames kept on the device, and no pair
     overlap measured (-inf), which the overlap check takes as within any tolerance."""
