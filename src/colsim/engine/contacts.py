@@ -153,14 +153,19 @@ def _swept_keep(i, j, position, predicted, radius, margin, slack, keep):
         keep[k] = swept_close(position, predicted, radius, i[k], j[k], margin, slack)
 
 
+def lever_of(radius_i, radius_j, scale):
+    """One contact's rolling lever (length): scale R_i R_j / (R_i + R_j), or R_i for a wall (R_j = 0)
+    (scalar code: compiled by numba, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
+    if radius_j > 0:
+        return scale * (radius_i * radius_j / (radius_i + radius_j))
+    return radius_i
+
+
 def _levers(radius_i, radius_j, scale, out):
     """out (m,) = :func:`colsim.engine.state.rolling_lever` in one pass, the same arithmetic (scale 2
     for 'paper', 1 for 'effective'): numpy's form made eight temporaries, 78 ms at 2 M contacts."""
     for k in prange(len(out)):
-        if radius_j[k] > 0:
-            out[k] = scale * (radius_i[k] * radius_j[k] / (radius_i[k] + radius_j[k]))
-        else:
-            out[k] = radius_i[k]
+        out[k] = lever_of(radius_i[k], radius_j[k], scale)
 
 
 def contact_levers(radius_i: np.ndarray, radius_j: np.ndarray, lever: str) -> np.ndarray:
@@ -176,6 +181,7 @@ def contact_levers(radius_i: np.ndarray, radius_j: np.ndarray, lever: str) -> np
 if HAVE_NUMBA:
     swept_close = numba.njit(cache=True, inline="always")(swept_close)
     _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
+    lever_of = numba.njit(cache=True, inline="always")(lever_of)
     _levers = numba.njit(cache=True, parallel=True)(_levers)
 
 
@@ -298,7 +304,8 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
             (pair_normal, pair_t1, pair_t2, pair_gap), given))
 
     pairs = {"i": pi, "j": pj, "family": np.full(len(pi), PARTICLE), "gap": pair_gap, "radius_i": state.radius[pi],
-             "radius_j": state.radius[pj]}
+             "radius_j": state.radius[pj], "mu": np.full(len(pi), float(np.asarray(law.mu)[PARTICLE])),
+             "mu_r": np.full(len(pi), float(np.asarray(law.mu_r)[PARTICLE]))}
     arrays = {name: np.concatenate([pairs[name], others[name]]) for name in pairs}
     for name in ("i", "j", "family"):
         arrays[name] = arrays[name].astype(np.int64)
@@ -308,7 +315,6 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
         for name, pair in (("normal", pair_normal), ("tangent1", pair_t1), ("tangent2", pair_t2)):
             arrays[name] = np.concatenate([pair.reshape(-1, 3), others[name]])
     arrays["lever"] = contact_levers(arrays["radius_i"], arrays["radius_j"], law.rolling_lever)
-    arrays["mu"], arrays["mu_r"] = np.asarray(law.mu)[arrays["family"]], np.asarray(law.mu_r)[arrays["family"]]
     if on_device is not None:   # the GPU's copies of the same numbers, for the warm start and the solver
         from .cuda_operator import keep_device_copy
 
@@ -326,7 +332,7 @@ def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: 
                     most_recovered: float) -> dict:
     """The contacts with the floor, the cylinder and the fixed spheres (see :func:`detect`), by name:
     i, j, family, normal, tangent1, tangent2, gap, radius_i, radius_j, mu, mu_r (the lever is made
-    with the pairs')."""
+    with the pairs' one)."""
     wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
     fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
     normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)

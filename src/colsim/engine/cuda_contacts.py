@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .contacts import swept_close, swept_midpoints
+from .contacts import lever_of, swept_close, swept_midpoints
 from .state import PARTICLE
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
                             prefix_sums_on_device, sort_range_on_device)
@@ -93,12 +93,13 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     numbers = cuda.device_array((len(_NUMBERS), max(total, 1)), dtype=np.float64)   # gap, radii, lever, mu, mu_r
     bodies = cuda.device_array((2, max(total, 1)), dtype=np.int64)   # i, j
     if w:   # the others' rows: the numbers in one copy, the bodies in another
+        uploaded = [row for row in range(len(_NUMBERS)) if row != LEVER]   # the lever is made here
         rows = cuda.to_device(np.concatenate([others_frames.reshape(-1)] + [
-            np.asarray(others[name], dtype=float) for name in _NUMBERS if name != "lever"]))
+            np.asarray(others[_NUMBERS[row]], dtype=float) for row in uploaded]))
         for f in range(3):
             frames[f, m:total].copy_to_device(rows[3 * w * f:3 * w * (f + 1)].reshape(w, 3))
-        for k, name in enumerate(name for name in _NUMBERS if name != "lever"):
-            numbers[_NUMBERS.index(name), m:total].copy_to_device(rows[9 * w + k * w:9 * w + (k + 1) * w])
+        for k, row in enumerate(uploaded):
+            numbers[row, m:total].copy_to_device(rows[(9 + k) * w:(10 + k) * w])
         ids = cuda.to_device(np.stack([others["i"], others["j"]]).astype(np.int64))
         for b in range(2):
             bodies[b, m:total].copy_to_device(ids[b])
@@ -106,7 +107,7 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
                                     float(most_recovered), frames[0], gap, frames[1], frames[2])
     if m:
-        numbers[_NUMBERS.index("gap"), :m].copy_to_device(gap[:m])
+        numbers[GAP, :m].copy_to_device(gap[:m])
     mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
     _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, bodies, numbers)
     if total:
@@ -120,8 +121,12 @@ def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float,
     return PairFrames(found.i, j, gap[:m], frames.copy_to_host()[:, :total], on_device, float(gap[m:].max()))
 
 
-#: the rows of the device's per-contact numbers (:func:`swept_pair_frames`)
+#: the rows of the device's per-contact numbers (:func:`swept_pair_frames`), by the contacts' names
 _NUMBERS = ("gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
+GAP, RADIUS_I, RADIUS_J, LEVER, MU, MU_R = range(len(_NUMBERS))
+
+#: the CPU's lever (colsim.engine.contacts.lever_of), compiled for the GPU
+_lever_of = cuda.jit(device=True)(getattr(lever_of, "py_func", lever_of))
 
 
 @cuda.jit
@@ -134,19 +139,16 @@ def _pair_rows_kernel(offsets, partners, radius, mu, mu_r, bodies, numbers):
     for k in range(offsets[i], offsets[i + 1]):
         j = partners[k]
         bodies[0, k], bodies[1, k] = i, j
-        numbers[1, k], numbers[2, k] = radius[i], radius[j]
-        numbers[4, k], numbers[5, k] = mu, mu_r
+        numbers[RADIUS_I, k], numbers[RADIUS_J, k] = radius[i], radius[j]
+        numbers[MU, k], numbers[MU_R, k] = mu, mu_r
 
 
 @cuda.jit
 def _lever_kernel(numbers, scale, total):
-    """Each contact's rolling lever from its radii, in the CPU's arithmetic
-    (:func:`colsim.engine.contacts.contact_levers`: scale R_i R_j / (R_i + R_j), or R_i for a wall)."""
+    """Each contact's rolling lever from its radii, by the CPU's code (:func:`colsim.engine.contacts.lever_of`)."""
     k = cuda.grid(1)
-    if k >= total:
-        return
-    radius_i, radius_j = numbers[1, k], numbers[2, k]
-    numbers[3, k] = scale * (radius_i * radius_j / (radius_i + radius_j)) if radius_j > 0 else radius_i
+    if k < total:
+        numbers[LEVER, k] = _lever_of(numbers[RADIUS_I, k], numbers[RADIUS_J, k], scale)
 
 
 def _no_pairs():
