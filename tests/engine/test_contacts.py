@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from colsim.engine.contacts import WALL, detect, overlaps, tangent_basis, touching_pairs
+from colsim.engine.contacts import WALL, detect, overlaps, row_lengths, tangent_basis, touching_pairs
 from colsim.engine.state import CYLINDER, FLOOR, PARTICLE, ContactLaw, ParticleState, Walls
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
@@ -24,6 +24,15 @@ def test_tangent_basis_is_orthonormal_and_right_handed(raw):
     np.testing.assert_allclose(gram, np.broadcast_to(np.eye(3), gram.shape), atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(frame), 1.0, atol=1e-12)
     np.testing.assert_allclose(np.cross(t1, t2), n, atol=1e-12)
+
+
+def test_row_lengths_are_numpy_s_norms_bit_for_bit():
+    """The detection's row lengths equal np.linalg.norm(axis=1) exactly: the same squares summed in
+    the same order (x, y, z), so the contacts' gaps and normals keep their bits; also over a
+    strided view, and for no rows."""
+    rows = np.random.default_rng(3).normal(size=(10_001, 3)) * np.array([1e-8, 1.0, 1e8])
+    for vectors in (rows, rows[::3], rows[:0], np.asfortranarray(rows)):
+        assert np.array_equal(row_lengths(vectors), np.linalg.norm(vectors, axis=1))
 
 
 def _three_spheres():
