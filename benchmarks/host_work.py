@@ -3,10 +3,8 @@
     python -m benchmarks host_work COLUMN [--tile R0] [--repeat 5]
 
 A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host:
-- detection's walls, joins, levers and coefficients, with the GPU's part given (its pairs, gaps
-  and frames);
-- the grid's bounds and the assembly;
-- the warm start's keys;
+- detection's walls and fixed spheres (the pairs and every contact's arrays are made on the device);
+- the grid's bounds, the midpoints and the assembly;
 - the update, the overlap check's walls and the kinetic energy.
 
 Each is timed here, best of `--repeat`, on the column (`colsim trim`) or on a column of radius R0
@@ -15,7 +13,7 @@ tiled from it (benchmarks/tiling.py). Velocities are drawn at 0.01, so that ever
 Some pieces are timed both ways, as 93f3a2a's GPU step ran them and as it runs them now:
 - the overlap check, with the pairs measured on the host, or measured by the GPU's detection;
 - the warm start's global forces and keys, which the GPU's step now makes on the device;
-- detection's joins, whose frames the device now joins.
+- detection's joins of the pairs' arrays with the walls', which the device now makes.
 
 No GPU is needed: nothing here launches a kernel. glibc's allocator makes the figures depend on the
 process's history (docs/performance.md): set MALLOC_MMAP_THRESHOLD_ and MALLOC_TRIM_THRESHOLD_ to
@@ -53,7 +51,7 @@ def main(argv=None):
 
     from colsim import io
     from colsim.engine import contacts as detection
-    from colsim.engine.cuda_contacts import PairFrames, _grid
+    from colsim.engine.cuda_contacts import _grid
     from colsim.engine.program import assemble
     from colsim.engine.state import ContactLaw, StepSettings, Walls, pair_keys
     from colsim.engine.stepper import _advance, predicted_displacement
@@ -85,18 +83,17 @@ def main(argv=None):
             detection.swept_pairs, detection.pair_frames = found_pairs, found_frames
 
     found = detect_given_pairs()
-    on_the_gpu = PairFrames(*pairs, frames[3], np.stack([found.normal, found.tangent1, found.tangent2]), None, 0.0)
 
-    def detect_given_the_gpu_s():   # detect as the GPU's step runs it, with what the device returns given
+    def detect_given_the_gpu_s():   # detect as the GPU's step runs it, the device's contacts given
         from colsim.engine import cuda_contacts
 
-        device_part = cuda_contacts.swept_pair_frames
-        cuda_contacts.swept_pair_frames = lambda *a, **k: on_the_gpu
+        device_part = cuda_contacts.swept_contacts
+        cuda_contacts.swept_contacts = lambda *a, **k: found
         try:
             return detection.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
                                     np.zeros(state.n), None, 0.01, "cuda")
         finally:
-            cuda_contacts.swept_pair_frames = device_part
+            cuda_contacts.swept_contacts = device_part
 
     program = assemble(state, found, settings.dt, settings.gravity)
     midpoint, reach = detection.swept_midpoints(state, predicted, margin, settings.detection_slack)
@@ -112,10 +109,9 @@ def main(argv=None):
           f"{state.n} spheres, {found.m} contacts")
     table = record.table(["phase (host)", "ms", "on the GPU's step"])
     rows = [
-        ("detection's walls, joins, levers, coefficients (the frames joined on the host)",
+        ("detection's walls, joins, levers, coefficients (every array joined on the host)",
          best_ms(r, detect_given_pairs), "before"),
-        ("detection's walls, joins, levers, coefficients (the frames joined on the device)",
-         best_ms(r, detect_given_the_gpu_s), "now"),
+        ("detection's walls (every array made on the device)", best_ms(r, detect_given_the_gpu_s), "now"),
         ("the grid's bounds", best_ms(r, _grid, midpoint, reach), "on the host"),
         ("midpoints", best_ms(r, detection.swept_midpoints, state, predicted, margin, settings.detection_slack),
          "on the host"),
@@ -133,7 +129,7 @@ def main(argv=None):
         ("the warm start's keys, stored and new",
          best_ms(r, lambda: (pair_keys(found.i, found.j, found.family), pair_keys(found.i, found.j, found.family))),
          "before"),
-        ("the new contacts' keys, once", best_ms(r, keys), "now"),
+        ("the new contacts' keys, once", best_ms(r, keys), "before (now on the device)"),
     ]
     for phase, ms, where in rows:
         table.row(phase, f"{ms:.1f}", where, data={"phase": phase, "ms": ms, "gpu_step": where,

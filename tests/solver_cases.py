@@ -23,11 +23,11 @@ def small_pile() -> ParticleState:
     return state
 
 
-def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE):
-    """(program, contacts) of one collapse step from `state`, detected as the stepper does."""
+def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE, device: str = "cpu"):
+    """(program, contacts) of one collapse step from `state`, detected as the stepper does (on `device`)."""
     margin = settings.detection_margin_fraction * 2 * state.radius.min()
     found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
-                   margin, settings.detection_slack)
+                   margin, settings.detection_slack, device=device)
     return assemble(state, found, settings.dt, settings.gravity), found
 
 

@@ -84,6 +84,11 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         renormal = (i[:3], j[:3], tilted / np.linalg.norm(tilted, axis=1)[:, None])
     gpu, cpu = (detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device=device)
                 for device in ("cuda", "cpu"))
+    from colsim.engine.contacts import DEVICE_ARRAYS
+    from colsim.engine.cuda_contacts import DeviceContacts
+
+    # a first attempt's contacts stay on the device, with no host array until one is read
+    assert isinstance(gpu, DeviceContacts) != redo and (redo or not set(DEVICE_ARRAYS) & set(vars(gpu)))
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
     assert np.count_nonzero(cpu.j <= -2) == 2                                           # the fixed spheres
     pairs = cpu.j >= 0
@@ -97,11 +102,10 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     # a first attempt's largest pair overlap, measured on the device for the stepper's check: the
     # host's measure of the same pairs (overlaps()), to 1e-14 as the gaps; a redo's is not measured
     assert cpu.largest_pair_overlap is None
-    # a first attempt's arrays stay on the device for the warm start and the solver: every contact's
-    # (pairs', walls', fixed spheres'), the same numbers as the host's, bit for bit (the same values
-    # moved, or the CPU's lever arithmetic, which has no multiply-add to fuse); a redo's are copied
-    # when asked for
-    from colsim.engine.contacts import DEVICE_ARRAYS
+    # a first attempt's arrays on the device, for the warm start and the solver: every contact's
+    # (pairs', walls', fixed spheres'), the host arrays read above (the CPU's: the lever and the keys
+    # in the CPU's arithmetic, which has no multiply-add to fuse), bit for bit, kept as their copies;
+    # a redo's are copied when asked for
     from colsim.engine.cuda_operator import kept_device_copy
 
     for name in DEVICE_ARRAYS:
@@ -109,6 +113,8 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         assert (kept is None) == redo, name
         if not redo:
             np.testing.assert_array_equal(kept.copy_to_host(), getattr(gpu, name), err_msg=name)
+            assert kept is gpu.device[name]
+    np.testing.assert_array_equal(gpu.keys, cpu.keys)
     if redo:
         assert gpu.largest_pair_overlap is None
     else:

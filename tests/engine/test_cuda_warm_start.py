@@ -59,9 +59,9 @@ def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monke
     """from_step on the GPU turns the forces into the global frame there (the CPU's sums; bound 4
     ulps of the largest force, for the multiply-adds a GPU fuses) and keeps them there: read on the
     host, they are the CPU's record; matched on the GPU, they give the CPU's match (1e-14, as
-    above); and a match copies to the device only the new contacts' keys, once (the next step finds
-    them there), and their coefficients: 8 + 16 bytes a contact, where a host record's matching
-    copies its stored keys and forces too (8 + 48 more)."""
+    above); and a match of contacts detected on the host copies to the device only their keys and
+    coefficients, once (8 + 16 bytes a contact: the next match finds them there), where a host
+    record's matching copies its stored keys and forces too (8 + 48 more)."""
     from numba import cuda
 
     from colsim.engine.cuda_warm_start import DeviceWarmStart
@@ -78,14 +78,44 @@ def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monke
         np.testing.assert_array_equal(getattr(carried, name), getattr(host, name))
     np.testing.assert_allclose(carried.match(found), host.match(found), rtol=0, atol=1e-14)   # on the CPU
 
+    copied = _copies_to_device(monkeypatch, cuda)
+    again = WarmStart.from_step(found, forces, "cuda")      # the same arrays: nothing copied
+    first, second = (again.match(found, "cuda").copy_to_host() for _ in range(2))
+    monkeypatch.undo()
+    assert copied == [8 * found.m, 16 * found.m]
+    expected = host.match(found)
+    np.testing.assert_allclose(first, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+    assert np.array_equal(first, second)
+
+
+def test_contacts_detected_on_the_gpu_are_matched_with_no_copy_and_no_host_array(solver_pile, monkeypatch):
+    """A GPU detection's contacts hold their keys, frames and coefficients on the device
+    (DeviceContacts): a step's forces carried there and matched to the next contacts copy nothing to
+    the device but the forces, and read none of the contacts' host arrays (none is copied back); the
+    match is the CPU's on the same contacts (1e-14 of the largest force, as above)."""
+    from numba import cuda
+
+    from colsim.engine.contacts import DEVICE_ARRAYS
+    from colsim.engine.cuda_contacts import DeviceContacts
+
+    _, found = collapse_program(solver_pile, device="cuda")
+    _, later = collapse_program(solver_pile, device="cuda")   # the next step's: a new set, the same pairs
+    assert isinstance(found, DeviceContacts) and isinstance(later, DeviceContacts)
+    forces = np.random.default_rng(48).uniform(0.0, 1.0, (found.m, 5)) * [1.0, 0.8, 0.8, 0.2, 0.2]
+    copied = _copies_to_device(monkeypatch, cuda)
+    matched = WarmStart.from_step(found, forces, "cuda").match(later, "cuda").copy_to_host()
+    monkeypatch.undo()
+    assert copied == [40 * found.m]   # the forces (m, 5): on a step's GPU solve, its own device copy
+    for contacts in (found, later):
+        assert not set(DEVICE_ARRAYS) & set(vars(contacts)), "a host array was copied back"
+    expected = WarmStart.from_step(found, forces).match(later)
+    np.testing.assert_allclose(matched, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+
+
+def _copies_to_device(monkeypatch, cuda) -> list:
+    """The sizes (bytes) of the arrays that cuda.to_device copies from now until monkeypatch.undo()."""
     copied = []
     to_device = cuda.to_device
     monkeypatch.setattr(cuda, "to_device", lambda array, *args, **kwargs: (
         copied.append(np.asarray(array).nbytes), to_device(array, *args, **kwargs))[1])
-    again = WarmStart.from_step(found, forces, "cuda")      # the same arrays: nothing copied
-    first, second = (again.match(found, "cuda").copy_to_host() for _ in range(2))
-    monkeypatch.undo()
-    assert copied == [8 * found.m, 16 * found.m, 16 * found.m]
-    expected = host.match(found)
-    np.testing.assert_allclose(first, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
-    assert np.array_equal(first, second)
+    return copied

@@ -88,8 +88,9 @@ def test_from_step_is_the_frames_sum_to_the_bit(solver_pile):
 def test_pair_keys_tell_every_pair_apart():
     """One key a pair of bodies, whatever the particles' number: particle pairs, the floor and the
     cylinder (wall j = -1, told apart by family) and fixed spheres (j = -2 - k) of the same particle
-    all differ, and the same pair gives the same key."""
-    from colsim.engine.state import CYLINDER, FLOOR, PARTICLE, fixed_code, pair_keys
+    all differ, and the same pair gives the same key; the scalar code that the GPU compiles
+    (pair_key) gives each one exactly."""
+    from colsim.engine.state import CYLINDER, FLOOR, PARTICLE, fixed_code, pair_key, pair_keys
 
     i = np.array([0, 0, 0, 0, 0, 0, 1, 7, 2**31 - 9])
     j = np.array([1, 2, -1, -1, fixed_code(0), fixed_code(1), 0, fixed_code(2**31 - 11), 2**31 - 10])
@@ -97,3 +98,4 @@ def test_pair_keys_tell_every_pair_apart():
     keys = pair_keys(i, j, family)
     assert keys.dtype == np.int64 and len(np.unique(keys)) == len(keys) and np.all(keys >= 0)
     assert np.array_equal(pair_keys(i, j, family), keys)
+    assert [pair_key(int(a), int(b), int(c)) for a, b, c in zip(i, j, family)] == keys.tolist()

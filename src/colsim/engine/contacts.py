@@ -63,6 +63,11 @@ class Contacts:
         made once (a step's matching and the next step's both take them: the contacts never change)."""
         return pair_keys(self.i, self.j, self.family)
 
+    @property
+    def pair_count(self) -> int:
+        """How many contacts join two moving particles (j >= 0)."""
+        return int(np.count_nonzero(self.j >= 0))
+
     def particle_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """(i, j): the contacts between two moving particles (not a wall, not a fixed sphere)."""
         between = (self.family == PARTICLE) & (self.j >= 0)
@@ -284,29 +289,34 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
-    :func:`pair_frames`) or 'cuda' (a grid on the GPU, :func:`colsim.engine.cuda_contacts.swept_pair_frames`:
-    the same pairs, the same arithmetic; the walls' and fixed spheres' rows join the pairs' there,
-    and the device's copies of the contacts' arrays (:data:`DEVICE_ARRAYS`) stay there for the warm
-    start and the solver, :func:`colsim.engine.cuda_operator.keep_device_copy`); the walls and fixed
-    spheres are found on the host.
+    :func:`pair_frames`) or 'cuda' (a grid on the GPU: the same pairs, the same arithmetic). On the
+    GPU a first attempt's contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`, the
+    walls' and fixed spheres' rows found on the host and joined there), and their host arrays are
+    copied only when read; a redo's given normals join on the host.
     """
     speed = row_lengths(predicted)
     others = _other_contacts(state, walls, law, margin + (1.0 + slack) * speed, cylinder_margin, most_recovered)
-
-    on_device = largest_pair_overlap = None   # on_device: the GPU's arrays of every contact, by name
+    largest_pair_overlap = None   # measured by the GPU's detection
     if device == "cuda":
-        from .cuda_contacts import swept_pair_frames
+        from .cuda_contacts import swept_contacts
 
-        found = swept_pair_frames(state, predicted, margin, slack, most_recovered, others, law)
-        pi, pj, pair_gap = found.i, found.j, found.gap
-        on_device, largest_pair_overlap = found.on_device, found.largest_overlap
-        pair_normal, pair_t1, pair_t2 = (found.frames[f, :len(pi)] for f in range(3))
+        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law)
+        if found is not None and renormal is None:
+            return found
+        largest_pair_overlap = -np.inf if found is None else found.largest_pair_overlap
+        if found is None:
+            pi = pj = np.zeros(0, np.int64)
+            pair_normal = pair_t1 = pair_t2 = np.zeros((0, 3))
+            pair_gap = np.zeros(0)
+        else:   # the pairs' rows come first
+            pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = (getattr(found, name)[:found.pair_count] for name in (
+                "i", "j", "normal", "tangent1", "tangent2", "gap"))
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
     if renormal is not None:   # these pairs, with the normals given, replace those found and go last
         ri, rj, rnormal = renormal
-        on_device = largest_pair_overlap = None   # of the pairs found, not of these
+        largest_pair_overlap = None   # of the pairs found, not of these
         n = state.n
         keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
         given = pair_frames(state, ri, rj, rnormal, most_recovered)
@@ -316,27 +326,19 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
 
     pairs = {"i": pi, "j": pj, "family": np.full(len(pi), PARTICLE), "gap": pair_gap, "radius_i": state.radius[pi],
              "radius_j": state.radius[pj], "mu": np.full(len(pi), float(np.asarray(law.mu)[PARTICLE])),
-             "mu_r": np.full(len(pi), float(np.asarray(law.mu_r)[PARTICLE]))}
+             "mu_r": np.full(len(pi), float(np.asarray(law.mu_r)[PARTICLE])), "normal": pair_normal.reshape(-1, 3),
+             "tangent1": pair_t1.reshape(-1, 3), "tangent2": pair_t2.reshape(-1, 3)}
     arrays = {name: np.concatenate([pairs[name], others[name]]) for name in pairs}
     for name in ("i", "j", "family"):
         arrays[name] = arrays[name].astype(np.int64)
-    if device == "cuda" and renormal is None:   # the GPU's frames: the pairs' and the others' rows, as one
-        arrays["normal"], arrays["tangent1"], arrays["tangent2"] = found.frames
-    else:
-        for name, pair in (("normal", pair_normal), ("tangent1", pair_t1), ("tangent2", pair_t2)):
-            arrays[name] = np.concatenate([pair.reshape(-1, 3), others[name]])
     arrays["lever"] = contact_levers(arrays["radius_i"], arrays["radius_j"], law.rolling_lever)
-    if on_device is not None:   # the GPU's copies of the same numbers, for the warm start and the solver
-        from .cuda_operator import keep_device_copy
-
-        for name, copy in on_device.items():
-            keep_device_copy(arrays[name], copy)
     return Contacts(**arrays, largest_pair_overlap=largest_pair_overlap)
 
 
-#: the arrays of every contact that the GPU's detection also makes on the device
-#: (:func:`colsim.engine.cuda_contacts.swept_pair_frames`)
-DEVICE_ARRAYS = ("i", "j", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
+#: the arrays of every contact that the GPU's detection makes on the device, by name
+#: (:class:`colsim.engine.cuda_contacts.DeviceContacts`)
+DEVICE_ARRAYS = ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever", "mu",
+                 "mu_r", "keys")
 
 
 def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: np.ndarray, cylinder_margin,

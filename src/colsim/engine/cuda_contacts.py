@@ -14,24 +14,23 @@ as the k-d tree's reach, so that every candidate pair lies in neighbouring cells
    second pass writes them there and sorts them by j.
 
 So the pairs come out sorted by (i, j) as the CPU's do, and the same every run: no order depends on
-the atomic adds. For detect, :func:`swept_pair_frames` then gives each pair its normal, tangents and
-gap there (3. one thread a particle over its partners), so that only the results come back. The
-prefix sums run on the device; the partners' counts come to the host once, for each pair's first
-particle. Without a GPU
+the atomic adds. For detect, :func:`swept_contacts` then makes every contact's arrays there (3. one
+thread a particle over its partners: the normal, tangents and gap; then one thread a contact: the
+lever and the pair key), and they stay there (:class:`DeviceContacts`): what comes back is the
+pairs' count and each block's largest overlap. The prefix sums run on the device. Without a GPU
 the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), where the tests compare the
-pairs with the CPU's.
+contacts with the CPU's.
 """
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
-from .contacts import lever_of, swept_close, swept_midpoints
-from .state import PARTICLE
+from .contacts import Contacts, lever_of, swept_close, swept_midpoints
+from .state import PARTICLE, pair_key
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
-                            prefix_sums_on_device, sort_range_on_device)
+                            keep_device_copy, prefix_sums_on_device, sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
 _swept_close = cuda.jit(device=True)(getattr(swept_close, "py_func", swept_close))
@@ -45,120 +44,138 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
     """(i, j) int64 (m,): the pairs of :func:`colsim.engine.contacts.swept_pairs`, sorted by (i, j),
     found on the GPU. state: a ParticleState (n particles); predicted: (n, 3) length."""
     if state.n < 2:
-        return _no_pairs()[:2]
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
     found = _SweptPairs(state, predicted, margin, slack)
-    return found.i, found.partners.copy_to_host()[:found.m]
+    counts = np.diff(found.offsets.copy_to_host())
+    return np.repeat(np.arange(state.n, dtype=np.int64), counts), found.partners.copy_to_host()[:found.m]
 
 
-class PairFrames(NamedTuple):
-    """What :func:`swept_pair_frames` finds: the pairs i, j (m,) int64 and their gaps (m,) on the
-    host; frames (3, M, 3) on the host, the normals, tangent1 and tangent2 of the M = m + w contacts
-    (the pairs', then the w others'); on_device: each of the M contacts' arrays on the device, by
-    the name of :data:`colsim.engine.contacts.DEVICE_ARRAYS` (None for fewer than two particles or
-    no contacts); largest_overlap: the pairs' largest R_i + R_j - |x_j - x_i| (length; -inf: none)."""
+class DeviceContacts(Contacts):
+    """The contacts of a GPU detection (:func:`swept_contacts`), whose arrays stay on the device: `device`
+    holds each of them by name (:data:`colsim.engine.contacts.DEVICE_ARRAYS`). A host array is copied
+    from there when first read (a redo's missed pairs, a file, a solver on the CPU), and that copy
+    keeps the device's as its own (:func:`colsim.engine.cuda_operator.keep_device_copy`); a step on the
+    GPU reads none: the warm start and the solver take the device's (:func:`contact_arrays_on_device`).
+    m: the contacts; pair_count: the first pair_count are the particle pairs, the walls' and fixed
+    spheres' rows follow."""
 
-    i: np.ndarray
-    j: np.ndarray
-    gap: np.ndarray
-    frames: np.ndarray
-    on_device: dict | None
-    largest_overlap: float
+    def __init__(self, device: dict, m: int, pair_count: int, largest_pair_overlap: float):
+        self.device, self._m, self._pair_count = device, m, pair_count
+        self.largest_pair_overlap = largest_pair_overlap
+
+    m = property(lambda self: self._m)
+    pair_count = property(lambda self: self._pair_count)
+    keys = property(lambda self: self._on_host("keys"), doc="(m,) int64 pair keys (copied from the device).")
+
+    def __getattr__(self, name):   # only for an attribute not set: a host array not yet copied
+        if name in self.__dict__.get("device", ()):
+            return self._on_host(name)
+        raise AttributeError(name)
+
+    def _on_host(self, name: str) -> np.ndarray:
+        host = self.__dict__.get(name)
+        if host is None:
+            host = self.__dict__[name] = self.device[name].copy_to_host()
+            keep_device_copy(host, self.device[name])
+        return host
 
 
-def swept_pair_frames(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
-                      others: dict, law) -> PairFrames:
-    """The swept pairs and their contact geometry, all found on the GPU (:class:`PairFrames`): the
-    pairs of :func:`swept_pairs_on_device`, the unit normal from i to j, the tangents of
-    :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed by
-    :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none): the
-    particle pairs of :func:`colsim.engine.contacts.detect`, in the same arithmetic (to rounding: a
-    GPU fuses some multiply-adds).
+def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
+                   others: dict, law) -> DeviceContacts | None:
+    """The contacts of :func:`colsim.engine.contacts.detect`'s first attempt, made on the GPU
+    (:class:`DeviceContacts`), or None for fewer than two particles or no contacts (detect then makes
+    them on the host).
+
+    The particle pairs are :func:`swept_pairs_on_device`'s. Each gets the unit normal from i to j,
+    the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed
+    by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none), in
+    the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds), and its bodies, family,
+    radii and coefficients (from `law`, a ContactLaw).
 
     others: the other contacts' arrays by name (detect's walls and fixed spheres, made on the host);
-    their rows go to the device in two copies (the numbers, the bodies) and join the pairs' there,
-    so that the device holds every contact's arrays for the warm start and the solver (the pairs'
-    bodies, radii, coefficients (from `law`, a ContactLaw) and every lever made there, in the CPU's
-    arithmetic), and the frames come back whole in one copy: the host joins no frame.
-    The largest overlap is :func:`colsim.engine.contacts.overlaps`' of these pairs, in its
-    arithmetic, so that the stepper's check need not measure them on the host (its blocks' largest
-    come back with the gaps, one copy)."""
-    w = len(others["i"])
-    others_frames = np.stack([others["normal"], others["tangent1"], others["tangent2"]]).reshape(3, w, 3)
+    their rows go to the device in two copies (the numbers, the bodies) and follow the pairs'. Every
+    contact's lever (the CPU's arithmetic) and pair key (:func:`colsim.engine.state.pair_key`) are made
+    there. The pairs' largest overlap R_i + R_j - |x_j - x_i| (length; -inf: no pair) is
+    :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
+    check need not measure them on the host: each block's largest comes back, the one copy from the
+    device besides the pairs' count."""
     if state.n < 2:
-        i, j, _, _, _, gap = _no_pairs()
-        return PairFrames(i, j, gap, others_frames, None, -math.inf)
+        return None
     found = _SweptPairs(state, predicted, margin, slack)
-    m, blocks, total = found.m, blocks_for(state.n), found.m + w
-    frames = cuda.device_array((3, max(total, 1), 3), dtype=np.float64)   # normal, tangent1, tangent2
-    numbers = cuda.device_array((len(_NUMBERS), max(total, 1)), dtype=np.float64)   # gap, radii, lever, mu, mu_r
-    bodies = cuda.device_array((2, max(total, 1)), dtype=np.int64)   # i, j
+    w = len(others["i"])
+    m, total = found.m, found.m + len(others["i"])
+    if total == 0:   # no zero-length arrays on the device
+        return None
+    frames = cuda.device_array((3, total, 3), dtype=np.float64)     # normal, tangent1, tangent2
+    numbers = cuda.device_array((len(_NUMBERS), total), dtype=np.float64)   # gap, radii, lever, mu, mu_r
+    bodies = cuda.device_array((len(_BODIES), total), dtype=np.int64)       # i, j, family
     if w:   # the others' rows: the numbers in one copy, the bodies in another
         uploaded = [row for row in range(len(_NUMBERS)) if row != LEVER]   # the lever is made here
-        rows = cuda.to_device(np.concatenate([others_frames.reshape(-1)] + [
+        rows = cuda.to_device(np.concatenate([np.stack([others[name] for name in _FRAMES]).reshape(-1)] + [
             np.asarray(others[_NUMBERS[row]], dtype=float) for row in uploaded]))
         for f in range(3):
             frames[f, m:total].copy_to_device(rows[3 * w * f:3 * w * (f + 1)].reshape(w, 3))
         for k, row in enumerate(uploaded):
             numbers[row, m:total].copy_to_device(rows[(9 + k) * w:(10 + k) * w])
-        ids = cuda.to_device(np.stack([others["i"], others["j"]]).astype(np.int64))
-        for b in range(2):
+        ids = cuda.to_device(np.stack([others[name] for name in _BODIES]).astype(np.int64))
+        for b in range(len(_BODIES)):
             bodies[b, m:total].copy_to_device(ids[b])
-    gap = cuda.device_array(m + blocks, dtype=np.float64)             # the gaps, then each block's largest overlap
+    blocks = blocks_for(state.n)
+    largest = cuda.device_array(blocks, dtype=np.float64)   # each block's largest pair overlap
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
-                                    float(most_recovered), frames[0], gap, frames[1], frames[2])
-    if m:
-        numbers[GAP, :m].copy_to_device(gap[:m])
+                                    float(most_recovered), frames[0], numbers[GAP], frames[1], frames[2], largest)
     mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
     _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, bodies, numbers)
-    if total:
-        _lever_kernel[blocks_for(total), THREADS](numbers, 2.0 if law.rolling_lever == "paper" else 1.0, total)
-    j, gap = found.partners.copy_to_host()[:m], gap.copy_to_host()
-    on_device = None
-    if total:   # no zero-length views of device arrays
-        on_device = {"i": bodies[0, :total], "j": bodies[1, :total],
-                     **{name: frames[f, :total] for f, name in enumerate(("normal", "tangent1", "tangent2"))},
-                     **{name: numbers[k, :total] for k, name in enumerate(_NUMBERS)}}
-    return PairFrames(found.i, j, gap[:m], frames.copy_to_host()[:, :total], on_device, float(gap[m:].max()))
+    keys = cuda.device_array(total, dtype=np.int64)
+    _lever_and_key_kernel[blocks_for(total), THREADS](numbers, bodies, 2.0 if law.rolling_lever == "paper" else 1.0,
+                                                      keys)
+    device = {"keys": keys, **{name: bodies[k] for k, name in enumerate(_BODIES)},
+              **{name: frames[f] for f, name in enumerate(_FRAMES)},
+              **{name: numbers[k] for k, name in enumerate(_NUMBERS)}}
+    return DeviceContacts(device, total, m, float(largest.copy_to_host().max()))
 
 
-#: the rows of the device's per-contact numbers (:func:`swept_pair_frames`), by the contacts' names
+#: the rows of the device's per-contact numbers and bodies (:func:`swept_contacts`), by the contacts' names
 _NUMBERS = ("gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
 GAP, RADIUS_I, RADIUS_J, LEVER, MU, MU_R = range(len(_NUMBERS))
+_BODIES = ("i", "j", "family")
+BODY_I, BODY_J, FAMILY = range(len(_BODIES))
+_FRAMES = ("normal", "tangent1", "tangent2")
 
-#: the CPU's lever (colsim.engine.contacts.lever_of), compiled for the GPU
+#: the CPU's lever (colsim.engine.contacts.lever_of) and pair key (colsim.engine.state.pair_key), for the GPU
 _lever_of = cuda.jit(device=True)(getattr(lever_of, "py_func", lever_of))
+_pair_key = cuda.jit(device=True)(pair_key)
 
 
 @cuda.jit
 def _pair_rows_kernel(offsets, partners, radius, mu, mu_r, bodies, numbers):
-    """Each pair (i, j) of particle i (one thread a particle): its bodies, its radii R_i and R_j and
-    the particles' coefficients, into the rows of bodies (i, j) and numbers (:data:`_NUMBERS`)."""
+    """Each pair (i, j) of particle i (one thread a particle): its bodies and family, its radii R_i and
+    R_j and the particles' coefficients, into the rows of bodies (:data:`_BODIES`) and numbers
+    (:data:`_NUMBERS`)."""
     i = cuda.grid(1)
     if i >= offsets.shape[0] - 1:
         return
     for k in range(offsets[i], offsets[i + 1]):
         j = partners[k]
-        bodies[0, k], bodies[1, k] = i, j
+        bodies[BODY_I, k], bodies[BODY_J, k], bodies[FAMILY, k] = i, j, PARTICLE
         numbers[RADIUS_I, k], numbers[RADIUS_J, k] = radius[i], radius[j]
         numbers[MU, k], numbers[MU_R, k] = mu, mu_r
 
 
 @cuda.jit
-def _lever_kernel(numbers, scale, total):
-    """Each contact's rolling lever from its radii, by the CPU's code (:func:`colsim.engine.contacts.lever_of`)."""
+def _lever_and_key_kernel(numbers, bodies, scale, keys):
+    """Each contact's rolling lever from its radii and its pair key from its bodies, by the CPU's code
+    (:func:`colsim.engine.contacts.lever_of`, :func:`colsim.engine.state.pair_key`)."""
     k = cuda.grid(1)
-    if k < total:
+    if k < keys.shape[0]:
         numbers[LEVER, k] = _lever_of(numbers[RADIUS_I, k], numbers[RADIUS_J, k], scale)
-
-
-def _no_pairs():
-    empty = np.zeros(0, dtype=np.int64)
-    return empty, empty, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+        keys[k] = _pair_key(bodies[BODY_I, k], bodies[BODY_J, k], bodies[FAMILY, k])
 
 
 class _SweptPairs:
     """The swept pairs of n >= 2 particles on the device: particle i's partners are
-    partners[offsets[i]:offsets[i + 1]] (sorted); i (m,): each pair's first particle, on the host;
+    partners[offsets[i]:offsets[i + 1]] (sorted), m pairs in all (the one number copied to the host);
     position, radius: the particles' on the device."""
 
     def __init__(self, state, predicted: np.ndarray, margin: float, slack: float):
@@ -178,31 +195,29 @@ class _SweptPairs:
                 reach * reach, float(margin), float(slack))
         counts = full_on_device(n, 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
-        found = counts.copy_to_host()   # each particle's count of partners, for i on the host
-        self.m = int(found.sum())
         self.offsets = prefix_sums_on_device(counts)
+        self.m = int(self.offsets[n:].copy_to_host()[0])
         self.partners = full_on_device(max(self.m, 1), 0, np.int64)
         _pairs_kernel[blocks_for(n), THREADS](*args, counts, self.offsets, self.partners, True)
-        self.i = np.repeat(np.arange(n, dtype=np.int64), found)
 
 
 @cuda.jit
-def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2):
+def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2, largest):
     """Each pair (i, j) of particle i (one thread a particle): the unit normal from i to j, the gap
     along it relaxed by max(0, -(|d| - R_i - R_j) - most_recovered), and the tangents of
     colsim.engine.contacts.tangent_basis (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
-    normalised; t2 = n x t1), in the CPU's arithmetic; and gap[m + b] (m pairs) the largest overlap
+    normalised; t2 = n x t1), in the CPU's arithmetic; and largest[b] the largest overlap
     R_i + R_j - |d| of block b's particles' pairs (-inf: none)."""
-    largest = cuda.shared.array(THREADS, dtype=np.float64)
+    cache = cuda.shared.array(THREADS, dtype=np.float64)
     i = cuda.grid(1)
     t = cuda.threadIdx.x
-    largest[t] = -math.inf
+    cache[t] = -math.inf
     if i < offsets.shape[0] - 1:
-        largest[t] = _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1,
-                                  tangent2)
-    block_reduce(largest, t, True)
+        cache[t] = _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1,
+                                tangent2)
+    block_reduce(cache, t, True)
     if t == 0:
-        gap[offsets[offsets.shape[0] - 1] + cuda.blockIdx.x] = largest[0]
+        largest[cuda.blockIdx.x] = cache[0]
 
 
 @cuda.jit(device=True)

@@ -53,7 +53,8 @@ def blocks_for(count: int) -> int:
 #: (:func:`device_copy_of`)
 _device_copies: dict = {}
 
-#: the contact arrays a step never changes once made, which may share one device copy
+#: the contacts' frames: each goes to the device on its own, one copy that the operator and the warm
+#: start share (:func:`contact_arrays_on_device`)
 SHARED_FRAMES = ("normal", "tangent1", "tangent2")
 
 
@@ -81,6 +82,28 @@ def keep_device_copy(array: np.ndarray, copy) -> None:
     key = id(array)
     _device_copies[key] = copy
     weakref.finalize(array, _device_copies.pop, key, None)
+
+
+def contact_arrays_on_device(contacts, names, dtype=np.float64) -> list:
+    """The device copies of the arrays `names` of `contacts` (anything that has them by name: a
+    Contacts, a ConeProgram, a ContactOperator): the ones made there where it holds them (a GPU
+    detection's, :class:`colsim.engine.cuda_contacts.DeviceContacts`), else those kept for its host
+    arrays (:func:`kept_device_copy`), else its host arrays in one copy, each kept for its array."""
+    made = getattr(contacts, "device", None)
+    if made is not None and all(name in made for name in names):
+        return [made[name] for name in names]
+    host = [getattr(contacts, name) for name in names]
+    kept = [kept_device_copy(array) for array in host]
+    if all(copy is not None for copy in kept):
+        return kept
+    if len(host) == 1:
+        copies = [cuda.to_device(np.ascontiguousarray(host[0], dtype=dtype))]
+    else:
+        stacked = cuda.to_device(np.stack(host).astype(dtype, copy=False))
+        copies = [stacked[k] for k in range(len(host))]
+    for array, copy in zip(host, copies):
+        keep_device_copy(array, copy)
+    return copies
 
 
 @cuda.jit
@@ -451,43 +474,33 @@ class CudaContactOperator:
     :class:`colsim.engine.operator.ContactOperator`: i, j, frames, radii, lever)."""
 
     def __init__(self, contacts, n_bodies: int):
-        """B of `contacts` (:class:`colsim.engine.contacts.Contacts`) among n_bodies bodies: each body's
-        contacts listed on the device (:func:`body_contacts_on_device`), so no list is made on the
-        host, nor copied."""
-        self.n = int(n_bodies)
-        i = np.ascontiguousarray(contacts.i, dtype=np.int64)
-        j = np.ascontiguousarray(contacts.j, dtype=np.int64)
-        self._copy({"i": i, "j": j, **{name: getattr(contacts, name) for name in (
-            "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")}})
-        entries = len(i) + int(np.count_nonzero(j >= 0))   # each contact's first body, and its second if any
+        """B of `contacts` (:class:`colsim.engine.contacts.Contacts`) among n_bodies bodies: their arrays
+        on the device (:func:`contact_arrays_on_device`: none copied where the GPU's detection made
+        them) and each body's contacts listed there (:func:`body_contacts_on_device`), so no list is
+        made on the host, nor copied."""
+        self._copy(contacts, int(n_bodies))
         d = self.device
-        d["start"], d["entry"] = body_contacts_on_device(d["i"], d["j"], self.n, entries)
+        d["start"], d["entry"] = body_contacts_on_device(d["i"], d["j"], self.n, self.m + contacts.pair_count)
 
     @classmethod
     def from_operator(cls, operator) -> "CudaContactOperator":
         """The GPU's copy of a :class:`colsim.engine.operator.ContactOperator` (its lists of each
         body's contacts included)."""
         self = cls.__new__(cls)
-        self.n = int(operator.n)
-        self._copy({name: getattr(operator, name) for name in ("i", "j", "start", "entry", "normal", "tangent1",
-                                                              "tangent2", "radius_i", "radius_j", "lever")})
+        self._copy(operator, int(operator.n))
+        self.device.update({name: cuda.to_device(np.ascontiguousarray(getattr(operator, name), dtype=np.int64))
+                            for name in ("start", "entry")})
         return self
 
-    def _copy(self, host: dict) -> None:
-        """The contacts' arrays to the device: the copies kept there (the GPU's detection made them:
-        :func:`kept_device_copy`) where there are, else the frames shared (:func:`device_copy_of`), i and
-        j in one copy, the radii and levers in another, each other array (start, entry) on its own."""
-        self.m = len(host["i"])
-        self.device = {}
-        for group, dtype in ((("i", "j"), np.int64), (("radius_i", "radius_j", "lever"), float)):
-            kept = [kept_device_copy(host[name]) for name in group]
-            if any(copy is None for copy in kept):
-                kept = cuda.to_device(np.stack([host[name] for name in group]).astype(dtype, copy=False))
-            self.device.update(zip(group, kept))
-            for name in group:
-                del host[name]
-        self.device.update({name: device_copy_of(array) if name in SHARED_FRAMES else cuda.to_device(
-            np.ascontiguousarray(array, dtype=np.int64)) for name, array in host.items()})
+    def _copy(self, contacts, n_bodies: int) -> None:
+        """The contacts' arrays on the device (:func:`contact_arrays_on_device`): i and j in one copy,
+        the radii and levers in another, each frame on its own (shared with the warm start's)."""
+        self.n, self.m = n_bodies, contacts.m
+        self.device = dict(zip(("i", "j"), contact_arrays_on_device(contacts, ("i", "j"), np.int64)))
+        self.device.update(zip(("radius_i", "radius_j", "lever"),
+                               contact_arrays_on_device(contacts, ("radius_i", "radius_j", "lever"))))
+        for name in SHARED_FRAMES:
+            self.device[name], = contact_arrays_on_device(contacts, (name,))
         self.work = cuda.device_array((max(self.m, 1), 9), dtype=np.float64)
 
     def geometry(self, s) -> ContactGeometry:

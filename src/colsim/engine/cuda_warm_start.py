@@ -12,18 +12,20 @@ slot holds it does not change the answer: the same every run, whatever the order
 operations. The matched forces stay on the device, where the solver's first iterate takes them.
 
 What a step leaves for the next also stays there: its forces turned into the global frame on the
-device, from the solver's forces and the contacts' frames already there, and its contacts' keys,
-which went to the device for the step's own matching
-(:func:`colsim.engine.cuda_operator.device_copy_of`). So a step's matching copies to the device
-only its new contacts' keys and coefficients (24 bytes a contact), and nothing back; before, the
-stored keys and forces went out and the matched forces came back and went out again (153 bytes a
-contact, four more copies). Without a GPU the kernels run on numba's CUDA simulator (the tests).
+device, from the solver's forces and the contacts' frames already there, and its contacts' keys.
+The contacts of a GPU detection hold their keys, frames and coefficients on the device already
+(:class:`colsim.engine.cuda_contacts.DeviceContacts`), so a step's matching copies nothing either
+way; other contacts' go there once (:func:`colsim.engine.cuda_operator.contact_arrays_on_device`:
+24 bytes a contact). Before, the stored keys and forces went out and the matched forces came back
+and went out again (153 bytes a contact, four more copies). Without a GPU the kernels run on
+numba's CUDA simulator (the tests).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .cuda_operator import THREADS, blocks_for, cuda, device_copy_of, full_on_device, project_point_on_device
+from .cuda_operator import (SHARED_FRAMES, THREADS, blocks_for, contact_arrays_on_device, cuda, device_copy_of,
+                            full_on_device, project_point_on_device)
 from .operator import global_force_row
 from .program import ROWS_PER_CONTACT
 from .state import pair_keys
@@ -35,14 +37,14 @@ _global_force_row = cuda.jit(device=True)(getattr(global_force_row, "py_func", g
 
 
 class DeviceWarmStart(WarmStart):
-    """A :class:`WarmStart` whose forces are on the device: i, j, family (m,) on the host as the
-    record's, keys (m,) the pairs' keys on the host (their device copy made by the matching that
-    took them, :func:`colsim.engine.cuda_operator.device_copy_of`), on_device (2, m, 3) the force and
-    rolling force in the global frame. `force` and `rolling` are copied to the host when first read
-    (a checkpoint, a file, a match on the CPU); the GPU's matching reads them where they are."""
+    """A :class:`WarmStart` whose forces are on the device: the pairs are those of `contacts` (a step's
+    :class:`colsim.engine.contacts.Contacts`: i, j and family read from them, their keys on the device
+    from them), on_device (2, m, 3) the force and rolling force in the global frame. `force` and
+    `rolling` (and a GPU detection's i, j and family) are copied to the host when first read (a
+    checkpoint, a file, a match on the CPU); the GPU's matching reads them where they are."""
 
-    def __init__(self, i, j, family, keys, on_device):
-        self.i, self.j, self.family, self.keys, self.on_device = i, j, family, keys, on_device
+    def __init__(self, contacts, on_device):
+        self.contacts, self.on_device = contacts, on_device
         self._on_host = None
 
     def _host(self) -> np.ndarray:
@@ -50,8 +52,16 @@ class DeviceWarmStart(WarmStart):
             self._on_host = self.on_device.copy_to_host()
         return self._on_host
 
+    m = property(lambda self: self.contacts.m)
+    i = property(lambda self: self.contacts.i, doc="(m,) int particle (the contacts').")
+    j = property(lambda self: self.contacts.j, doc="(m,) int other body (the contacts').")
+    family = property(lambda self: self.contacts.family, doc="(m,) int family (the contacts').")
     force = property(lambda self: self._host()[0], doc="(m, 3) the force in the global frame (copied once).")
     rolling = property(lambda self: self._host()[1], doc="(m, 3) the rolling force in the global frame.")
+
+    def keys_on_device(self):
+        """(m,) int64 the pairs' keys on the device."""
+        return contact_arrays_on_device(self.contacts, ("keys",), np.int64)[0]
 
 
 def carried_on_device(contacts, forces: np.ndarray) -> DeviceWarmStart:
@@ -59,36 +69,36 @@ def carried_on_device(contacts, forces: np.ndarray) -> DeviceWarmStart:
     from their device copy (the solver's, when it solved on the GPU: no copy), turned by the frames'
     (detection's) in the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds)."""
     m = contacts.m
-    frames = [device_copy_of(frame) for frame in (contacts.normal, contacts.tangent1, contacts.tangent2)]
+    frames = [contact_arrays_on_device(contacts, (name,))[0] for name in SHARED_FRAMES]
     on_device = cuda.device_array((2, m, 3), dtype=np.float64)
     _global_forces_kernel[blocks_for(m), THREADS](device_copy_of(np.ascontiguousarray(forces, dtype=float)), *frames,
                                                   on_device[0], on_device[1])
-    return DeviceWarmStart(contacts.i, contacts.j, contacts.family, contacts.keys, on_device)
+    return DeviceWarmStart(contacts, on_device)
 
 
 def match_on_device(warm: WarmStart, contacts):
     """(m, 5) = :meth:`WarmStart.match` (the stored forces of the pairs in `contacts`, in their frames,
     projected onto their cones; zeros for new pairs), matched on the GPU: a device array. The new
-    contacts' keys go to the device once (:func:`colsim.engine.cuda_operator.device_copy_of`: the next
-    step finds them there), and their coefficients; a :class:`DeviceWarmStart`'s keys and forces are
-    there already, a host one's go in two copies."""
+    contacts' keys, frames and coefficients are a GPU detection's there, or go there once
+    (:func:`colsim.engine.cuda_operator.contact_arrays_on_device`: the next step finds them); a
+    :class:`DeviceWarmStart`'s keys and forces are there already, a host one's go in two copies."""
     out = full_on_device((contacts.m, ROWS_PER_CONTACT), 0.0)
     if warm.m == 0 or contacts.m == 0:
         return out
-    keys = device_copy_of(contacts.keys)
+    keys, = contact_arrays_on_device(contacts, ("keys",), np.int64)
     if isinstance(warm, DeviceWarmStart):
-        stored, forces = device_copy_of(warm.keys), warm.on_device
+        stored, forces = warm.keys_on_device(), warm.on_device
     else:
         stored = cuda.to_device(pair_keys(warm.i, warm.j, warm.family))
         forces = cuda.to_device(np.stack([warm.force, warm.rolling]).astype(float, copy=False))
-    coefficients = cuda.to_device(np.stack([contacts.mu, contacts.mu_r]).astype(float, copy=False))
+    mu, mu_r = contact_arrays_on_device(contacts, ("mu", "mu_r"))
     size = 1 << int(2 * warm.m - 1).bit_length()       # a power of two >= 2 m
     table_key = full_on_device(size, EMPTY, np.int64)
     table_row = cuda.device_array(size, dtype=np.int64)   # read only where a key was stored
     _insert_kernel[blocks_for(warm.m), THREADS](stored, table_key, table_row)
-    frames = [device_copy_of(array) for array in (contacts.normal, contacts.tangent1, contacts.tangent2)]
+    frames = [contact_arrays_on_device(contacts, (name,))[0] for name in SHARED_FRAMES]
     _match_kernel[blocks_for(contacts.m), THREADS](keys, table_key, table_row, forces[0], forces[1], *frames,
-                                                   coefficients[0], coefficients[1], out)
+                                                   mu, mu_r, out)
     return out
 
 

@@ -73,7 +73,7 @@ def solve_step(program: ConeProgram, solver: Solver, law: FrictionLaw, mean_diam
         if solves == law.max_iter:
             break
         correction = accelerate(correction, residual)
-        solution = solver.solve(replace(program, gap=program.gap + correction),
+        solution = solver.solve(replace(program, gap_shift=correction),
                                 warm_start=solution.forces, step=step)
         iterations += solution.iterations
         setup_time += solution.setup_time

@@ -26,6 +26,7 @@ them by name.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -44,9 +45,10 @@ class ConeProgram:
 
     mass: (6n,) diagonal of Mbar = diag(m, m, m, ..., I, I, I, ...)/dt^2, mass/time^2
     fbar: (6n,) fbar, force (and moment) units
-    gap: (m,) length; mu, mu_r: (m,) coefficients
-    contacts: the contacts B is built from (their frames and radii also give B without the matrix:
-    :attr:`operator`); None for a program given by its matrix alone
+    contacts: the contacts: B is built from them (their frames and radii also give B without the
+    matrix: :attr:`operator`), and the gaps and coefficients are theirs (:attr:`gap`, :attr:`mu`,
+    :attr:`mu_r`: not copied, so that a GPU detection's stay on the device)
+    gap_shift: (m,) length added to the contacts' gaps (a Coulomb fixed point's correction), or None
     matrix: (5m, 6n) CSR matrix B, dimensionless and length (rotation columns), or None: built from
     the contacts when first asked for (:attr:`jacobian`). A step solved by APGD never asks: its
     products with B and B' run on :attr:`operator`.
@@ -54,10 +56,8 @@ class ConeProgram:
 
     mass: np.ndarray
     fbar: np.ndarray
-    gap: np.ndarray
-    mu: np.ndarray
-    mu_r: np.ndarray
-    contacts: Contacts | None = None
+    contacts: Contacts
+    gap_shift: np.ndarray | None = None
     matrix: sp.csr_matrix | None = field(default=None, repr=False)
     _operator: ContactOperator | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -67,7 +67,15 @@ class ConeProgram:
 
     @property
     def m(self) -> int:
-        return len(self.gap)
+        return self.contacts.m
+
+    @cached_property
+    def gap(self) -> np.ndarray:
+        """(m,) length: the contacts' gaps, shifted by gap_shift where given."""
+        return self.contacts.gap if self.gap_shift is None else self.contacts.gap + self.gap_shift
+
+    mu = property(lambda self: self.contacts.mu, doc="(m,) the contacts' sliding coefficients.")
+    mu_r = property(lambda self: self.contacts.mu_r, doc="(m,) the contacts' rolling coefficients.")
 
     @property
     def jacobian(self) -> sp.csr_matrix:
@@ -79,7 +87,7 @@ class ConeProgram:
     @property
     def operator(self) -> ContactOperator | None:
         """B applied from the contacts' frames (None without contacts or without numba)."""
-        if self._operator is None and self.contacts is not None and HAVE_NUMBA:
+        if self._operator is None and HAVE_NUMBA:
             self._operator = ContactOperator(self.contacts, self.n_unknowns // 6)
         return self._operator
 
@@ -168,9 +176,7 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
     translation += m_i[:, None] * np.asarray(gravity, dtype=float)[None, :]   # f_ext + m v / dt
     np.multiply(inertia[:, None], state.angular_velocity, out=rotation)
     rotation /= dt
-    # the contacts' own gaps and coefficients (no array of a step is changed in place): their device
-    # copies, where the GPU's detection kept them, serve the program too
-    return ConeProgram(mass=mass, fbar=fbar, gap=contacts.gap, mu=contacts.mu, mu_r=contacts.mu_r, contacts=contacts)
+    return ConeProgram(mass=mass, fbar=fbar, contacts=contacts)
 
 
 def cone_violation(program: ConeProgram, u: np.ndarray, forces: np.ndarray) -> dict[str, float]:

@@ -137,6 +137,18 @@ def pair_keys(i, j, family) -> np.ndarray:
     return np.asarray(i, dtype=np.int64) * (1 << 32) + other
 
 
+def pair_key(i, j, family):
+    """:func:`pair_keys` of one contact (scalar code: the GPU's detection compiles it with numba.cuda,
+    :mod:`colsim.engine.cuda_contacts`; a test holds the two equal for every kind of body)."""
+    if j >= 0:
+        other = j
+    elif j == -1:
+        other = OTHER_BODIES + family
+    else:
+        other = OTHER_BODIES + 8 + (-2 - j)
+    return i * (1 << 32) + other
+
+
 @dataclass(frozen=True)
 class Walls:
     """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder

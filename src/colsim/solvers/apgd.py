@@ -266,10 +266,10 @@ class _Iteration:
         """:func:`colsim.engine.cones.relative_residuals` at the iterate (mu, mu_r (m,): the program's own)."""
         return scaled_residuals(self.gradient_at_x(), self.x, self.scaling.ravel(), mu, mu_r, scale, floor)
 
-    def iterate_and_check(self, n: int, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
+    def iterate_and_check(self, n: int, program: ConeProgram, scale: float, floor: float) -> dict[str, float]:
         """:meth:`iterate` n, then :meth:`residuals` there (the GPU's twin reads both in one copy)."""
         self.iterate(n)
-        return self.residuals(mu, mu_r, scale, floor)
+        return self.residuals(program.mu, program.mu_r, scale, floor)
 
     def host_x(self) -> np.ndarray:
         """(5m,) the scaled iterate z."""
@@ -504,7 +504,7 @@ class ApgdSolver(Solver):
         converged = False
         while k < max_iter:
             n = min(self.check_every, max_iter - k)
-            res = run.iterate_and_check(n, program.mu, program.mu_r, scale, floor)
+            res = run.iterate_and_check(n, program, scale, floor)
             k += n
             if self.verbose:
                 log.info("apgd %d: primal %.2e compl %.2e L %.3g", k, res["primal"],

@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
-                                    body_sums_on_device, cuda, dot, full_on_device,         # on numpy 2.5
+                                    body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
+                                    dot, full_on_device,
                                     gradient_on_device, gradient_row, keep_device_copy, kept_device_copy,
                                     normalise_on_device, project_point_on_device, transpose_on_device,
                                     wrench_on_device)
@@ -426,14 +427,11 @@ class CudaIteration:
         there (the frames and a warm start matched on the GPU are there already, and so are the
         forces of the solve before, in a Coulomb fixed point)."""
         m = program.m
-        device = (CudaContactOperator.from_operator(program.operator) if program.contacts is None
-                  else CudaContactOperator(program.contacts, program.n_unknowns // 6))   # no host operator
+        device = CudaContactOperator(program.contacts, program.n_unknowns // 6)   # no host operator
         bodies = cuda.to_device(np.stack([inv_mass, program.fbar]).astype(float, copy=False))   # one copy each
         d_inv_mass, fbar = bodies[0], bodies[1]
-        per_contact = [kept_device_copy(array) for array in (program.mu, program.mu_r, program.gap)]
-        if any(copy is None for copy in per_contact):   # not the GPU detection's (kept there), one copy
-            per_contact = cuda.to_device(np.stack([program.mu, program.mu_r, program.gap]).astype(float, copy=False))
-        mu, mu_r, gap = per_contact[0], per_contact[1], per_contact[2]
+        shifted = program.gap_shift is not None   # a Coulomb fixed point's gaps are made on the host
+        mu, mu_r, gap = contact_arrays_on_device(program if shifted else program.contacts, ("mu", "mu_r", "gap"))
         diagonal = device.diagonal_on_device(d_inv_mass)
         s = cuda.device_array(5 * m, dtype=np.float64)
         mu_s, mu_r_s = cuda.device_array(m, dtype=np.float64), cuda.device_array(m, dtype=np.float64)
@@ -494,9 +492,9 @@ class CudaIteration:
             if self._read[ITERATIONS] >= target:
                 return
 
-    def iterate_and_check(self, n: int, mu, mu_r, scale: float, floor: float) -> dict[str, float]:
-        """:meth:`iterate` n, then :meth:`residuals` there (mu, mu_r: as there): one copy from the
-        device a round."""
+    def iterate_and_check(self, n: int, program, scale: float, floor: float) -> dict[str, float]:
+        """:meth:`iterate` n, then :meth:`residuals` there (with the coefficients already on the device,
+        not `program`'s host ones): one copy from the device a round."""
         self.iterate(n, check=True)
         return self._residuals_read(scale, floor)
 
