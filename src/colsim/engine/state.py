@@ -66,9 +66,11 @@ class ParticleState:
 
     def kinetic_energy(self) -> tuple[float, float]:
         """(translational, rotational) kinetic energy, mass length^2/time^2."""
-        trans = 0.5 * float(np.sum(self.mass * np.einsum("ij,ij->i", self.velocity, self.velocity)))
+        mass = self.mass
+        trans = 0.5 * float(np.sum(mass * np.einsum("ij,ij->i", self.velocity, self.velocity)))
         w = self.angular_velocity
-        rot = 0.5 * float(np.sum(self.inertia * np.einsum("ij,ij->i", w, w)))
+        inertia = 0.4 * mass * self.radius**2   # self.inertia, without making the masses again
+        rot = 0.5 * float(np.sum(inertia * np.einsum("ij,ij->i", w, w)))
         return trans, rot
 
     def subset(self, keep: np.ndarray) -> "ParticleState":
