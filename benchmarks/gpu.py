@@ -77,20 +77,20 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     every array element a kernel reads or writes, counted once (a gathered entry read by several
     threads once too): a lower bound on the traffic to the GPU's memory.
 
-    A trial step: the projection reads x, x_prev, g and the two scaled coefficients and writes x_new
-    (22m); the same thread's wrench reads s, the frame and the three lengths and writes 9 a contact
-    (26m); the bodies' sums read their starts, entries and the wrenches and write h_new (7n + 1 +
-    entries + 9m); the same thread's part of the descent test reads hx, hx_prev and inv_mass (18n:
-    hy = hx + beta (hx - hx_prev) is made there). An accepted trial step (an iteration) then takes
-    the gradient at the new y (hx, hx_prev and inv_mass 18n; s, i, j, the frame, the lengths and c
-    read, g written: 29m); a rejected one moves nothing. A residual check: a gradient at x (12n + 29m)
-    and the residual kernel (g, x, s, mu and mu_r: 17m). Until 2026-11-27 the kernels also read back
+    A trial step: the projection reads x, x_prev and the two scaled coefficients and writes x_new
+    (17m); the same thread's gradient at y reads hx, hx_prev and inv_mass of its bodies (18n: hy = hx
+    + beta (hx - hx_prev) is made there), i, j and c (7m), and with its wrench s, the frame and the
+    three lengths, writing 9 a contact (26m); the bodies' sums read their starts, entries and the
+    wrenches and write h_new (7n + 1 + entries + 9m); the same thread's part of the descent test
+    reads hx, hx_prev and inv_mass (18n). A residual check: a gradient at x (12n + 29m) and the
+    residual kernel (g, x, s, mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed
+    by a kernel that took the gradient at the new y and wrote it, for the next projection to read
+    (18n + 29m an iteration, and 5m more a trial step); until 2026-11-27 the kernels also read back
     x_new and h_new (5m + 6n a trial step), stored hy (18n an iteration) and copied x_new and h_new
     into their slots; the bound counted the first two."""
-    trial = 22 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
-    gradient = 12 * n + 29 * m
-    check = gradient + 17 * m
-    return WORD * (trial_steps * trial + iterations * (6 * n + gradient) + checks * check)
+    trial = 17 * m + 18 * n + 7 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
+    check = 12 * n + 29 * m + 17 * m
+    return WORD * (trial_steps * trial + checks * check)
 
 
 def bandwidth(cuda, gib: float = 1.0, repeat: int = 5) -> tuple[float | None, float]:

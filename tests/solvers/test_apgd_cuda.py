@@ -41,16 +41,16 @@ def program(solver_pile):
 def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
     """Everything ApgdSolver.prepare makes, made on the device: the row scales, the scaled
     coefficients, c, the first iterate (a warm start's forces projected onto the scaled cones, or
-    zero), T x, the first gradient and the Lipschitz estimate (12 power iterations on the kernels):
-    the CPU's to 1e-12 (sums in another order); the forces S z to 1e-12 too."""
+    zero), T x and the Lipschitz estimate (12 power iterations on the kernels): the CPU's to 1e-12
+    (sums in another order); the forces S z to 1e-12 too. (The gradient at y is taken by each trial
+    step on the device: the next test's x_new shows it.)"""
     warm = ApgdSolver(kernel="numba").solve(program).forces if start == "warm" else None
     cpu = ApgdSolver(kernel="numba").prepare(program, warm)
     gpu = ApgdSolver(kernel="cuda").prepare(program, warm)
     assert gpu.is_warm() == cpu.is_warm() == (start == "warm")
     assert gpu.lip == pytest.approx(cpu.lip, rel=1e-12) and (gpu.theta, gpu.beta) == (cpu.theta, cpu.beta)
     for device, host in ((gpu.geometry.s, cpu.scaling.ravel()), (gpu.mu_s, cpu.mu_s), (gpu.mu_r_s, cpu.mu_r_s),
-                         (gpu.c, cpu.c), (gpu.x, cpu.x), (gpu.x_prev, cpu.x_prev), (gpu.hx, cpu.hx),
-                         (gpu.g, cpu.g)):   # hy is made where it is read (g = G hy + c shows it)
+                         (gpu.c, cpu.c), (gpu.x, cpu.x), (gpu.x_prev, cpu.x_prev), (gpu.hx, cpu.hx)):
         np.testing.assert_allclose(device.copy_to_host(), host, rtol=0, atol=1e-12 * max(np.abs(host).max(), 1e-300))
     np.testing.assert_allclose(gpu.forces(), cpu.forces(), rtol=0, atol=1e-12 * np.abs(cpu.forces()).max() + 1e-300)
 
@@ -59,8 +59,8 @@ def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
     cpu = ApgdSolver(kernel="numba").prepare(program)
     gpu = ApgdSolver(kernel="cuda").prepare(program)
     x_new, h_new = np.empty_like(cpu.x), np.empty_like(cpu.hx)
-    apgd_cuda.trial_step(gpu.x_slots, gpu.h_slots, gpu.control, gpu.g, gpu.geometry, gpu.mu_s, gpu.mu_r_s,
-                         gpu.inv_mass, gpu.parts)
+    apgd_cuda.trial_step(gpu.x_slots, gpu.h_slots, gpu.control, gpu.c, gpu.geometry, gpu.mu_s, gpu.mu_r_s,
+                         gpu.inv_mass, gpu.parts)   # its gradient at y = x taken on the device
     ours = gpu.parts.copy_to_host().sum(axis=1)   # the blocks' sums (the step 1/lip and beta from the device)
     theirs = _trial_step(cpu.x, cpu.x_prev, 0.0, cpu.g, x_new, 1.0 / cpu.lip, h_new, cpu.hy, cpu.geometry, cpu.mu_s,
                          cpu.mu_r_s, cpu.inv_mass, 1)

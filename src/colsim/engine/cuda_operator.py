@@ -126,6 +126,15 @@ def _entry(h, h_prev, beta, extrapolate, i):
 @cuda.jit(device=True)
 def gradient_row(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
     """out[5k:5k + 5] = contact k's rows of S B Mbar^-1 h + c (h's entries by :func:`_entry`)."""
+    o = 5 * k
+    out[o], out[o + 1], out[o + 2], out[o + 3], out[o + 4] = gradient_values(
+        k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c)
+
+
+@cuda.jit(device=True)
+def gradient_values(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c):
+    """Contact k's five rows of S B Mbar^-1 h + c (h's entries by :func:`_entry`), returned: the
+    caller keeps them in registers (APGD's trial step) or stores them (:func:`gradient_row`)."""
     rot = h.shape[0] // 2
     first, second = ci[k], cj[k]
     un = ut1 = ut2 = ur1 = ur2 = 0.0
@@ -146,11 +155,8 @@ def gradient_row(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, 
             ur1 += lever[k] * t1[k, d] * w
             ur2 += lever[k] * t2[k, d] * w
     o = 5 * k
-    out[o] = s[o] * un + c[o]
-    out[o + 1] = s[o + 1] * ut1 + c[o + 1]
-    out[o + 2] = s[o + 2] * ut2 + c[o + 2]
-    out[o + 3] = s[o + 3] * ur1 + c[o + 3]
-    out[o + 4] = s[o + 4] * ur2 + c[o + 4]
+    return (s[o] * un + c[o], s[o + 1] * ut1 + c[o + 1], s[o + 2] * ut2 + c[o + 2], s[o + 3] * ur1 + c[o + 3],
+            s[o + 4] * ur2 + c[o + 4])
 
 
 @cuda.jit(device=True)

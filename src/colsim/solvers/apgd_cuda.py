@@ -8,14 +8,15 @@ from the CPU's sums by rounding only). A trial step (projection, B' S z, the des
 followed by one block that adds its blocks' sums and decides as the CPU does, with the CPU's code
 (:func:`colsim.solvers.apgd.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
 iteration's scalars kept in a small device array; an accepted step then moves the iterate (the
-roles of three slots move on, nothing is copied) and the gradient at the new y is taken. So the
-host launches trial steps without waiting for any, and reads that array once a round of them
+roles of three slots move on, nothing is copied); the next trial step takes the gradient at its y
+itself, in the projection's kernel: three launches a trial step. So the host launches trial steps
+without waiting for any, and reads that array once a round of them
 (:meth:`CudaIteration.iterate`): a trial step used to wait for a copy of its sums to the host, which
 with the launches was most of an iteration at 69,000 spheres (0.22 ms on an H200, against 0.04 ms of
 memory traffic). A residual check costs one more copy. A solve's start is made on the device as
 well (:meth:`CudaIteration.of_program`): the contacts' frames, the masses, the free forces, the
 gaps, the coefficients and the warm start go there once, and the row scales, c, the first iterate,
-T x, the first gradient and the Lipschitz estimate's power iteration are made by kernels.
+T x and the Lipschitz estimate's power iteration are made by kernels.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), as in the tests.
 """
@@ -28,7 +29,8 @@ import numpy as np
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
                                     dot, full_on_device,
-                                    gradient_on_device, gradient_row, keep_device_copy, kept_device_copy,
+                                    gradient_on_device, gradient_row, gradient_values, keep_device_copy,
+                                    kept_device_copy,
                                     normalise_on_device, project_point_on_device, transpose_on_device,
                                     wrench_on_device)
 from ..engine.cones import combine_residuals
@@ -61,13 +63,18 @@ def _slot(slots_0, slots_1, slots_2, control, role):
 
 
 @cuda.jit
-def _project_kernel(x_0, x_1, x_2, control, g, mu_s, mu_r_s, s, nrm, t1, t2, ri, rj, lever, work, parts):
+def _project_kernel(x_0, x_1, x_2, h_0, h_1, h_2, control, inv_mass, c, mu_s, mu_r_s, s, ci, cj, nrm, t1, t2, ri,
+                    rj, lever, work, parts):
     """x_new = Proj_K(y - g / lip) at y = x + beta (x - x_prev), one contact a thread (x, x_prev and
-    x_new from the three slots x_0, x_1, x_2, lip and beta from the control array), and its wrench
-    from the force S x_new into work (m, 9) (the first half of T x_new:
-    :func:`colsim.engine.cuda_operator.wrench_on_device`, s and the frames from the contact
+    x_new from the three slots x_0, x_1, x_2, lip and beta from the control array), with the
+    gradient g = S B Mbar^-1 hy + c at y taken here, in registers, from hy = hx + beta (hx - hx_prev)
+    (hx and hx_prev from the slots h_0, h_1, h_2: :func:`colsim.engine.cuda_operator.gradient_values`,
+    the CPU's arithmetic); its wrench from the force S x_new into work (m, 9) (the first half of
+    T x_new: :func:`colsim.engine.cuda_operator.wrench_on_device`, s and the frames from the contact
     geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and g . (x_new - x)
-    (colsim.solvers.apgd._project_step)."""
+    (colsim.solvers.apgd._project_step). A backtrack takes the same gradient again (the same y,
+    the same bits): that costs less than a kernel of its own after each accepted step, which
+    wrote g for this one to read back."""
     moved = cuda.shared.array(THREADS, dtype=np.float64)
     uphill = cuda.shared.array(THREADS, dtype=np.float64)
     k = cuda.grid(1)
@@ -79,21 +86,23 @@ def _project_kernel(x_0, x_1, x_2, control, g, mu_s, mu_r_s, s, nrm, t1, t2, ri,
         x_new = _slot(x_0, x_1, x_2, control, X_NEW)
         beta = control[BETA]
         step = 1.0 / control[LIP]
+        g0, g1, g2, g3, g4 = gradient_values(k, _slot(h_0, h_1, h_2, control, X), _slot(h_0, h_1, h_2, control, X_PREV),
+                                             beta, True, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c)
         o = 5 * k
         y0 = x[o] + beta * (x[o] - x_prev[o])
         y1 = x[o + 1] + beta * (x[o + 1] - x_prev[o + 1])
         y2 = x[o + 2] + beta * (x[o + 2] - x_prev[o + 2])
         y3 = x[o + 3] + beta * (x[o + 3] - x_prev[o + 3])
         y4 = x[o + 4] + beta * (x[o + 4] - x_prev[o + 4])
-        p, q1, q2, r1, r2 = project_point_on_device(y0 - step * g[o], y1 - step * g[o + 1], y2 - step * g[o + 2],
-                                                    y3 - step * g[o + 3], y4 - step * g[o + 4], mu_s[k], mu_r_s[k])
+        p, q1, q2, r1, r2 = project_point_on_device(y0 - step * g0, y1 - step * g1, y2 - step * g2, y3 - step * g3,
+                                                    y4 - step * g4, mu_s[k], mu_r_s[k])
         x_new[o], x_new[o + 1], x_new[o + 2], x_new[o + 3], x_new[o + 4] = p, q1, q2, r1, r2
         wrench_on_device(k, s[o] * p, s[o + 1] * q1, s[o + 2] * q2, s[o + 3] * r1, s[o + 4] * r2, nrm, t1, t2, ri,
                          rj, lever, work)
         moved[t] = ((p - y0) * (p - y0) + (q1 - y1) * (q1 - y1) + (q2 - y2) * (q2 - y2)
                     + (r1 - y3) * (r1 - y3) + (r2 - y4) * (r2 - y4))
-        uphill[t] = (g[o] * (p - x[o]) + g[o + 1] * (q1 - x[o + 1]) + g[o + 2] * (q2 - x[o + 2])
-                     + g[o + 3] * (r1 - x[o + 3]) + g[o + 4] * (r2 - x[o + 4]))
+        uphill[t] = (g0 * (p - x[o]) + g1 * (q1 - x[o + 1]) + g2 * (q2 - x[o + 2]) + g3 * (r1 - x[o + 3])
+                     + g4 * (r2 - x[o + 4]))
     block_reduce(moved, t, False)
     block_reduce(uphill, t, False)
     if t == 0:
@@ -195,18 +204,6 @@ def _decide_kernel_few(parts, control):
 
 
 @cuda.jit
-def _extrapolated_gradient_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g):
-    """After an accepted trial step, g (5m,) = S B Mbar^-1 hy + c at the new y, one contact a thread,
-    hy = hx + beta (hx - hx_prev) made from the slots of h as it is read
-    (:func:`colsim.engine.cuda_operator.gradient_row`); after a rejected one g stays (y has not moved)."""
-    k = cuda.grid(1)
-    if control[ACCEPTED] == 0.0 or k >= ci.shape[0]:
-        return
-    gradient_row(k, _slot(h_0, h_1, h_2, control, X), _slot(h_0, h_1, h_2, control, X_PREV), control[BETA], True,
-                 inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g)
-
-
-@cuda.jit
 def _gradient_at_x_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g):
     """g (5m,) = S B Mbar^-1 hx + c at the iterate x, one contact a thread, hx the slot of h that the
     control names now (:func:`colsim.engine.cuda_operator.gradient_row`, not extrapolated)."""
@@ -254,22 +251,22 @@ def _residual_kernel(g, x_0, x_1, x_2, control, s, mu, mu_r, parts):
 
 # -- an iteration on the device -----------------------------------------------------------------
 
-def trial_step(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s, inv_mass, parts):
-    """The projection, h_new = T x_new and the descent test's sums per block into parts (rows
-    ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}); x_slots, h_slots: the three slots
-    of x and of h = T x (:data:`X`): two launches (one thread a contact, then one a body), nothing
-    waits."""
-    for kernel, blocks, threads, arguments in trial_launches(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s,
+def trial_step(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, parts):
+    """The gradient at y, the projection, h_new = T x_new and the descent test's sums per block into
+    parts (rows ||x_new - y||^2, g . (x_new - x), ||h_new - hy||^2_{Mbar^-1}); x_slots, h_slots: the
+    three slots of x and of h = T x (:data:`X`); c: (5m,) the gradient's constant: two launches (one
+    thread a contact, then one a body), nothing waits."""
+    for kernel, blocks, threads, arguments in trial_launches(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s,
                                                              inv_mass, parts):
         launch(kernel, blocks, threads, *arguments)
 
 
-def trial_launches(x_slots, h_slots, control, g, geometry, mu_s, mu_r_s, inv_mass, parts):
+def trial_launches(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, parts):
     """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments)."""
     geo = geometry
     return ((_project_kernel, blocks_for(mu_s.shape[0]), THREADS,
-             (*x_slots, control, g, mu_s, mu_r_s, geo.s, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i,
-              geo.radius_j, geo.lever, geo.work, parts)),
+             (*x_slots, *h_slots, control, inv_mass, c, mu_s, mu_r_s, geo.s, geo.i, geo.j, geo.normal, geo.tangent1,
+              geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)),
             (_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS,
              (geo.work, geo.start, geo.entry, *h_slots, control, inv_mass, parts)))
 
@@ -370,7 +367,7 @@ class CudaIteration:
     """The APGD state on the device: the fields and methods of :class:`colsim.solvers.apgd._Iteration`,
     as device arrays, from the same arguments (host or device arrays): the scaled problem (c (5m,),
     mu_s, mu_r_s (m,), inv_mass (6n,), the scaling (m, 5) or (5m,)) and the first iterate x (5m,);
-    hx = T x, the gradient g and the Lipschitz estimate (the same power iteration,
+    hx = T x and the Lipschitz estimate (the same power iteration,
     :func:`lipschitz_estimate`) are made on the device. operator: the program's CPU operator (its
     frames are copied) or their copy on the device; mu, mu_r: the program's coefficients, for the
     residual check; warm: whether x holds a force (None: look). :meth:`of_program` makes the scaled
@@ -398,8 +395,6 @@ class CudaIteration:
         # the slots of x, x_new, x_prev (:data:`X` at SLOT 0) and of h = T x: x_prev = x, so y = x
         self.x_slots = (x, cuda.device_array_like(x), _copy(x))
         self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
-        self.g = cuda.device_array(5 * self.m, dtype=np.float64)
-        gradient_on_device(self.geometry, hx, self.inv_mass, self.c, self.g)
         lip = self._lipschitz_estimate()
         # what the host reads: the control array, then the residual check's block sums (one copy a check)
         self.readout = cuda.device_array(CONTROL_SIZE + 4 * blocks_for(self.m), dtype=np.float64)
@@ -523,24 +518,19 @@ class CudaIteration:
                                  float(parts[2].sum()), float(parts[3].sum()), self.m, scale, floor)
 
     def _trial(self):
-        """One trial step, its decision and the gradient at the new y when accepted: four launches, each
+        """One trial step (with its gradient at y) and its decision: three launches, each
         with the same arguments every time (prepared once: :class:`colsim.engine.cuda_launch.Prepared`)."""
         for prepared in self._trial_launches:
             prepared()
         self._stale = True
 
     def _launches_of_a_trial(self) -> list:
-        """The trial step's two launches, its decision's and the gradient at the new y after an
-        accepted step: each (kernel, blocks, threads, arguments)."""
+        """The trial step's two launches and its decision's: each (kernel, blocks, threads, arguments)."""
         decide = ((_decide_kernel_few, 1, FEW_DECIDE_THREADS) if self.parts.shape[1] <= FEW_DECIDE_THREADS
                   else (_decide_kernel, 1, DECIDE_THREADS))
-        geo = self.geometry
-        return [*trial_launches(self.x_slots, self.h_slots, self.control, self.g, geo, self.mu_s, self.mu_r_s,
-                                self.inv_mass, self.parts),
-                (*decide, (self.parts, self.control)),
-                (_extrapolated_gradient_kernel, blocks_for(self.m), THREADS,
-                 (self.control, *self.h_slots, self.inv_mass, geo.s, geo.i, geo.j, geo.normal, geo.tangent1,
-                  geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, self.c, self.g))]
+        return [*trial_launches(self.x_slots, self.h_slots, self.control, self.c, self.geometry, self.mu_s,
+                                self.mu_r_s, self.inv_mass, self.parts),
+                (*decide, (self.parts, self.control))]
 
     def _role(self, slots, role: int):
         """The slot of `slots` that holds `role` (:data:`X`), as of the control array's last read."""
