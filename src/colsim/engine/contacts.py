@@ -296,21 +296,18 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     """
     speed = row_lengths(predicted)
     others = _other_contacts(state, walls, law, margin + (1.0 + slack) * speed, cylinder_margin, most_recovered)
-    largest_pair_overlap = None   # measured by the GPU's detection
+    largest_pair_overlap = found = None   # the largest pair overlap: measured by the GPU's detection
     if device == "cuda":
         from .cuda_contacts import swept_contacts
 
         found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law)
-        if found is not None and renormal is None:
+        if found is None:   # fewer than two particles or no contacts: nothing to keep there
+            largest_pair_overlap = -np.inf
+        elif renormal is None:
             return found
-        largest_pair_overlap = -np.inf if found is None else found.largest_pair_overlap
-        if found is None:
-            pi = pj = np.zeros(0, np.int64)
-            pair_normal = pair_t1 = pair_t2 = np.zeros((0, 3))
-            pair_gap = np.zeros(0)
-        else:   # the pairs' rows come first
-            pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = (getattr(found, name)[:found.pair_count] for name in (
-                "i", "j", "normal", "tangent1", "tangent2", "gap"))
+    if found is not None:   # a redo on the GPU: the device's pairs (their rows first), the given ones joined
+        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = (getattr(found, name)[:found.pair_count] for name in (
+            "i", "j", "normal", "tangent1", "tangent2", "gap"))
     else:
         pi, pj = swept_pairs(state, predicted, margin, slack)
         pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)

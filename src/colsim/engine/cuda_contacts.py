@@ -103,8 +103,8 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     if state.n < 2:
         return None
     found = _SweptPairs(state, predicted, margin, slack)
-    w = len(others["i"])
-    m, total = found.m, found.m + len(others["i"])
+    m, w = found.m, len(others["i"])
+    total = m + w
     if total == 0:   # no zero-length arrays on the device
         return None
     frames = cuda.device_array((3, total, 3), dtype=np.float64)     # normal, tangent1, tangent2

@@ -28,11 +28,9 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
-                                    dot, full_on_device,
-                                    gradient_on_device, gradient_row, gradient_values, keep_device_copy,
-                                    kept_device_copy,
-                                    normalise_on_device, project_point_on_device, transpose_on_device,
-                                    wrench_on_device)
+                                    dot, full_on_device, gradient_on_device, gradient_row, gradient_values,
+                                    keep_device_copy, kept_device_copy, normalise_on_device,
+                                    project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
 from .apgd import decide, lipschitz_estimate, power_start_drawn
