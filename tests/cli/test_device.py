@@ -39,10 +39,10 @@ def column(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
-    """4 steps at dt/sqrt(h0/g) = 0.004 (the simulator runs about 1 s an iteration, each GPU thread
-    a Python thread: 80 iterations here, 100 s; 20 steps would take 8 minutes): the same iterations a
-    step, and the end positions within 1e-9 of a diameter (measured: equal; both stop at the same
-    check, and the GPU's sums differ from the CPU's by rounding only)."""
+    """4 steps at dt/sqrt(h0/g) = 0.004 (the simulator runs about 0.5 s an iteration, each GPU thread
+    a Python thread: 80 iterations here, 50 s; 20 steps would take over 3 minutes): the same
+    iterations a step, and the end positions within 1e-9 of a diameter (measured: equal; both stop at
+    the same check, and the GPU's sums differ from the CPU's by rounding only)."""
     runs = {}
     for device in ("cpu", "cuda"):
         done = colsim("collapse", "--input", "column.nc", "--steps", "4", "--duration", "0.016", "--device", device,

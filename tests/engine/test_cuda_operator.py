@@ -28,8 +28,8 @@ def test_the_kernels_equal_the_cpu_operator(pile_with_every_contact):
 
 
 def test_the_dot_product_sums_in_a_fixed_order():
-    """Over several blocks (1,000 values, blocks of 128): numpy's dot to rounding, and the same bits
-    on every call."""
+    """Over several blocks (1,000 values, blocks of THREADS: 128 on a GPU, 32 on the simulator):
+    numpy's dot to rounding, and the same bits on every call."""
     rng = np.random.default_rng(7)
     a, b = rng.standard_normal(1000), rng.standard_normal(1000)
     first = cuda_operator.dot(a, b)
@@ -113,7 +113,8 @@ def test_each_bodys_contacts_are_listed_on_the_device_as_on_the_cpu(pile_with_ev
         np.testing.assert_array_equal(entry.copy_to_host(), expected_entry)
 
 
-@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 1000])
+@pytest.mark.parametrize("n", sorted({0, 1, 127, 128, 129, 1000, cuda_operator.THREADS - 1, cuda_operator.THREADS,
+                                       cuda_operator.THREADS + 1}))
 def test_prefix_sums_on_the_device_are_numpys(n):
     """prefix_sums_on_device: 0 then numpy's cumsum, exactly (integers), across block edges."""
     count = np.random.default_rng(n).integers(0, 9, n).astype(np.int64)
@@ -124,7 +125,7 @@ def test_prefix_sums_on_the_device_are_numpys(n):
 @pytest.mark.parametrize("blocks", [5, 300])
 def test_the_blocks_totals_are_scanned_by_one_block(blocks):
     """The blocks' totals' exclusive running sums, by one block of THREADS threads: more totals than
-    threads (300: each thread sums a stretch of three) as well as fewer."""
+    threads (300: each thread sums a stretch of several) as well as fewer."""
     totals = np.random.default_rng(blocks).integers(0, 1000, blocks).astype(np.int64)
     on_device = cuda_operator.cuda.to_device(totals)
     cuda_operator._exclusive_scan_kernel[1, cuda_operator.THREADS](on_device)

@@ -4,7 +4,7 @@ solve on the device meets Clarabel as the CPU's does. They run on numba's CUDA s
 NUMBA_ENABLE_CUDASIM=1 unless told otherwise), on a GPU where there is one.
 
 Bounds: a kernel against its CPU twin 1e-12 relative (the same arithmetic; the sums over contacts
-and bodies are added in another order, per block of 128 then by block, so they differ by rounding,
+and bodies are added in another order, per block (of cuda_operator.THREADS) then by block, so they differ by rounding,
 about 1e-16 a term); the relative residuals also 1e-12 absolute, since a force on its cone's
 boundary has a violation of rounding size, which a GPU's fused multiply-adds change (on an H200 the
 dual residual was 1.6e-17 against the CPU's 5.5e-17); 30 iterations 1e-10 of the largest force

@@ -36,8 +36,10 @@ from .operator import ContactGeometry
 if numba_config.ENABLE_CUDASIM:   # faster, and its shared arrays made under a lock
     cuda_simulator.use()
 
-#: threads a block; a power of two (the dot product's tree halves it)
-THREADS = 128
+#: threads a block; a power of two (the dot product's tree halves it). 32 on numba's simulator, which
+#: runs each thread as a Python thread and polls a block's threads at every sync: the same kernels, 2.4x
+#: faster there, and more of the tests' small launches span several blocks (their sums across blocks)
+THREADS = 32 if numba_config.ENABLE_CUDASIM else 128
 
 
 #: one thread's projection onto a contact's coupled cone (the CPU's scalar code, compiled for the GPU)
