@@ -75,7 +75,8 @@ def fit_limit(d_over_r0, values, p: float | None = 1.0) -> LimitFit:
     if p is not None:
         if sizes < 2:
             raise ValueError("a limit needs at least 2 column sizes")
-        return LimitFit(*_fixed_p(x, y, p)[:2], float(p), False, _fixed_p(x, y, p)[2], len(x))
+        x_inf, k, sse = _fixed_p(x, y, p)
+        return LimitFit(x_inf, k, float(p), False, sse, len(x))
     if sizes < 4:
         raise ValueError(f"fitting the exponent needs at least 4 column sizes, got {sizes}")
     found = minimize_scalar(lambda q: _fixed_p(x, y, q)[2], bounds=P_BOUNDS, method="bounded",
