@@ -90,19 +90,19 @@ def contact_arrays_on_device(contacts, names, dtype=np.float64) -> list:
     """The device copies of the arrays `names` of `contacts` (anything that has them by name: a
     Contacts, a ConeProgram, a ContactOperator): the ones made there where it holds them (a GPU
     detection's, :class:`colsim.engine.cuda_contacts.DeviceContacts`), else those kept for its host
-    arrays (:func:`kept_device_copy`), else its host arrays in one copy, each kept for its array."""
+    arrays (:func:`kept_device_copy`), else its host arrays in one copy (dtype; one array: its own,
+    :func:`device_copy_of`), each kept for its array."""
     made = getattr(contacts, "device", None)
     if made is not None and all(name in made for name in names):
         return [made[name] for name in names]
     host = [getattr(contacts, name) for name in names]
+    if len(host) == 1:   # its own copy, of its own dtype
+        return [device_copy_of(host[0])]
     kept = [kept_device_copy(array) for array in host]
     if all(copy is not None for copy in kept):
         return kept
-    if len(host) == 1:
-        copies = [cuda.to_device(np.ascontiguousarray(host[0], dtype=dtype))]
-    else:
-        stacked = cuda.to_device(np.stack(host).astype(dtype, copy=False))
-        copies = [stacked[k] for k in range(len(host))]
+    stacked = cuda.to_device(np.stack(host).astype(dtype, copy=False))
+    copies = [stacked[k] for k in range(len(host))]
     for array, copy in zip(host, copies):
         keep_device_copy(array, copy)
     return copies

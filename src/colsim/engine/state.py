@@ -62,14 +62,18 @@ class ParticleState:
     @property
     def inertia(self) -> np.ndarray:
         """(n,) moment of inertia of a solid sphere, 2/5 m R^2."""
-        return 0.4 * self.mass * self.radius**2
+        return self.mass_and_inertia()[1]
+
+    def mass_and_inertia(self) -> tuple[np.ndarray, np.ndarray]:
+        """(:attr:`mass`, :attr:`inertia`), the masses made once."""
+        mass = self.mass
+        return mass, 0.4 * mass * self.radius**2
 
     def kinetic_energy(self) -> tuple[float, float]:
         """(translational, rotational) kinetic energy, mass length^2/time^2."""
-        mass = self.mass
+        mass, inertia = self.mass_and_inertia()
         trans = 0.5 * float(np.sum(mass * np.einsum("ij,ij->i", self.velocity, self.velocity)))
         w = self.angular_velocity
-        inertia = 0.4 * mass * self.radius**2   # self.inertia, without making the masses again
         rot = 0.5 * float(np.sum(inertia * np.einsum("ij,ij->i", w, w)))
         return trans, rot
 
