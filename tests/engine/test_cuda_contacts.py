@@ -64,8 +64,10 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     on the device, in the CPU's arithmetic: equal to 1e-14 (a GPU fuses multiply-adds, rounding once
     where the CPU rounds twice: a few units in the last place of numbers of order 1). Some pairs
     overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts; two
-    fixed spheres touch the lowest particles; a redo passes three pairs with given normals (the
-    stepper's missed pairs), which go last."""
+    fixed spheres touch the lowest particles. A redo passes five pairs with given normals (the
+    stepper's missed pairs): three among those found, whose rows they replace, and two not; the given
+    pairs go after the found ones, and on the GPU they join there: nothing of the found contacts comes
+    back to the host but the counts and the largest overlaps (8 B each, one per block)."""
     from colsim.engine.contacts import detect, overlaps
     from colsim.engine.state import ContactLaw, FixedSpheres, Walls
 
@@ -80,15 +82,29 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     renormal = None
     if redo:
         i, j = swept_pairs(state, predicted, 0.05, 0.5)
-        tilted = state.position[j[:3]] - state.position[i[:3]] + [0.01, -0.02, 0.03]
-        renormal = (i[:3], j[:3], tilted / np.linalg.norm(tilted, axis=1)[:, None])
-    gpu, cpu = (detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device=device)
-                for device in ("cuda", "cpu"))
+        missed = [(a, b) for a, b in ((0, state.n - 1), (1, state.n - 2)) if not np.any((i == a) & (j == b))]
+        assert len(missed) == 2
+        i, j = np.concatenate([i[[4, 0, 7]], [a for a, _ in missed]]), np.concatenate([j[[4, 0, 7]], [b for _, b in missed]])
+        tilted = state.position[j] - state.position[i] + [0.01, -0.02, 0.03]
+        renormal = (i, j, tilted / np.linalg.norm(tilted, axis=1)[:, None])
+    from numba import cuda
+
     from colsim.engine.contacts import DEVICE_ARRAYS
     from colsim.engine.cuda_contacts import DeviceContacts
+    from colsim.engine.cuda_operator import blocks_for
 
-    # a first attempt's contacts stay on the device, with no host array until one is read
-    assert isinstance(gpu, DeviceContacts) != redo and (redo or not set(DEVICE_ARRAYS) & set(vars(gpu)))
+    device_array = type(cuda.device_array(1))
+    to_host, read = device_array.copy_to_host, []
+    device_array.copy_to_host = lambda self, *args, **kwargs: (read.append(self.nbytes),
+                                                               to_host(self, *args, **kwargs))[1]
+    try:
+        gpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cuda")
+    finally:
+        device_array.copy_to_host = to_host
+    cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cpu")
+    # the contacts stay on the device, with no host array until one is read
+    assert isinstance(gpu, DeviceContacts) and not set(DEVICE_ARRAYS) & set(vars(gpu))
+    assert read == [8, 8 * blocks_for(state.n)] + [8] * redo   # the counts and each block's largest overlap
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
     assert np.count_nonzero(cpu.j <= -2) == 2                                           # the fixed spheres
     pairs = cpu.j >= 0
@@ -102,18 +118,15 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     # a first attempt's largest pair overlap, measured on the device for the stepper's check: the
     # host's measure of the same pairs (overlaps()), to 1e-14 as the gaps; a redo's is not measured
     assert cpu.largest_pair_overlap is None
-    # a first attempt's arrays on the device, for the warm start and the solver: every contact's
-    # (pairs', walls', fixed spheres'), the host arrays read above (the CPU's: the lever and the keys
-    # in the CPU's arithmetic, which has no multiply-add to fuse), bit for bit, kept as their copies;
-    # a redo's are copied when asked for
+    # the arrays on the device, for the warm start and the solver: every contact's (pairs', walls',
+    # fixed spheres'), the host arrays read above (the CPU's: the lever and the keys in the CPU's
+    # arithmetic, which has no multiply-add to fuse), bit for bit, kept as their copies
     from colsim.engine.cuda_operator import kept_device_copy
 
     for name in DEVICE_ARRAYS:
         kept = kept_device_copy(getattr(gpu, name))
-        assert (kept is None) == redo, name
-        if not redo:
-            np.testing.assert_array_equal(kept.copy_to_host(), getattr(gpu, name), err_msg=name)
-            assert kept is gpu.device[name]
+        np.testing.assert_array_equal(kept.copy_to_host(), getattr(gpu, name), err_msg=name)
+        assert kept is gpu.device[name]
     np.testing.assert_array_equal(gpu.keys, cpu.keys)
     if redo:
         assert gpu.largest_pair_overlap is None
@@ -122,7 +135,8 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         checked = overlaps(state, walls, overlap.max() + 1e-9, detected=gpu)   # within the tolerance: not measured
         assert checked.largest_pair == gpu.largest_pair_overlap and len(checked.pairs[0]) == 0
     if redo:
-        np.testing.assert_array_equal(gpu.normal[pairs][-3:], renormal[2])
+        np.testing.assert_array_equal(gpu.normal[pairs][-5:], renormal[2])
+        assert gpu.pair_count == np.count_nonzero(pairs)
 
 
 def test_the_gpu_measures_the_cpu_s_overlaps():

@@ -123,3 +123,24 @@ def test_a_step_times_its_phases_within_its_wall_time():
     phases = [d.detection_time, d.assembly_time, d.matching_time, d.setup_time, d.solve_time, d.check_time]
     assert d.redone >= 1 and all(t >= 0.0 for t in phases)
     assert d.check_time > 0.0 and sum(phases) <= d.wall_time
+
+
+def test_a_redo_on_the_gpu_takes_the_cpu_s_step():
+    """The train's step on the GPU (APGD's kernels; the detection, and the redo's given pair joined to
+    it, on the device: numba's simulator here) is the CPU's: the same redos, the same contacts in the
+    same order, and the same end state. Both run APGD's arithmetic on the same programs, so they
+    stop at the same iteration; the positions agree to 1e-12 of the step's largest displacement, the
+    rounding of a GPU's fused multiply-adds over some hundreds of iterations."""
+    pytest.importorskip("colsim.engine.cuda_contacts", reason="numba.cuda is not importable")
+    from colsim.engine.cuda_contacts import DeviceContacts
+
+    state, settings = _train(max_redo=3)
+    gpu = step(state, settings, ApgdSolver(tolerance=1e-8, kernel="cuda"), step_number=5)
+    cpu = step(state, settings, ApgdSolver(tolerance=1e-8), step_number=5)
+    assert gpu.diagnostics.redone == cpu.diagnostics.redone >= 1
+    assert gpu.diagnostics.solver_iterations == cpu.diagnostics.solver_iterations
+    assert isinstance(gpu.contacts, DeviceContacts) and gpu.contacts.pair_count == 2
+    for name in ("i", "j", "family", "lever", "keys"):
+        np.testing.assert_array_equal(getattr(gpu.contacts, name), getattr(cpu.contacts, name))
+    moved = np.abs(cpu.state.position - state.position).max()
+    np.testing.assert_allclose(gpu.state.position, cpu.state.position, rtol=0, atol=1e-12 * moved)

@@ -290,46 +290,49 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
     :func:`pair_frames`) or 'cuda' (a grid on the GPU: the same pairs, the same arithmetic). On the
-    GPU a first attempt's contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`, the
-    walls' and fixed spheres' rows found on the host and joined there), and their host arrays are
-    copied only when read; a redo's given normals join on the host.
+    GPU the contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`, the walls' and fixed
+    spheres' rows found on the host and joined there; a redo's given pairs made on the host and joined
+    there by :func:`colsim.engine.cuda_contacts.join_given_pairs`), and their host arrays are copied only
+    when read.
     """
     speed = row_lengths(predicted)
     others = _other_contacts(state, walls, law, margin + (1.0 + slack) * speed, cylinder_margin, most_recovered)
-    largest_pair_overlap = found = None   # the largest pair overlap: measured by the GPU's detection
+    given = None if renormal is None else pair_rows(state, law, renormal[0], renormal[1], pair_frames(
+        state, renormal[0], renormal[1], renormal[2], most_recovered))
+    largest_pair_overlap = None   # the largest pair overlap: measured by the GPU's detection
     if device == "cuda":
-        from .cuda_contacts import swept_contacts
+        from .cuda_contacts import join_given_pairs, swept_contacts
 
         found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law)
-        if found is None:   # fewer than two particles or no contacts: nothing to keep there
-            largest_pair_overlap = -np.inf
-        elif renormal is None:
-            return found
-    if found is not None:   # a redo on the GPU: the device's pairs (their rows first), the given ones joined
-        pi, pj, pair_normal, pair_t1, pair_t2, pair_gap = (getattr(found, name)[:found.pair_count] for name in (
-            "i", "j", "normal", "tangent1", "tangent2", "gap"))
-    else:
-        pi, pj = swept_pairs(state, predicted, margin, slack)
-        pair_normal, pair_t1, pair_t2, pair_gap = pair_frames(state, pi, pj, None, most_recovered)
-    if renormal is not None:   # these pairs, with the normals given, replace those found and go last
-        ri, rj, rnormal = renormal
+        if found is not None:
+            if given is None or not len(given["i"]):
+                return found
+            return join_given_pairs(found, given, state.n, law.rolling_lever)
+        largest_pair_overlap = -np.inf   # fewer than two particles or no contacts: nothing to keep there
+    pi, pj = swept_pairs(state, predicted, margin, slack)
+    pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered))
+    parts = [pairs, others]
+    if given is not None:   # these pairs, with the normals given, replace those found and go last
         largest_pair_overlap = None   # of the pairs found, not of these
-        n = state.n
-        keep = ~np.isin(pi.astype(np.int64) * n + pj, ri.astype(np.int64) * n + rj)
-        given = pair_frames(state, ri, rj, rnormal, most_recovered)
-        pi, pj = np.concatenate([pi[keep], ri]), np.concatenate([pj[keep], rj])
-        pair_normal, pair_t1, pair_t2, pair_gap = (np.concatenate([ours[keep], theirs]) for ours, theirs in zip(
-            (pair_normal, pair_t1, pair_t2, pair_gap), given))
-
-    pairs = {"i": pi, "j": pj, "family": np.full(len(pi), PARTICLE), "gap": pair_gap, "radius_i": state.radius[pi],
-             "radius_j": state.radius[pj], "mu": np.full(len(pi), float(np.asarray(law.mu)[PARTICLE])),
-             "mu_r": np.full(len(pi), float(np.asarray(law.mu_r)[PARTICLE])), "normal": pair_normal.reshape(-1, 3),
-             "tangent1": pair_t1.reshape(-1, 3), "tangent2": pair_t2.reshape(-1, 3)}
-    arrays = {name: np.concatenate([pairs[name], others[name]]) for name in pairs}
+        keep = ~np.isin(pi.astype(np.int64) * state.n + pj, given["i"].astype(np.int64) * state.n + given["j"])
+        parts = [{name: values[keep] for name, values in pairs.items()}, given, others]
+    arrays = {name: np.concatenate([part[name] for part in parts]) for name in pairs}
     for name in ("i", "j", "family"):
         arrays[name] = arrays[name].astype(np.int64)
     arrays["lever"] = contact_levers(arrays["radius_i"], arrays["radius_j"], law.rolling_lever)
     return Contacts(**arrays, largest_pair_overlap=largest_pair_overlap)
+
+
+def pair_rows(state: ParticleState, law: ContactLaw, i: np.ndarray, j: np.ndarray, frames) -> dict:
+    """The arrays of particle pairs (i, j) ((k,) each) by their names in :class:`Contacts` (all but the
+    lever): bodies, family, frames (normal, tangent1, tangent2, gap: :func:`pair_frames`), radii and
+    the particles' coefficients."""
+    normal, tangent1, tangent2, gap = frames
+    k = len(i)
+    return {"i": i, "j": j, "family": np.full(k, PARTICLE), "gap": gap, "radius_i": state.radius[i],
+            "radius_j": state.radius[j], "mu": np.full(k, float(np.asarray(law.mu)[PARTICLE])),
+            "mu_r": np.full(k, float(np.asarray(law.mu_r)[PARTICLE])), "normal": normal.reshape(-1, 3),
+            "tangent1": tangent1.reshape(-1, 3), "tangent2": tangent2.reshape(-1, 3)}
 
 
 #: the arrays of every contact that the GPU's detection makes on the device, by name

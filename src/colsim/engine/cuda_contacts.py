@@ -52,19 +52,19 @@ def swept_pairs_on_device(state, predicted: np.ndarray, margin: float, slack: fl
 
 
 class DeviceContacts(Contacts):
-    """The contacts of a GPU detection (:func:`swept_contacts`), whose arrays stay on the device: `device`
-    holds each of them by name (:data:`colsim.engine.contacts.DEVICE_ARRAYS`). A host array is copied
-    from there when first read (a redo's missed pairs, a file, a solver on the CPU), and that copy
-    keeps the device's as its own (:func:`colsim.engine.cuda_operator.keep_device_copy`); a step on the
-    GPU reads none: the warm start and the solver take the device's (:func:`contact_arrays_on_device`).
-    m: the contacts; pair_count: the first pair_count are the particle pairs, the walls' and fixed
-    spheres' rows follow."""
+    """The contacts of a GPU detection (:func:`swept_contacts`, :func:`join_given_pairs`), whose arrays
+    stay on the device: `rows` (a :class:`ContactRows`) holds them, and `device` each of them by name
+    (:data:`colsim.engine.contacts.DEVICE_ARRAYS`). A host array is copied from there when first read
+    (a file, a solver on the CPU), and that copy keeps the device's as its own
+    (:func:`colsim.engine.cuda_operator.keep_device_copy`); a step on the GPU reads none: the warm start
+    and the solver take the device's (:func:`contact_arrays_on_device`). m: the contacts; pair_count:
+    the first pair_count are the particle pairs, the walls' and fixed spheres' rows follow."""
 
-    def __init__(self, device: dict, m: int, pair_count: int, largest_pair_overlap: float):
-        self.device, self._m, self._pair_count = device, m, pair_count
+    def __init__(self, rows: "ContactRows", pair_count: int, largest_pair_overlap: float | None):
+        self.rows, self.device, self._pair_count = rows, rows.named(), pair_count
         self.largest_pair_overlap = largest_pair_overlap
 
-    m = property(lambda self: self._m)
+    m = property(lambda self: self.rows.count)
     pair_count = property(lambda self: self._pair_count)
     keys = property(lambda self: self._on_host("keys"), doc="(m,) int64 pair keys (copied from the device).")
 
@@ -79,6 +79,58 @@ class DeviceContacts(Contacts):
             host = self.__dict__[name] = self.device[name].copy_to_host()
             keep_device_copy(host, self.device[name])
         return host
+
+
+#: the rows of the device's per-contact numbers and bodies (:class:`ContactRows`), by the contacts' names
+_NUMBERS = ("gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
+GAP, RADIUS_I, RADIUS_J, LEVER, MU, MU_R = range(len(_NUMBERS))
+_BODIES = ("i", "j", "family")
+BODY_I, BODY_J, FAMILY = range(len(_BODIES))
+_FRAMES = ("normal", "tangent1", "tangent2")
+
+
+class ContactRows:
+    """`count` contacts' arrays on the device, in four blocks: frames (3, count, 3) float64 (normal,
+    tangent1, tangent2), numbers (6, count) float64 (:data:`_NUMBERS`), bodies (3, count) int64
+    (:data:`_BODIES`) and keys (count,) int64, the pair keys."""
+
+    def __init__(self, count: int):
+        self.count = count
+        self.frames = cuda.device_array((len(_FRAMES), count, 3), dtype=np.float64)
+        self.numbers = cuda.device_array((len(_NUMBERS), count), dtype=np.float64)
+        self.bodies = cuda.device_array((len(_BODIES), count), dtype=np.int64)
+        self.keys = cuda.device_array(count, dtype=np.int64)
+
+    def named(self) -> dict:
+        """Each contact array, a view of its block, by its name in :class:`colsim.engine.contacts.Contacts`."""
+        return {"keys": self.keys, **{name: self.bodies[k] for k, name in enumerate(_BODIES)},
+                **{name: self.frames[f] for f, name in enumerate(_FRAMES)},
+                **{name: self.numbers[k] for k, name in enumerate(_NUMBERS)}}
+
+    def upload(self, rows: dict, first: int) -> None:
+        """Host contacts' arrays by name (all but the lever and keys, which :meth:`levers_and_keys`
+        makes) into rows first, first + 1, ...: the numbers in one copy, the bodies in another."""
+        w = len(rows["i"])
+        if not w:
+            return
+        end = first + w
+        uploaded = [row for row in range(len(_NUMBERS)) if row != LEVER]
+        numbers = cuda.to_device(np.concatenate([np.stack([rows[name] for name in _FRAMES]).reshape(-1)] + [
+            np.asarray(rows[_NUMBERS[row]], dtype=float) for row in uploaded]))
+        for f in range(len(_FRAMES)):
+            self.frames[f, first:end].copy_to_device(numbers[3 * w * f:3 * w * (f + 1)].reshape(w, 3))
+        for k, row in enumerate(uploaded):
+            self.numbers[row, first:end].copy_to_device(numbers[(9 + k) * w:(10 + k) * w])
+        bodies = cuda.to_device(np.stack([rows[name] for name in _BODIES]).astype(np.int64))
+        for b in range(len(_BODIES)):
+            self.bodies[b, first:end].copy_to_device(bodies[b])
+
+    def levers_and_keys(self, rolling_lever: str, first: int = 0, end: int | None = None) -> None:
+        """Rows first to end's (None: the last) rolling levers and pair keys, from their radii and bodies."""
+        end = self.count if end is None else end
+        if end > first:
+            _lever_and_key_kernel[blocks_for(end - first), THREADS](
+                self.numbers, self.bodies, 2.0 if rolling_lever == "paper" else 1.0, self.keys, first, end)
 
 
 def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
@@ -103,45 +155,52 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     if state.n < 2:
         return None
     found = _SweptPairs(state, predicted, margin, slack)
-    m, w = found.m, len(others["i"])
-    total = m + w
+    m, total = found.m, found.m + len(others["i"])
     if total == 0:   # no zero-length arrays on the device
         return None
-    frames = cuda.device_array((3, total, 3), dtype=np.float64)     # normal, tangent1, tangent2
-    numbers = cuda.device_array((len(_NUMBERS), total), dtype=np.float64)   # gap, radii, lever, mu, mu_r
-    bodies = cuda.device_array((len(_BODIES), total), dtype=np.int64)       # i, j, family
-    if w:   # the others' rows: the numbers in one copy, the bodies in another
-        uploaded = [row for row in range(len(_NUMBERS)) if row != LEVER]   # the lever is made here
-        rows = cuda.to_device(np.concatenate([np.stack([others[name] for name in _FRAMES]).reshape(-1)] + [
-            np.asarray(others[_NUMBERS[row]], dtype=float) for row in uploaded]))
-        for f in range(3):
-            frames[f, m:total].copy_to_device(rows[3 * w * f:3 * w * (f + 1)].reshape(w, 3))
-        for k, row in enumerate(uploaded):
-            numbers[row, m:total].copy_to_device(rows[(9 + k) * w:(10 + k) * w])
-        ids = cuda.to_device(np.stack([others[name] for name in _BODIES]).astype(np.int64))
-        for b in range(len(_BODIES)):
-            bodies[b, m:total].copy_to_device(ids[b])
+    rows = ContactRows(total)
+    rows.upload(others, m)
     blocks = blocks_for(state.n)
     largest = cuda.device_array(blocks, dtype=np.float64)   # each block's largest pair overlap
     _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
-                                    float(most_recovered), frames[0], numbers[GAP], frames[1], frames[2], largest)
+                                    float(most_recovered), rows.frames[0], rows.numbers[GAP], rows.frames[1],
+                                    rows.frames[2], largest)
     mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
-    _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, bodies, numbers)
-    keys = cuda.device_array(total, dtype=np.int64)
-    _lever_and_key_kernel[blocks_for(total), THREADS](numbers, bodies, 2.0 if law.rolling_lever == "paper" else 1.0,
-                                                      keys)
-    device = {"keys": keys, **{name: bodies[k] for k, name in enumerate(_BODIES)},
-              **{name: frames[f] for f, name in enumerate(_FRAMES)},
-              **{name: numbers[k] for k, name in enumerate(_NUMBERS)}}
-    return DeviceContacts(device, total, m, float(largest.copy_to_host().max()))
+    _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, rows.bodies,
+                                       rows.numbers)
+    rows.levers_and_keys(law.rolling_lever)
+    return DeviceContacts(rows, m, float(largest.copy_to_host().max()))
 
 
-#: the rows of the device's per-contact numbers and bodies (:func:`swept_contacts`), by the contacts' names
-_NUMBERS = ("gap", "radius_i", "radius_j", "lever", "mu", "mu_r")
-GAP, RADIUS_I, RADIUS_J, LEVER, MU, MU_R = range(len(_NUMBERS))
-_BODIES = ("i", "j", "family")
-BODY_I, BODY_J, FAMILY = range(len(_BODIES))
-_FRAMES = ("normal", "tangent1", "tangent2")
+def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: str) -> DeviceContacts:
+    """:func:`colsim.engine.contacts.detect`'s redo on the GPU: the contacts of `found` (a first
+    attempt's, :func:`swept_contacts`) with the particle pairs `given` (their arrays by name, made on
+    the host with the normals the stepper gives, as :func:`colsim.engine.contacts.pair_rows` makes
+    them; each pair once) in place of found's same pairs, in the CPU's order: found's other pairs,
+    then the given ones, then found's walls and fixed spheres. n: the particles (a pair's key is
+    i n + j); rolling_lever: the ContactLaw's.
+
+    The rows move on the device: one thread a pair looks its key up among the given ones (sorted, a
+    binary search), the kept pairs' places are their prefix sums, and one thread a contact copies its
+    row there. What goes to the device is the given pairs (their sorted keys, their rows in two
+    copies); what comes back is the kept pairs' count. Its pairs' largest overlap is not measured
+    (None), as on the host."""
+    wanted = np.sort(np.asarray(given["i"], dtype=np.int64) * n + np.asarray(given["j"], dtype=np.int64))
+    pairs = found.pair_count
+    keep = cuda.device_array(max(pairs, 1), dtype=np.int64)[:pairs]
+    if pairs:
+        _kept_pairs_kernel[blocks_for(pairs), THREADS](found.rows.bodies, n, cuda.to_device(wanted), keep)
+    start = prefix_sums_on_device(keep)
+    kept = int(start[pairs:].copy_to_host()[0])
+    rows = ContactRows(found.m - pairs + kept + len(wanted))
+    old = found.rows
+    _move_rows_kernel[blocks_for(old.count), THREADS](old.frames, old.numbers, old.bodies, old.keys, pairs, start,
+                                                      len(wanted), rows.frames, rows.numbers, rows.bodies,
+                                                      rows.keys)
+    rows.upload(given, kept)
+    rows.levers_and_keys(rolling_lever, kept, kept + len(wanted))
+    return DeviceContacts(rows, kept + len(wanted), None)
+
 
 #: the CPU's lever (colsim.engine.contacts.lever_of) and pair key (colsim.engine.state.pair_key), for the GPU
 _lever_of = cuda.jit(device=True)(getattr(lever_of, "py_func", lever_of))
@@ -164,13 +223,56 @@ def _pair_rows_kernel(offsets, partners, radius, mu, mu_r, bodies, numbers):
 
 
 @cuda.jit
-def _lever_and_key_kernel(numbers, bodies, scale, keys):
-    """Each contact's rolling lever from its radii and its pair key from its bodies, by the CPU's code
-    (:func:`colsim.engine.contacts.lever_of`, :func:`colsim.engine.state.pair_key`)."""
-    k = cuda.grid(1)
-    if k < keys.shape[0]:
+def _lever_and_key_kernel(numbers, bodies, scale, keys, first, end):
+    """Contacts first to end - 1 (one thread each): the rolling lever from the radii and the pair key from
+    the bodies, by the CPU's code (:func:`colsim.engine.contacts.lever_of`,
+    :func:`colsim.engine.state.pair_key`)."""
+    k = first + cuda.grid(1)
+    if k < end:
         numbers[LEVER, k] = _lever_of(numbers[RADIUS_I, k], numbers[RADIUS_J, k], scale)
         keys[k] = _pair_key(bodies[BODY_I, k], bodies[BODY_J, k], bodies[FAMILY, k])
+
+
+@cuda.jit
+def _kept_pairs_kernel(bodies, n, wanted, keep):
+    """keep[k] = 0 where pair k's key i n + j is among `wanted` (sorted; a binary search), else 1."""
+    k = cuda.grid(1)
+    if k >= keep.shape[0]:
+        return
+    key = bodies[BODY_I, k] * n + bodies[BODY_J, k]
+    low, high = 0, wanted.shape[0]
+    while low < high:
+        middle = (low + high) // 2
+        if wanted[middle] < key:
+            low = middle + 1
+        else:
+            high = middle
+    keep[k] = 0 if low < wanted.shape[0] and wanted[low] == key else 1
+
+
+@cuda.jit
+def _move_rows_kernel(frames, numbers, bodies, keys, pairs, start, given, to_frames, to_numbers, to_bodies,
+                      to_keys):
+    """Contact k's row (one thread each) to its place in the joined blocks: a pair (k < pairs) to
+    start[k] when kept (start: the kept flags' prefix sums), nowhere when not; another contact after
+    the kept pairs and the `given` ones."""
+    k = cuda.grid(1)
+    if k >= keys.shape[0]:
+        return
+    if k < pairs:
+        if start[k + 1] == start[k]:
+            return
+        row = start[k]
+    else:
+        row = start[pairs] + given + k - pairs
+    for f in range(frames.shape[0]):
+        for d in range(3):
+            to_frames[f, row, d] = frames[f, k, d]
+    for r in range(numbers.shape[0]):
+        to_numbers[r, row] = numbers[r, k]
+    for b in range(bodies.shape[0]):
+        to_bodies[b, row] = bodies[b, k]
+    to_keys[row] = keys[k]
 
 
 class _SweptPairs:
