@@ -87,20 +87,12 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         i, j = np.concatenate([i[[4, 0, 7]], [a for a, _ in missed]]), np.concatenate([j[[4, 0, 7]], [b for _, b in missed]])
         tilted = state.position[j] - state.position[i] + [0.01, -0.02, 0.03]
         renormal = (i, j, tilted / np.linalg.norm(tilted, axis=1)[:, None])
-    from numba import cuda
-
     from colsim.engine.contacts import DEVICE_ARRAYS
     from colsim.engine.cuda_contacts import DeviceContacts
     from colsim.engine.cuda_operator import blocks_for
 
-    device_array = type(cuda.device_array(1))
-    to_host, read = device_array.copy_to_host, []
-    device_array.copy_to_host = lambda self, *args, **kwargs: (read.append(self.nbytes),
-                                                               to_host(self, *args, **kwargs))[1]
-    try:
-        gpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cuda")
-    finally:
-        device_array.copy_to_host = to_host
+    gpu, read = _reading_back(lambda: detect(state, walls, law, predicted, 0.05, renormal=renormal,
+                                             most_recovered=0.002, device="cuda"))
     cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cpu")
     # the contacts stay on the device, with no host array until one is read
     assert isinstance(gpu, DeviceContacts) and not set(DEVICE_ARRAYS) & set(vars(gpu))
@@ -134,9 +126,33 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
         np.testing.assert_allclose(gpu.largest_pair_overlap, overlap.max(), rtol=0, atol=1e-14)
         checked = overlaps(state, walls, overlap.max() + 1e-9, detected=gpu)   # within the tolerance: not measured
         assert checked.largest_pair == gpu.largest_pair_overlap and len(checked.pairs[0]) == 0
+        # beyond it, the overlapping pairs are listed on the device: the CPU's search's (sorted), with
+        # the normals made on the host by the same arithmetic; back come their count and bodies only
+        tolerance = 0.5 * overlap.max()
+        listed, read = _reading_back(lambda: overlaps(state, walls, tolerance, detected=gpu))
+        searched = overlaps(state, walls, tolerance)
+        order = np.lexsort((searched.pairs[1], searched.pairs[0]))
+        assert len(order) >= 2 and read == [8, 16 * len(order)]
+        for ours, theirs in zip(listed.pairs, searched.pairs):
+            np.testing.assert_array_equal(ours, theirs[order])
+        assert listed.largest_pair == gpu.largest_pair_overlap
     if redo:
         np.testing.assert_array_equal(gpu.normal[pairs][-5:], renormal[2])
         assert gpu.pair_count == np.count_nonzero(pairs)
+
+
+def _reading_back(action):
+    """(action(), the bytes of each copy from the device that it made)."""
+    from numba import cuda
+
+    device_array = type(cuda.device_array(1))
+    to_host, read = device_array.copy_to_host, []
+    device_array.copy_to_host = lambda self, *args, **kwargs: (read.append(self.nbytes),
+                                                               to_host(self, *args, **kwargs))[1]
+    try:
+        return action(), read
+    finally:
+        device_array.copy_to_host = to_host
 
 
 def test_the_gpu_measures_the_cpu_s_overlaps():

@@ -73,6 +73,13 @@ class Contacts:
         between = (self.family == PARTICLE) & (self.j >= 0)
         return self.i[between], self.j[between]
 
+    def overlapping_pairs(self, state: ParticleState, tolerance: float) -> tuple:
+        """(largest overlap, (i, j, normal (k, 3))): the largest overlap R_i + R_j - |x_j - x_i| of
+        these contacts' particle pairs at `state` (length; -inf: none), and the pairs that overlap by
+        more than `tolerance` with their unit normals from i to j (:func:`overlaps`)."""
+        pi, pj = self.particle_pairs()
+        return pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
+
 
 def row_lengths(vectors: np.ndarray) -> np.ndarray:
     """(m,) the length of each row of `vectors` (m, 3): numpy's norm along axis 1, the same bits (the
@@ -392,22 +399,16 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device:
     tolerance (the GPU's detection: :attr:`Contacts.largest_pair_overlap`; no pair to report then)."""
     measured = None if detected is None else detected.largest_pair_overlap
     if measured is not None and measured <= tolerance:
-        pi = pj = np.zeros(0, dtype=np.int64)
-        d = np.zeros((0, 3))
+        largest_pair, pairs = measured, (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
     elif detected is not None:
-        pi, pj = detected.particle_pairs()
-        d = state.position[pj] - state.position[pi]
+        largest_pair, pairs = detected.overlapping_pairs(state, tolerance)
     elif device == "cuda":
         from .cuda_contacts import swept_pairs_on_device
 
         pi, pj = swept_pairs_on_device(state, np.zeros_like(state.position), 0.0, 0.0)
-        d = state.position[pj] - state.position[pi]
+        largest_pair, pairs = pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
     else:
-        pi, pj, d = particle_pairs(state, 0.0)
-    dist = row_lengths(d)
-    overlap = state.radius[pi] + state.radius[pj] - dist
-    bad = overlap > tolerance
-    pairs = (pi[bad], pj[bad], d[bad] / np.maximum(dist[bad, None], 1e-300))   # two centres on one spot: a zero normal
+        largest_pair, pairs = pair_overlaps(state, *particle_pairs(state, 0.0), tolerance)
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))
@@ -416,8 +417,17 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device:
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
     _, _, _, fixed_gap = fixed_pairs(state, walls.fixed, np.zeros(state.n))
-    largest_pair = max(0.0, float(overlap.max(initial=0.0)) if measured is None else measured)
-    return Overlaps(pairs, largest_pair, largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))))
+    return Overlaps(pairs, max(0.0, largest_pair), largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))))
+
+
+def pair_overlaps(state: ParticleState, pi: np.ndarray, pj: np.ndarray, d: np.ndarray, tolerance: float) -> tuple:
+    """(largest overlap (-inf: no pair), (i, j, normal)) of the pairs (pi, pj) with centre-to-centre
+    vectors d (k, 3): :meth:`Contacts.overlapping_pairs`."""
+    dist = row_lengths(d)
+    overlap = state.radius[pi] + state.radius[pj] - dist
+    bad = overlap > tolerance
+    pairs = (pi[bad], pj[bad], d[bad] / np.maximum(dist[bad, None], 1e-300))   # two centres on one spot: a zero normal
+    return float(overlap.max(initial=-np.inf)), pairs
 
 
 def touching_pairs(state: ParticleState, tolerance: float) -> tuple[np.ndarray, np.ndarray]:

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from .contacts import Contacts, lever_of, swept_close, swept_midpoints
+from .contacts import Contacts, pair_overlaps, lever_of, swept_close, swept_midpoints
 from .state import PARTICLE, pair_key
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
@@ -58,11 +58,12 @@ class DeviceContacts(Contacts):
     (a file, a solver on the CPU), and that copy keeps the device's as its own
     (:func:`colsim.engine.cuda_operator.keep_device_copy`); a step on the GPU reads none: the warm start
     and the solver take the device's (:func:`contact_arrays_on_device`). m: the contacts; pair_count:
-    the first pair_count are the particle pairs, the walls' and fixed spheres' rows follow."""
+    the first pair_count are the particle pairs, the walls' and fixed spheres' rows follow;
+    particles: (positions (n, 3), radii (n,)) on the device, of the state detected (None: not kept)."""
 
-    def __init__(self, rows: "ContactRows", pair_count: int, largest_pair_overlap: float | None):
+    def __init__(self, rows: "ContactRows", pair_count: int, largest_pair_overlap: float | None, particles=None):
         self.rows, self.device, self._pair_count = rows, rows.named(), pair_count
-        self.largest_pair_overlap = largest_pair_overlap
+        self.largest_pair_overlap, self.particles = largest_pair_overlap, particles
 
     m = property(lambda self: self.rows.count)
     pair_count = property(lambda self: self._pair_count)
@@ -79,6 +80,30 @@ class DeviceContacts(Contacts):
             host = self.__dict__[name] = self.device[name].copy_to_host()
             keep_device_copy(host, self.device[name])
         return host
+
+    def overlapping_pairs(self, state, tolerance: float) -> tuple:
+        """:meth:`colsim.engine.contacts.Contacts.overlapping_pairs`, the pairs that overlap by more than
+        `tolerance` listed on the device (one thread a pair: the flags, their prefix sums, the flagged
+        pairs' bodies), at the particles the detection had there (`particles`: their positions and
+        radii; `state` must be the one detected). What comes back is their count and their bodies;
+        their normals are made on the host, as there. Contacts without the particles or without
+        their largest overlap measured (a redo's): the host's way."""
+        pairs = self.pair_count
+        if self.particles is None or self.largest_pair_overlap is None or not pairs:
+            return super().overlapping_pairs(state, tolerance)
+        position, radius = self.particles
+        flag = cuda.device_array(pairs, dtype=np.int64)
+        _overlap_flags_kernel[blocks_for(pairs), THREADS](position, radius, self.rows.bodies, float(tolerance), flag)
+        start = prefix_sums_on_device(flag)
+        count = int(start[pairs:].copy_to_host()[0])
+        listed = np.zeros((2, 0), dtype=np.int64)
+        if count:
+            on_device = cuda.device_array((2, count), dtype=np.int64)
+            _flagged_pairs_kernel[blocks_for(pairs), THREADS](self.rows.bodies, start, on_device)
+            listed = on_device.copy_to_host()
+        pi, pj = listed
+        _, overlapping = pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
+        return self.largest_pair_overlap, overlapping
 
 
 #: the rows of the device's per-contact numbers and bodies (:class:`ContactRows`), by the contacts' names
@@ -169,7 +194,7 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, rows.bodies,
                                        rows.numbers)
     rows.levers_and_keys(law.rolling_lever)
-    return DeviceContacts(rows, m, float(largest.copy_to_host().max()))
+    return DeviceContacts(rows, m, float(largest.copy_to_host().max()), (found.position, found.radius))
 
 
 def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: str) -> DeviceContacts:
@@ -199,7 +224,7 @@ def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: 
                                                       rows.keys)
     rows.upload(given, kept)
     rows.levers_and_keys(rolling_lever, kept, kept + len(wanted))
-    return DeviceContacts(rows, kept + len(wanted), None)
+    return DeviceContacts(rows, kept + len(wanted), None, found.particles)
 
 
 #: the CPU's lever (colsim.engine.contacts.lever_of) and pair key (colsim.engine.state.pair_key), for the GPU
@@ -248,6 +273,29 @@ def _kept_pairs_kernel(bodies, n, wanted, keep):
         else:
             high = middle
     keep[k] = 0 if low < wanted.shape[0] and wanted[low] == key else 1
+
+
+@cuda.jit
+def _overlap_flags_kernel(position, radius, bodies, tolerance, flag):
+    """flag[k] = 1 where pair k's overlap R_i + R_j - |x_j - x_i| exceeds `tolerance`, else 0 (one thread
+    a pair, the arithmetic of colsim.engine.contacts.overlaps)."""
+    k = cuda.grid(1)
+    if k >= flag.shape[0]:
+        return
+    i, j = bodies[BODY_I, k], bodies[BODY_J, k]
+    d0 = position[j, 0] - position[i, 0]
+    d1 = position[j, 1] - position[i, 1]
+    d2 = position[j, 2] - position[i, 2]
+    flag[k] = 1 if radius[i] + radius[j] - math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) > tolerance else 0
+
+
+@cuda.jit
+def _flagged_pairs_kernel(bodies, start, listed):
+    """The flagged pairs' bodies (start: the flags' prefix sums) into listed[0] (i) and listed[1] (j),
+    in the pairs' order."""
+    k = cuda.grid(1)
+    if k < start.shape[0] - 1 and start[k + 1] > start[k]:
+        listed[0, start[k]], listed[1, start[k]] = bodies[BODY_I, k], bodies[BODY_J, k]
 
 
 @cuda.jit
