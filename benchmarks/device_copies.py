@@ -3,6 +3,7 @@ step's data on the device (issue 46, "kernels at 80 %") has left to remove.
 
     NUMBA_ENABLE_CUDASIM=1 python -m benchmarks device_copies          # here, on numba's simulator
     python -m benchmarks device_copies --steps 5                        # on a GPU
+    NUMBA_ENABLE_CUDASIM=1 python -m benchmarks device_copies --redo 5  # a redone step
 
 A stack of 12 spheres (3 layers of 2 x 2, diameter 0.5) in a cylinder of radius 0.65 on the floor
 collapses with mu = 0.577, mu_r = 0.12 and dt = 0.02 by APGD on the device (`ApgdSolver(kernel="cuda")`,
@@ -12,6 +13,10 @@ array's `copy_to_host` and `copy_to_device` from a host array is counted with it
 colsim function that made it. The count of a step's copies depends on its attempts and on the
 solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
 H200 whatever its size, docs/performance.md, "The third GPU sitting"); the bytes grow with it.
+
+`--redo SIDE`: one step that is redone instead (:func:`redone_step`), counted after the same step
+once uncounted: a sphere flies into a resting one and pushes it into a third that the first attempt
+did not list, beside a resting cube of SIDE^3 touching spheres whose contacts every attempt carries.
 """
 from __future__ import annotations
 
@@ -73,19 +78,47 @@ def stack():
                                walls=Walls(floor=True, cylinder_radius=0.65))
 
 
+def redone_step(side: int):
+    """(state, settings) of a step that is redone once: the train of tests/engine/test_stepper.py (gravity
+    off, no walls, margin 1e-6 d, no slack: the struck sphere's push into the third is missed), beside a
+    cube of side^3 spheres of radius 0.2 at rest, each pair of neighbours overlapping by 1e-5."""
+    from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+
+    train = np.array([[0.0, 0, 0], [0.401, 0, 0], [0.811, 0, 0]])
+    g = np.arange(side) * 0.39999
+    cube = np.array([[x, y + 2.0, z] for x in g for y in g for z in g]).reshape(-1, 3)
+    position = np.concatenate([train, cube])
+    velocity = np.zeros_like(position)
+    velocity[0, 0] = 2.0
+    state = ParticleState(position, velocity, np.zeros_like(position), np.full(len(position), 0.2))
+    return state, StepSettings(dt=0.02, gravity=(0.0, 0.0, 0.0), walls=Walls(floor=False),
+                               law=ContactLaw.uniform(0.3, 0.0), detection_margin_fraction=1e-6,
+                               detection_slack=0.0, max_redo=3)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=2, help="steps counted, after one to start from")
+    parser.add_argument("--redo", type=int, metavar="SIDE", help="count one redone step instead, beside a cube "
+                        "of SIDE^3 spheres at rest")
     args = parser.parse_args(argv)
-    from colsim.engine.stepper import run
+    from colsim.engine.stepper import run, step
     from colsim.solvers.apgd import ApgdSolver
 
-    state, settings = stack()
-    solver = ApgdSolver(kernel="cuda")
-    steps = run(state, settings, 1 + args.steps, solver)
-    next(steps)   # the first step, not counted: it made the second's first detection, as any step does
-    counts, sizes = counting_copies()
-    results = list(steps)
+    if args.redo:
+        state, settings = redone_step(args.redo)
+        solver = ApgdSolver(tolerance=1e-8, kernel="cuda")
+        step(state, settings, solver, 1)   # not counted: the kernels compiled, the radii's copy kept
+        counts, sizes = counting_copies()
+        results = [step(state, settings, solver, 2)]
+        args.steps = 1
+    else:
+        state, settings = stack()
+        solver = ApgdSolver(kernel="cuda")
+        steps = run(state, settings, 1 + args.steps, solver)
+        next(steps)   # the first step, not counted: it made the second's first detection, as any step does
+        counts, sizes = counting_copies()
+        results = list(steps)
     attempts = sum(r.diagnostics.redone + 1 for r in results)
     iterations = sum(r.diagnostics.solver_iterations for r in results)
     print(f"{state.n} spheres, {args.steps} steps counted: {attempts} attempts, {iterations} APGD iterations, "
