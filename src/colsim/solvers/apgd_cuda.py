@@ -372,7 +372,7 @@ class CudaIteration:
     problem on the device too.
 
     The iteration's scalars (lip, theta, beta) and its decisions live on the device too (`control`,
-    :func:`_decide`): a trial step is four launches that never wait for the host, and the
+    :func:`_decide`): a trial step is three launches that never wait for the host, and the
     host reads the control array once a round (:meth:`iterate`). x, x_prev and x_new are three slots
     that trade roles on the device (:data:`X`), and so are hx, hx_prev and h_new (y and hy = T y are
     made where they are read); `x`, `x_prev`, `x_new`, `hx` and `h_new` are the slots in those roles
