@@ -189,3 +189,23 @@ def test_detect_on_the_gpu_without_contacts():
     assert kept_device_copy(found.normal) is None
     checked = overlaps(state, walls, 0.0, detected=found)
     assert checked.largest == 0.0 and len(checked.pairs[0]) == 0
+
+
+def test_a_redo_on_the_gpu_with_no_pair_found():
+    """A redo whose detection finds no particle pair, only the floor's contacts (two spheres on it, far
+    apart), given one pair (the stepper's missed pair, with a normal given): on the device, as on the
+    host, the given pair comes first and the floor's rows after it."""
+    from colsim.engine.contacts import detect
+    from colsim.engine.cuda_contacts import DeviceContacts
+    from colsim.engine.state import ContactLaw, Walls
+
+    state = ParticleState.at_rest([[0.0, 0.0, 0.5], [3.0, 0.0, 0.5]], [0.5, 0.5])
+    walls = Walls(floor=True)
+    renormal = (np.array([0]), np.array([1]), np.array([[0.6, 0.0, 0.8]]))
+    gpu, cpu = (detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05, renormal=renormal,
+                       device=device) for device in ("cuda", "cpu"))
+    assert isinstance(gpu, DeviceContacts) and gpu.pair_count == 1 and gpu.m == cpu.m == 3
+    assert list(cpu.j) == [1, -1, -1]
+    for name in ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever",
+                 "mu", "mu_r", "keys"):
+        np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name), err_msg=name)

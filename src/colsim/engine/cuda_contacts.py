@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from .contacts import Contacts, pair_overlaps, lever_of, swept_close, swept_midpoints
+from .contacts import Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
 from .state import PARTICLE, pair_key
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
