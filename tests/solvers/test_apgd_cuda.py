@@ -120,6 +120,11 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     warm = ApgdSolver(kernel="numba").solve(program).forces
     sol = ApgdSolver(kernel="cuda").solve(program, warm_start=warm)
     assert sol.info["kernel"] == "cuda" and sol.info["start"] == "warm" and sol.iterations == 10
+    # the forces stay on the device until read: the step's warm start takes them there
+    assert "forces" not in vars(sol) and sol.forces_for("cuda") is sol.on_device
+    from colsim.engine.cuda_operator import kept_device_copy
+
+    assert kept_device_copy(sol.forces) is sol.on_device and sol.forces_for("cpu") is sol.forces
     assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
     expected = program.increments(sol.forces)   # the device's hx, B' lam, is the host's product
     np.testing.assert_allclose(sol.increments, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
@@ -127,6 +132,27 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
     net, net_ref = (program.jacobian.T @ forces.ravel() for forces in (sol.forces, ref.forces))
     assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
+
+
+@pytest.mark.parametrize("largest", [1.0, -1.0], ids=["pushing", "none-pushing"])
+def test_the_active_contacts_counted_on_the_device_are_the_host_s(largest):
+    """A solution's active contacts (normal force above 1e-8 of the largest, none when no force is
+    positive) counted on the device: the host's count of the same forces, exactly (the same comparisons).
+    3 THREADS + 5 contacts, so the largest is found across blocks; normal forces on either side of
+    the threshold, zeros and negatives."""
+    from colsim.engine.cuda_operator import THREADS
+    from colsim.engine.solver_contract import ConeSolution
+
+    rng = np.random.default_rng(4)
+    forces = rng.normal(size=(3 * THREADS + 5, 5))
+    forces[:, 0] = rng.choice([0.0, 5e-9, 1e-8, 2e-8, 0.3, -0.2], size=len(forces))
+    if largest < 0:
+        forces[:, 0] = -np.abs(forces[:, 0])
+    forces[2 * THREADS + 1, 0] = largest   # the largest in size, in the third block
+    solution = apgd_cuda.DeviceSolution(np.zeros(6), cuda.to_device(forces), "Solved", 0, 0.0, 0.0)
+    expected = ConeSolution(np.zeros(6), forces, "Solved", 0, 0.0, 0.0).active_contacts()
+    assert solution.active_contacts() == expected
+    assert expected == (np.count_nonzero(forces[:, 0] > 1e-8) if largest > 0 else 0) and "forces" not in vars(solution)
 
 
 def test_cuda_without_a_gpu_or_the_simulator_is_a_clear_error(monkeypatch):

@@ -64,15 +64,17 @@ class DeviceWarmStart(WarmStart):
         return contact_arrays_on_device(self.contacts, ("keys",), np.int64)[0]
 
 
-def carried_on_device(contacts, forces: np.ndarray) -> DeviceWarmStart:
+def carried_on_device(contacts, forces) -> DeviceWarmStart:
     """:meth:`WarmStart.from_step` of m > 0 `contacts` and their forces (m, 5) on the GPU: the forces
-    from their device copy (the solver's, when it solved on the GPU: no copy), turned by the frames'
-    (detection's) in the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds)."""
+    as they are when on the device (the solver's, when it solved there), else from their device copy,
+    turned by the frames' (detection's) in the CPU's arithmetic (to rounding: a GPU fuses some
+    multiply-adds)."""
     m = contacts.m
     frames = [contact_arrays_on_device(contacts, (name,))[0] for name in SHARED_FRAMES]
     on_device = cuda.device_array((2, m, 3), dtype=np.float64)
-    _global_forces_kernel[blocks_for(m), THREADS](device_copy_of(np.ascontiguousarray(forces, dtype=float)), *frames,
-                                                  on_device[0], on_device[1])
+    if not hasattr(forces, "copy_to_host"):
+        forces = device_copy_of(np.ascontiguousarray(forces, dtype=float))
+    _global_forces_kernel[blocks_for(m), THREADS](forces, *frames, on_device[0], on_device[1])
     return DeviceWarmStart(contacts, on_device)
 
 

@@ -28,6 +28,18 @@ class ConeSolution:
     info: dict = field(default_factory=dict)
     backend: str = ""
 
+    def forces_for(self, device: str):
+        """The forces (m, 5) where `device` ('cpu' or 'cuda') reads them: here, the host's array (a
+        solution whose forces stay on the GPU gives its device array to 'cuda')."""
+        return self.forces
+
+    def active_contacts(self) -> int:
+        """Contacts carrying a normal force above 1e-8 of the largest one."""
+        if len(self.forces) == 0:
+            return 0
+        p = self.forces[:, 0]
+        return int(np.count_nonzero(p > 1e-8 * max(float(p.max()), 0.0)))
+
 
 class SolverError(RuntimeError):
     """A cone program that was not solved to tolerance."""

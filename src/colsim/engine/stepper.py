@@ -162,7 +162,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
         if solver.uses_warm_start:   # the redo's contacts hold the attempt's, with the missed ones added
-            start_from = WarmStart.from_step(found, solution.forces, solver.device)
+            start_from = WarmStart.from_step(found, solution.forces_for(solver.device), solver.device)
     else:
         raise OverlapError(
             f"step {step_number}: largest overlap {overlap.largest:.3g} exceeds the tolerance "
@@ -170,7 +170,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     trans, rot = new_state.kinetic_energy()
     diagnostics = StepDiagnostics(
         step=step_number, time=new_state.time, n_contacts=found.m,
-        n_active=_count_active(solution.forces), largest_overlap=overlap.largest,
+        n_active=solution.active_contacts(), largest_overlap=overlap.largest,
         kinetic_energy=trans, rotational_energy=rot, solver_status=solution.status,
         solver_backend=solution.backend or solver.name, solver_iterations=solution.iterations,
         friction_iterations=solution.info.get("friction_iterations", 1),
@@ -190,14 +190,6 @@ def _merge_pairs(old, new, n):
     keys_new = new[0].astype(np.int64) * n + new[1]
     keep = ~np.isin(old[0].astype(np.int64) * n + old[1], keys_new)
     return tuple(np.concatenate([a[keep], b]) for a, b in zip(old, new))
-
-
-def _count_active(forces: np.ndarray) -> int:
-    """Contacts carrying a normal force above 1e-8 of the largest one."""
-    if len(forces) == 0:
-        return 0
-    p = forces[:, 0]
-    return int(np.count_nonzero(p > 1e-8 * max(float(p.max()), 0.0)))
 
 
 def _advance(state: ParticleState, u: np.ndarray, dt: float) -> ParticleState:
@@ -220,7 +212,7 @@ def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solv
     for k in range(first_step + 1, first_step + n_steps + 1):
         result = step(state, settings, solver, k, carry.warm_start, carry.margin, upcoming)
         upcoming = result.upcoming
-        warm = (WarmStart.from_step(result.contacts, result.solution.forces, solver.device)
+        warm = (WarmStart.from_step(result.contacts, result.solution.forces_for(solver.device), solver.device)
                 if solver.uses_warm_start else None)
         carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
         state = result.state

@@ -287,6 +287,13 @@ class _Iteration:
         """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate's forces lam (m, 5) (:meth:`forces`)."""
         return program.increments(forces)
 
+    def solution(self, program: ConeProgram, iterations: int, setup_time: float, solve_time: float,
+                 info: dict) -> ConeSolution:
+        """The solved program's solution at the iterate (times in seconds)."""
+        forces = self.forces()
+        return ConeSolution(self.increments(program, forces), forces, "Solved", iterations, setup_time, solve_time,
+                            info)
+
     def iterate(self, n: int):
         if self.geometry is not None:
             (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, bt,
@@ -513,7 +520,6 @@ class ApgdSolver(Solver):
                 converged = True
                 break
         solve_time = time.perf_counter() - start - setup_time
-        forces = run.forces()
         info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
         if not converged:
@@ -522,4 +528,4 @@ class ApgdSolver(Solver):
                 f"(relative primal infeasibility {res['primal']:.2e}, complementarity "
                 f"{res['complementarity']:.2e}, tolerance {self.tolerance:.1e}, {m} contacts)",
                 status="MaxIterations", step=step, residuals=res)
-        return ConeSolution(run.increments(program, forces), forces, "Solved", k, setup_time, solve_time, info)
+        return run.solution(program, k, setup_time, solve_time, info)

@@ -33,6 +33,7 @@ from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, 
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
+from ..engine.solver_contract import ConeSolution
 from .apgd import decide, lipschitz_estimate, power_start_drawn
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
@@ -579,8 +580,90 @@ class CudaIteration:
     def forces(self) -> np.ndarray:
         """(m, 5) the contact forces S z of the iterate, on the host; their device copy is kept
         (:func:`colsim.engine.cuda_operator.keep_device_copy`) for the warm start the step leaves."""
+        return DeviceSolution.host_copy(self.forces_on_device())
+
+    def forces_on_device(self):
+        """(m, 5) the contact forces S z of the iterate, a device array."""
         out = cuda.device_array(5 * self.m, dtype=np.float64)
         _forces_kernel[blocks_for(5 * self.m), THREADS](self.geometry.s, self.x, out)
-        forces = out.copy_to_host().reshape(self.m, 5)
-        keep_device_copy(forces, out.reshape(self.m, 5))
+        return out.reshape(self.m, 5)
+
+    def solution(self, program, iterations: int, setup_time: float, solve_time: float, info: dict) -> "DeviceSolution":
+        """The solved program's solution at the iterate, its forces left on the device (times in seconds)."""
+        return DeviceSolution(self.increments(program), self.forces_on_device(), "Solved", iterations, setup_time,
+                              solve_time, info)
+
+
+class DeviceSolution(ConeSolution):
+    """A :class:`colsim.engine.solver_contract.ConeSolution` whose forces stay on the device
+    (`on_device`, (m, 5)) until read: the host's `forces` are copied from there when first read (a
+    file, a packing's rest test), and keep the device's as their copy. A step on the GPU reads none:
+    its warm start and a Coulomb fixed point's next solve take the device's (:meth:`forces_for`), and
+    its count of active contacts is made there (:meth:`active_contacts`). m > 0."""
+
+    def __init__(self, increments, on_device, status, iterations, setup_time, solve_time, info=None, backend=""):
+        self.increments, self.on_device, self.status, self.iterations = increments, on_device, status, iterations
+        self.setup_time, self.solve_time, self.info, self.backend = setup_time, solve_time, info or {}, backend
+
+    def __getattr__(self, name):   # only for an attribute not set: the host's forces, not yet copied
+        if name != "forces":
+            raise AttributeError(name)
+        self.forces = self.host_copy(self.__dict__["on_device"])
+        return self.forces
+
+    @staticmethod
+    def host_copy(on_device) -> np.ndarray:
+        """The host's copy of device forces (m, 5), which keeps them as its device copy."""
+        forces = on_device.copy_to_host()
+        keep_device_copy(forces, on_device)
         return forces
+
+    def forces_for(self, device: str):
+        return self.on_device if device == "cuda" else self.forces
+
+    def active_contacts(self) -> int:
+        """:meth:`colsim.engine.solver_contract.ConeSolution.active_contacts`, counted on the device
+        (the largest normal force, the threshold and the count there, in the host's arithmetic: the
+        same count); only the count comes back."""
+        m = self.on_device.shape[0]
+        largest = cuda.device_array(blocks_for(m), dtype=np.float64)
+        _largest_normal_kernel[blocks_for(m), THREADS](self.on_device, largest)
+        threshold = cuda.device_array(1, dtype=np.float64)
+        _threshold_kernel[1, THREADS](largest, threshold)
+        count = full_on_device(1, 0, np.int64)
+        _count_above_kernel[blocks_for(m), THREADS](self.on_device, threshold, count)
+        return int(count.copy_to_host()[0])
+
+
+@cuda.jit
+def _largest_normal_kernel(forces, largest):
+    """largest[b] = the largest normal force p = forces[k, 0] of block b's contacts."""
+    cache = cuda.shared.array(THREADS, dtype=np.float64)
+    k = cuda.grid(1)
+    t = cuda.threadIdx.x
+    cache[t] = forces[k, 0] if k < forces.shape[0] else -math.inf
+    block_reduce(cache, t, True)
+    if t == 0:
+        largest[cuda.blockIdx.x] = cache[0]
+
+
+@cuda.jit
+def _threshold_kernel(largest, threshold):
+    """threshold[0] = 1e-8 max(largest normal force, 0), from the blocks' largest (one block)."""
+    cache = cuda.shared.array(THREADS, dtype=np.float64)
+    t = cuda.threadIdx.x
+    value = -math.inf
+    for b in range(t, largest.shape[0], THREADS):
+        value = max(value, largest[b])
+    cache[t] = value
+    block_reduce(cache, t, True)
+    if t == 0:
+        threshold[0] = 1e-8 * max(cache[0], 0.0)
+
+
+@cuda.jit
+def _count_above_kernel(forces, threshold, count):
+    """count[0] += the contacts whose normal force exceeds threshold[0] (an atomic add each)."""
+    k = cuda.grid(1)
+    if k < forces.shape[0] and forces[k, 0] > threshold[0]:
+        cuda.atomic.add(count, 0, 1)
