@@ -12,6 +12,9 @@ import numpy as np
 
 from .program import ROWS_PER_CONTACT, ConeProgram
 
+#: a contact is active when its normal force exceeds this fraction of the largest one
+ACTIVE_FRACTION = 1e-8
+
 
 @dataclass
 class ConeSolution:
@@ -34,11 +37,11 @@ class ConeSolution:
         return self.forces
 
     def active_contacts(self) -> int:
-        """Contacts carrying a normal force above 1e-8 of the largest one."""
+        """Contacts carrying a normal force above ACTIVE_FRACTION of the largest one."""
         if len(self.forces) == 0:
             return 0
         p = self.forces[:, 0]
-        return int(np.count_nonzero(p > 1e-8 * max(float(p.max()), 0.0)))
+        return int(np.count_nonzero(p > ACTIVE_FRACTION * max(float(p.max()), 0.0)))
 
 
 class SolverError(RuntimeError):

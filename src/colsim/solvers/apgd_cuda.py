@@ -33,7 +33,7 @@ from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, 
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
-from ..engine.solver_contract import ConeSolution
+from ..engine.solver_contract import ACTIVE_FRACTION, ConeSolution
 from .apgd import decide, lipschitz_estimate, power_start_drawn
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
@@ -649,7 +649,7 @@ def _largest_normal_kernel(forces, largest):
 
 @cuda.jit
 def _threshold_kernel(largest, threshold):
-    """threshold[0] = 1e-8 max(largest normal force, 0), from the blocks' largest (one block)."""
+    """threshold[0] = ACTIVE_FRACTION max(largest normal force, 0), from the blocks' largest (one block)."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
     t = cuda.threadIdx.x
     value = -math.inf
@@ -658,7 +658,7 @@ def _threshold_kernel(largest, threshold):
     cache[t] = value
     block_reduce(cache, t, True)
     if t == 0:
-        threshold[0] = 1e-8 * max(cache[0], 0.0)
+        threshold[0] = ACTIVE_FRACTION * max(cache[0], 0.0)
 
 
 @cuda.jit
