@@ -59,7 +59,8 @@ class DeviceContacts(Contacts):
     (:func:`colsim.engine.cuda_operator.keep_device_copy`); a step on the GPU reads none: the warm start
     and the solver take the device's (:func:`contact_arrays_on_device`). m: the contacts; pair_count:
     the first pair_count are the particle pairs, the walls' and fixed spheres' rows follow;
-    particles: (positions (n, 3), radii (n,)) on the device, of the state detected (None: not kept)."""
+    particles: (positions (n, 3), radii (n,)) on the device, of the state detected, kept with the
+    largest pair overlap measured (a first attempt's; None: neither)."""
 
     def __init__(self, rows: "ContactRows", pair_count: int, largest_pair_overlap: float | None, particles=None):
         self.rows, self.device, self._pair_count = rows, rows.named(), pair_count
@@ -86,10 +87,10 @@ class DeviceContacts(Contacts):
         `tolerance` listed on the device (one thread a pair: the flags, their prefix sums, the flagged
         pairs' bodies), at the particles the detection had there (`particles`: their positions and
         radii; `state` must be the one detected). What comes back is their count and their bodies;
-        their normals are made on the host, as there. Contacts without the particles or without
-        their largest overlap measured (a redo's): the host's way."""
+        their normals are made on the host, as there. Contacts without their largest overlap
+        measured, nor the particles kept (a redo's): the host's way."""
         pairs = self.pair_count
-        if self.particles is None or self.largest_pair_overlap is None or not pairs:
+        if self.largest_pair_overlap is None or not pairs:
             return super().overlapping_pairs(state, tolerance)
         position, radius = self.particles
         flag = cuda.device_array(pairs, dtype=np.int64)
@@ -224,7 +225,7 @@ def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: 
                                                       rows.keys)
     rows.upload(given, kept)
     rows.levers_and_keys(rolling_lever, kept, kept + len(wanted))
-    return DeviceContacts(rows, kept + len(wanted), None, found.particles)
+    return DeviceContacts(rows, kept + len(wanted), None)
 
 
 #: the CPU's lever (colsim.engine.contacts.lever_of) and pair key (colsim.engine.state.pair_key), for the GPU
