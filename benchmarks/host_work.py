@@ -59,7 +59,7 @@ def main(argv=None):
     from colsim.engine.cuda_contacts import _grid
     from colsim.engine.program import assemble
     from colsim.engine.state import ContactLaw, StepSettings, Walls, pair_keys
-    from colsim.engine.stepper import _advance, predicted_displacement
+    from colsim.engine.stepper import advance, predicted_displacement
     from colsim.engine.warm_start import WarmStart
 
     column = args.column
@@ -109,7 +109,7 @@ def main(argv=None):
 
     program = assemble(state, found, settings.dt, settings.gravity)
     midpoint, reach = detection.swept_midpoints(state, predicted, margin, settings.detection_slack)
-    moved = _advance(state, 1e-9 * np.ones(6 * state.n), settings.dt)
+    moved = advance(state, 1e-9 * np.ones(6 * state.n), settings.dt)
     forces = np.random.default_rng(2).uniform(size=(found.m, 5))
     measured = dataclasses.replace(found, largest_pair_overlap=0.0)   # as the GPU's detection measures it
 
@@ -134,7 +134,7 @@ def main(argv=None):
         ("the assembly", best_ms(r, assemble, state, found, settings.dt, settings.gravity), "on the host"),
         ("increments (fbar + B' lam) / mass", best_ms(r, lambda: (program.fbar + program.fbar) / program.mass),
          "on the host"),
-        ("the update", best_ms(r, _advance, state, 1e-9 * np.ones(6 * state.n), settings.dt), "on the host"),
+        ("the update", best_ms(r, advance, state, 1e-9 * np.ones(6 * state.n), settings.dt), "on the host"),
         ("the overlap check, pairs measured on the host",
          best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", found), "before"),
         ("the overlap check, pairs measured by detection",

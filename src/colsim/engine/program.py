@@ -160,9 +160,11 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
     )
 
 
-def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> ConeProgram:
+def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity, device: str = "cpu") -> ConeProgram:
     """The cone program of one step of length dt (time) from `state` with `contacts` (B is built
-    when a back-end first asks for it: :attr:`ConeProgram.jacobian`)."""
+    when a back-end first asks for it: :attr:`ConeProgram.jacobian`). device 'cuda': the masses and
+    free forces are made on the GPU too, from the state's arrays there, and kept as their device
+    copies (:func:`colsim.engine.cuda_state.program_on_device`; the host's arrays are then read-only)."""
     n = state.n
     m_i, inertia = state.mass_and_inertia()
     # filled a component at a time, the arithmetic in contiguous arrays: numpy's (n, 1) by (n, 3)
@@ -181,6 +183,10 @@ def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> Co
         np.multiply(inertia, state.angular_velocity[:, d], out=work)
         work /= dt
         fbar[3 * n + d::3] = work
+    if device == "cuda":
+        from .cuda_state import program_on_device
+
+        program_on_device(state, mass, fbar, dt, gravity)
     return ConeProgram(mass=mass, fbar=fbar, contacts=contacts)
 
 

@@ -51,11 +51,12 @@ class OverlapError(RuntimeError):
 @dataclass
 class Upcoming:
     """The first detection of the step after this one, made by this step's overlap check: the state
-    and the margin (length) it was made for, and its contacts."""
+    and the margin (length) it was made for, its contacts, and the state's predicted motion (n, 3)."""
 
     state: ParticleState
     margin: float
     contacts: contact_detection.Contacts
+    predicted: np.ndarray
 
 
 @dataclass
@@ -71,9 +72,15 @@ class StepResult:
     carry: Carry | None = None
 
 
-def predicted_displacement(state: ParticleState, settings: StepSettings) -> np.ndarray:
-    """(n, 3) free-flight displacement v dt + g dt^2 of each particle over one step (length)."""
-    return state.velocity * settings.dt + np.asarray(settings.gravity) * settings.dt**2
+def predicted_displacement(state: ParticleState, settings: StepSettings, device: str = "cpu") -> np.ndarray:
+    """(n, 3) free-flight displacement v dt + g dt^2 of each particle over one step (length); on
+    device 'cuda' made there too, from the velocities there (:mod:`colsim.engine.cuda_state`)."""
+    predicted = state.velocity * settings.dt + np.asarray(settings.gravity) * settings.dt**2
+    if device == "cuda":
+        from .cuda_state import predicted_on_device
+
+        predicted_on_device(state, predicted, settings.dt, settings.gravity)
+    return predicted
 
 
 def base_margin(state: ParticleState, settings: StepSettings) -> float:
@@ -117,7 +124,8 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     warm_start: forces by contact pair, matched to each attempt's contacts (None: a cold start).
     margin: detection margin of the first attempt (length); None: :func:`base_margin`.
     upcoming: the last step's :attr:`StepResult.upcoming`, taken as the first attempt's contacts
-    when it was made for this state and margin (None, or another's: detected here)."""
+    when it was made for this state and margin (None, or another's: detected here), and its
+    predicted motion when made for this state."""
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
@@ -125,7 +133,10 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     base = base_margin(state, settings)
     margin = base if margin is None else margin
     started = time.perf_counter()
-    predicted = predicted_displacement(state, settings)
+    if upcoming is not None and upcoming.state is state:
+        predicted = upcoming.predicted
+    else:
+        predicted = predicted_displacement(state, settings, solver.device)
     cylinder_margin = np.zeros(state.n)
     renormal, missed = None, 0
     start_from = warm_start
@@ -138,17 +149,18 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
                                              settings.detection_slack, cylinder_margin, renormal,
                                              most_recovered, solver.device)
         t1 = time.perf_counter()
-        program = assemble(state, found, settings.dt, settings.gravity)
+        program = assemble(state, found, settings.dt, settings.gravity, solver.device)
         t2 = time.perf_counter()
         guess = None if start_from is None else start_from.match(found, solver.device)
         t3 = time.perf_counter()
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
-        new_state = _advance(state, solution.increments, settings.dt)
+        new_state = advance(state, solution.increments, settings.dt, solver.device)
         t4 = time.perf_counter()
         following_margin = _next_margin(missed, margin, base)   # the next step's, if this attempt holds
+        following_motion = predicted_displacement(new_state, settings, solver.device)
         following = Upcoming(new_state, following_margin, _first_detection(
-            new_state, settings, predicted_displacement(new_state, settings), following_margin, most_recovered,
-            solver.device))
+            new_state, settings, following_motion, following_margin, most_recovered, solver.device),
+            following_motion)
         overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device,
                                              detected=following.contacts)
         t5 = time.perf_counter()
@@ -192,12 +204,20 @@ def _merge_pairs(old, new, n):
     return tuple(np.concatenate([a[keep], b]) for a, b in zip(old, new))
 
 
-def _advance(state: ParticleState, u: np.ndarray, dt: float) -> ParticleState:
+def advance(state: ParticleState, u: np.ndarray, dt: float, device: str = "cpu") -> ParticleState:
+    """The state after a step of dt (time) with increments u = [dx; dth] (6n,): x + dx, v = dx / dt,
+    w = dth / dt. device 'cuda': made on the GPU too, from u's copy there (a solve on the GPU's),
+    and kept as the new arrays' device copies (:func:`colsim.engine.cuda_state.advance_on_device`)."""
     n = state.n
     dx = u[:3 * n].reshape(n, 3)
     dth = u[3 * n:].reshape(n, 3)
-    return replace(state, position=state.position + dx, velocity=dx / dt,
-                   angular_velocity=dth / dt, time=state.time + dt)
+    new_state = replace(state, position=state.position + dx, velocity=dx / dt,
+                        angular_velocity=dth / dt, time=state.time + dt)
+    if device == "cuda":
+        from .cuda_state import advance_on_device
+
+        advance_on_device(state, new_state, u, dt)
+    return new_state
 
 
 def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solver,

@@ -14,8 +14,9 @@ without waiting for any, and reads that array once a round of them
 (:meth:`CudaIteration.iterate`): a trial step used to wait for a copy of its sums to the host, which
 with the launches was most of an iteration at 69,000 spheres (0.22 ms on an H200, against 0.04 ms of
 memory traffic). A residual check costs one more copy. A solve's start is made on the device as
-well (:meth:`CudaIteration.of_program`): the contacts' frames, the masses, the free forces, the
-gaps, the coefficients and the warm start go there once, and the row scales, c, the first iterate,
+well (:meth:`CudaIteration.of_program`): the contacts' frames, the gaps, the coefficients and the
+warm start go there once (the masses and free forces are made there by a step on the GPU,
+:mod:`colsim.engine.cuda_state`), and the row scales, c, the first iterate,
 T x and the Lipschitz estimate's power iteration are made by kernels.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), as in the tests.
@@ -28,11 +29,12 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
-                                    dot, full_on_device, gradient_on_device, gradient_row, gradient_values,
-                                    keep_device_copy, kept_device_copy, normalise_on_device,
+                                    device_copy_of, dot, full_on_device, gradient_on_device, gradient_row,
+                                    gradient_values, keep_device_copy, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
+from ..engine.cuda_state import increments_on_device, inverses_on_device
 from ..engine.solver_contract import ACTIVE_FRACTION, ConeSolution
 from .apgd import decide, lipschitz_estimate, power_start_drawn
 
@@ -416,14 +418,14 @@ class CudaIteration:
         """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
-        (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic; only the
-        masses, the free forces, the gaps, the coefficients and the contacts' bodies and radii go
-        there (the frames and a warm start matched on the GPU are there already, and so are the
-        forces of the solve before, in a Coulomb fixed point)."""
+        (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic, 1 / mass too
+        (`inv_mass`, the host's, is not copied). A step on the GPU has every array there already: the
+        contacts' (its detection's), the masses and free forces (:mod:`colsim.engine.cuda_state`), the
+        warm start (its matching's) and a Coulomb fixed point's last forces; others are copied once."""
         m = program.m
         device = CudaContactOperator(program.contacts, program.n_unknowns // 6)   # no host operator
-        bodies = cuda.to_device(np.stack([inv_mass, program.fbar]).astype(float, copy=False))   # one copy each
-        d_inv_mass, fbar = bodies[0], bodies[1]
+        # the masses and free forces: made on the device by a step there (cuda_state), else copied once
+        fbar, d_inv_mass = device_copy_of(program.fbar), inverses_on_device(device_copy_of(program.mass))
         shifted = program.gap_shift is not None   # a Coulomb fixed point's gaps are made on the host
         mu, mu_r, gap = contact_arrays_on_device(program if shifted else program.contacts, ("mu", "mu_r", "gap"))
         diagonal = device.diagonal_on_device(d_inv_mass)
@@ -573,9 +575,10 @@ class CudaIteration:
         return bool(np.any(self.host_x())) if self.warm is None else self.warm
 
     def increments(self, program, forces=None) -> np.ndarray:
-        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate: B' lam = B' S z is the device's hx, so only
-        it comes back (no product with B' on the host; `forces`, the host's lam, is not needed)."""
-        return (program.fbar + self.hx.copy_to_host()) / program.mass
+        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate, made on the device from B' lam = B' S z,
+        the device's hx, so only u comes back, keeping the device's as its copy for the step's update
+        (:func:`colsim.engine.cuda_state.advance_on_device`); `forces`, the host's lam, is not needed."""
+        return increments_on_device(program.fbar, self.hx, program.mass)
 
     def forces(self) -> np.ndarray:
         """(m, 5) the contact forces S z of the iterate, on the host; their device copy is kept

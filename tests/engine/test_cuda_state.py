@@ -1,0 +1,165 @@
+"""The particles' arrays that a step on the GPU makes there (colsim.engine.cuda_state, issue 46):
+the program's masses and free forces, the increments, the next state and its predicted motion are
+the host's, bit for bit (their arithmetic is sums, divisions and products rounded once each, and
+the kernels keep every product that a sum reads apart from it), so they serve as the host arrays'
+device copies; and a step made from them copies none of them from the host. The kernels run on
+numba's CUDA simulator here (conftest sets NUMBA_ENABLE_CUDASIM=1 unless told otherwise)."""
+import numpy as np
+import pytest
+
+from colsim.engine.contacts import detect, swept_midpoints
+from colsim.engine.program import assemble
+from colsim.engine.state import ContactLaw, StepSettings, Walls
+from colsim.engine.stepper import advance, predicted_displacement
+from colsim.stages.pack import starting_cloud
+
+cuda_state = pytest.importorskip("colsim.engine.cuda_state", reason="numba.cuda is not importable")
+
+
+def _moving_cloud(seed: int):
+    """The pack stage's 60-sphere cloud (diameters 0.25-0.5), settled closer, moving and spinning."""
+    state = starting_cloud(60, 1.0, seed=seed)
+    state.position[:, 2] *= 0.5
+    rng = np.random.default_rng(seed)
+    state.velocity[:] = rng.normal(scale=0.3, size=(state.n, 3))
+    state.angular_velocity[:] = rng.normal(scale=2.0, size=(state.n, 3))
+    return state
+
+
+def _kept(array):
+    from colsim.engine.cuda_operator import kept_device_copy
+
+    kept = kept_device_copy(array)
+    assert kept is not None
+    return kept.copy_to_host()
+
+
+#: where the particles' arrays went to the device, each step, before cuda_state made them there:
+#: (file, function) of a frame on the copy's stack
+PARTICLE_COPIES = {("cuda_contacts.py", "__init__"),   # positions, motion, midpoints (_SweptPairs)
+                   ("apgd_cuda.py", "of_program")}     # masses and free forces
+
+
+def _copies_to_device(monkeypatch) -> list:
+    """(bytes, {(file, function) of each frame on its stack}) of each array copied from the host,
+    from now until monkeypatch.undo()."""
+    import os
+    import traceback
+
+    from numba import cuda
+
+    copied = []
+
+    def record(array):
+        frames = {(os.path.basename(f.filename), f.name) for f in traceback.extract_stack()}
+        copied.append((np.asarray(array).nbytes, frames))
+
+    to_device = cuda.to_device
+    monkeypatch.setattr(cuda, "to_device", lambda array, *args, **kwargs: (
+        record(array), to_device(array, *args, **kwargs))[1])
+    device_array = type(cuda.device_array(1))
+    into_device = device_array.copy_to_device
+    monkeypatch.setattr(device_array, "copy_to_device", lambda self, source, *args, **kwargs: (
+        record(source) if isinstance(source, np.ndarray) else None, into_device(self, source, *args, **kwargs))[1])
+    return copied
+
+
+def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
+    """A step's chain on a moving, spinning cloud, with a time step and a gravity whose products
+    round: the program's masses and free forces (assemble), the increments from a B' lam on the
+    device, the next state (advance) and its predicted motion, and the swept midpoints, each equal
+    to the host's to the bit and kept as the host array's device copy; the host arrays kept so are
+    read-only. The next step's program and motion are made from the first's with no copy from the
+    host (the particles' masses were copied once, for their radii)."""
+    from numba import cuda
+
+    state = _moving_cloud(seed=8)
+    settings = StepSettings(dt=0.0137, gravity=(0.31, -0.17, -9.81), walls=Walls(floor=True, cylinder_radius=1.0))
+    predicted = predicted_displacement(state, settings, "cuda")
+    np.testing.assert_array_equal(_kept(predicted), state.velocity * settings.dt
+                                  + np.asarray(settings.gravity) * settings.dt**2)
+    contacts = detect(state, settings.walls, ContactLaw.uniform(0.5, 0.1), predicted, 0.05)
+    program = assemble(state, contacts, settings.dt, settings.gravity, "cuda")
+    on_host = assemble(state, contacts, settings.dt, settings.gravity)
+    for name in ("mass", "fbar"):
+        np.testing.assert_array_equal(getattr(program, name), getattr(on_host, name))
+        np.testing.assert_array_equal(_kept(getattr(program, name)), getattr(program, name), err_msg=name)
+        assert not getattr(program, name).flags.writeable
+    hx = np.random.default_rng(9).normal(scale=50.0, size=6 * state.n)
+    u = cuda_state.increments_on_device(program.fbar, cuda.to_device(hx), program.mass)
+    np.testing.assert_array_equal(u, (program.fbar + hx) / program.mass)
+    np.testing.assert_array_equal(_kept(u), u)
+    moved = advance(state, u, settings.dt, "cuda")
+    expected = advance(state, u, settings.dt)
+    for name in ("position", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(getattr(moved, name), getattr(expected, name))
+        np.testing.assert_array_equal(_kept(getattr(moved, name)), getattr(moved, name), err_msg=name)
+    with pytest.raises(ValueError, match="read-only"):
+        moved.position[0, 0] = 0.0   # its device copy would not follow: a change fails loudly
+
+    copied = _copies_to_device(monkeypatch)
+    following = predicted_displacement(moved, settings, "cuda")
+    next_program = assemble(moved, contacts, settings.dt, settings.gravity, "cuda")
+    monkeypatch.undo()
+    assert [size for size, _ in copied] == []
+    np.testing.assert_array_equal(_kept(following), predicted_displacement(moved, settings))
+    np.testing.assert_array_equal(_kept(next_program.fbar), assemble(moved, contacts, settings.dt,
+                                                                      settings.gravity).fbar)
+    midpoint, _ = swept_midpoints(moved, following, 0.05, 0.5)
+    from colsim.engine.cuda_operator import kept_device_copy
+
+    made = cuda_state.midpoints_on_device(kept_device_copy(moved.position), kept_device_copy(following))
+    np.testing.assert_array_equal(made.copy_to_host(), midpoint)
+
+
+def test_the_inverse_masses_are_the_host_s():
+    """1 / mass on the device (APGD's set-up takes it there) is numpy's, bit for bit."""
+    from numba import cuda
+
+    mass = np.random.default_rng(10).uniform(0.01, 300.0, 1000)
+    np.testing.assert_array_equal(cuda_state.inverses_on_device(cuda.to_device(mass)).copy_to_host(), 1.0 / mass)
+
+
+def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
+    """The second step of a small collapse on the GPU (APGD's kernels and the detection there: 12
+    spheres stacked 2 x 2 x 3 in a cylinder, nudged sideways): nothing goes to the device
+    from where the particles' arrays went (their positions, motion, masses and free forces are made
+    there from the step before), and of them only the increments (48 bytes a particle, one copy an
+    attempt) come back; the end is the CPU's run of the same steps, to 1e-12 of the motion (the
+    bound of the stepper's GPU test)."""
+    import traceback
+
+    from numba import cuda
+
+    from colsim.engine.state import ParticleState
+    from colsim.engine.stepper import run
+    from colsim.solvers.apgd import ApgdSolver
+
+    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
+    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
+    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
+    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
+                            walls=Walls(floor=True, cylinder_radius=0.65))
+    n = state.n
+    steps = run(state, settings, 2, ApgdSolver(tolerance=1e-6, kernel="cuda"))
+    next(steps)
+    copied = _copies_to_device(monkeypatch)
+    device_array = type(cuda.device_array(1))
+    to_host, increments = device_array.copy_to_host, []
+
+    def counted_to_host(self, *args, **kwargs):
+        if any(f.name == "increments_on_device" for f in traceback.extract_stack()):
+            increments.append(self.nbytes)
+        return to_host(self, *args, **kwargs)
+
+    monkeypatch.setattr(device_array, "copy_to_host", counted_to_host)
+    later = list(steps)
+    monkeypatch.undo()
+    assert copied, "a step copies its walls' contacts"
+    for size, frames in copied:
+        assert not frames & PARTICLE_COPIES and not any(name == "cuda_state.py" for name, _ in frames), size
+    assert increments == [48 * n] * sum(result.diagnostics.redone + 1 for result in later)
+    cpu = list(run(state, settings, 2, ApgdSolver(tolerance=1e-6)))
+    moved = np.abs(cpu[-1].state.position - state.position).max()
+    assert moved > 0.01
+    np.testing.assert_allclose(later[-1].state.position, cpu[-1].state.position, rtol=0, atol=1e-12 * moved)
