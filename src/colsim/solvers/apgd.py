@@ -449,11 +449,11 @@ class ApgdSolver(Solver):
     def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None) -> "_Iteration":
         """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""
         m = program.m
-        inv_mass = 1.0 / program.mass
         if self.kernel == "cuda":   # the scaling, the start and the iterations, all on the device
             from .apgd_cuda import CudaIteration
 
-            return CudaIteration.of_program(program, inv_mass, warm_start, self.precondition, self.lipschitz_decay)
+            return CudaIteration.of_program(program, warm_start, self.precondition, self.lipschitz_decay)
+        inv_mass = 1.0 / program.mass
         # the compiled kernels apply B and B' from the contacts' frames and never form B
         operator = program.operator if self.kernel == "numba" else None
         B = None if operator is not None else program.jacobian.tocsr()

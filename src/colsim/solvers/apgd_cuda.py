@@ -413,15 +413,14 @@ class CudaIteration:
                                 for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
 
     @classmethod
-    def of_program(cls, program, inv_mass: np.ndarray, warm_start, precondition: bool,
-                   lip_decay: float) -> "CudaIteration":
+    def of_program(cls, program, warm_start, precondition: bool, lip_decay: float) -> "CudaIteration":
         """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
-        (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic, 1 / mass too
-        (`inv_mass`, the host's, is not copied). A step on the GPU has every array there already: the
-        contacts' (its detection's), the masses and free forces (:mod:`colsim.engine.cuda_state`), the
-        warm start (its matching's) and a Coulomb fixed point's last forces; others are copied once."""
+        (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic, 1 / mass
+        too. A step on the GPU has every array there already: the contacts' (its detection's), the
+        masses and free forces (:mod:`colsim.engine.cuda_state`), the warm start (its matching's) and
+        a Coulomb fixed point's last forces; others are copied once."""
         m = program.m
         device = CudaContactOperator(program.contacts, program.n_unknowns // 6)   # no host operator
         # the masses and free forces: made on the device by a step there (cuda_state), else copied once
