@@ -10,7 +10,7 @@ collapses with mu = 0.577, mu_r = 0.12 and dt = 0.02 by APGD on the device (`Apg
 `colsim.engine.stepper.run` with the swept pairs, the warm start's matching and the overlap check
 there too); after one step to start from, `--steps` more of the same run are counted. Each `cuda.to_device`, device
 array's `copy_to_host` and `copy_to_device` from a host array is counted with its bytes, by the
-colsim function that made it. The count of a step's copies depends on its attempts and on the
+colsim function that made it; on numba's simulator, so is each kernel's launch. The count of a step's copies depends on its attempts and on the
 solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
 H200 whatever its size, docs/performance.md, "The third GPU sitting"); the bytes grow with it.
 
@@ -30,10 +30,16 @@ import numpy as np
 import record
 
 
-def _caller() -> str:
-    """module:function of the innermost colsim frame of the stack."""
-    frames = [f for f in traceback.extract_stack()[:-2] if "colsim" in f.filename and "benchmarks" not in f.filename]
+def _caller(helpers: tuple = ()) -> str:
+    """module:function of the innermost colsim frame of the stack, not counting the modules `helpers`."""
+    frames = [f for f in traceback.extract_stack()[:-2] if "colsim" in f.filename and "benchmarks" not in f.filename
+              and Path(f.filename).name not in helpers]
     return f"{Path(frames[-1].filename).name}:{frames[-1].name}" if frames else "elsewhere"
+
+
+#: the modules of launches made for others (the operator's products, fills, prefix sums): a launch is
+#: counted for their caller
+LAUNCH_HELPERS = ("cuda_launch.py", "cuda_operator.py")
 
 
 def counting_copies():
@@ -66,6 +72,26 @@ def counting_copies():
     device_array_type.copy_to_host = counted_to_host
     device_array_type.copy_to_device = counted_into_device
     return counts, sizes
+
+
+def counting_launches():
+    """On numba's simulator, patch its kernels' launches to count them; returns a Counter by caller
+    (None on a GPU, where they are not counted)."""
+    from numba import config
+
+    if not config.ENABLE_CUDASIM:
+        return None
+    from numba.cuda.simulator import kernel
+
+    launches, plain = collections.Counter(), kernel.FakeCUDAKernel.__call__
+
+    def counted_call(self, *args):
+        if not self._device:   # a kernel's launch, not a device function's call
+            launches[_caller(LAUNCH_HELPERS)] += 1
+        return plain(self, *args)
+
+    kernel.FakeCUDAKernel.__call__ = counted_call
+    return launches
 
 
 def stack():
@@ -110,6 +136,7 @@ def main(argv=None):
         solver = ApgdSolver(tolerance=1e-8, kernel="cuda")
         step(state, settings, solver, 1)   # not counted: the kernels compiled, the radii's copy kept
         counts, sizes = counting_copies()
+        launches = counting_launches()
         results = [step(state, settings, solver, 2)]
         args.steps = 1
     else:
@@ -118,6 +145,7 @@ def main(argv=None):
         steps = run(state, settings, 1 + args.steps, solver)
         next(steps)   # the first step, not counted: it made the second's first detection, as any step does
         counts, sizes = counting_copies()
+        launches = counting_launches()
         results = list(steps)
     attempts = sum(r.diagnostics.redone + 1 for r in results)
     iterations = sum(r.diagnostics.solver_iterations for r in results)
@@ -130,6 +158,13 @@ def main(argv=None):
                   data={"direction": direction, "caller": caller, "copies": counts[key] / args.steps,
                         "bytes": sizes[key] / args.steps})
     table.row("both", "all", f"{sum(counts.values()) / args.steps:.1f}", f"{sum(sizes.values()) / args.steps:.0f}")
+    if launches is not None:
+        print(f"kernel launches a step, by where they are made ({iterations / args.steps:.0f} APGD iterations "
+              "a step; counted on numba's simulator):")
+        launched = record.table(["made by", "launches a step"])
+        for caller, count in launches.most_common():
+            launched.row(caller, f"{count / args.steps:.1f}", data={"launches by": caller, "launches": count / args.steps})
+        launched.row("all", f"{sum(launches.values()) / args.steps:.1f}")
 
 
 if __name__ == "__main__":
