@@ -6,6 +6,7 @@ A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the hos
 - detection's walls and fixed spheres (the pairs and every contact's arrays are made on the device);
 - the grid's bounds, the midpoints and the assembly;
 - the update, the overlap check's walls and the kinetic energy.
+(The increments, 1 / mass and a second predicted motion have left the host: timed as they were.)
 
 Each is timed here, best of `--repeat`, on the column (`colsim trim`) or on a column of radius R0
 tiled from it (benchmarks/tiling.py). Velocities are drawn at 0.01, so that every particle moves.
@@ -130,10 +131,13 @@ def main(argv=None):
         ("the grid's bounds", best_ms(r, _grid, midpoint, reach), "on the host"),
         ("midpoints", best_ms(r, detection.swept_midpoints, state, predicted, margin, settings.detection_slack),
          "on the host"),
-        ("predicted motion", best_ms(r, predicted_displacement, state, settings), "on the host"),
-        ("the assembly", best_ms(r, assemble, state, found, settings.dt, settings.gravity), "on the host"),
+        ("predicted motion", best_ms(r, predicted_displacement, state, settings),
+         "on the host, once a step (twice before 047c585; also on the device since)"),
+        ("the assembly", best_ms(r, assemble, state, found, settings.dt, settings.gravity),
+         "on the host (also on the device since 047c585)"),
+        ("APGD's inverse masses 1 / mass", best_ms(r, lambda: 1.0 / program.mass), "on the device (before 3b1e40b: host)"),
         ("increments (fbar + B' lam) / mass", best_ms(r, lambda: (program.fbar + program.fbar) / program.mass),
-         "on the host"),
+         "on the device (before 047c585: host)"),
         ("the update", best_ms(r, advance, state, 1e-9 * np.ones(6 * state.n), settings.dt), "on the host"),
         ("the overlap check, pairs measured on the host",
          best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", found), "before"),
