@@ -75,19 +75,27 @@ def counting_copies():
 
 
 def counting_launches():
-    """On numba's simulator, patch its kernels' launches to count them; returns a Counter by caller
-    (None on a GPU, where they are not counted)."""
+    """On numba's simulator, patch its kernels' launches to count them; returns a dict by caller of
+    Counters: launches, those made through colsim.engine.cuda_launch.launch (which keeps an array's
+    marshalled words for its next launches), and the array arguments of the others, which numba-cuda
+    marshals anew at each launch (None on a GPU, where nothing is counted)."""
     from numba import config
 
     if not config.ENABLE_CUDASIM:
         return None
     from numba.cuda.simulator import kernel
 
-    launches, plain = collections.Counter(), kernel.FakeCUDAKernel.__call__
+    launches = collections.defaultdict(collections.Counter)
+    plain = kernel.FakeCUDAKernel.__call__
 
     def counted_call(self, *args):
         if not self._device:   # a kernel's launch, not a device function's call
-            launches[_caller(LAUNCH_HELPERS)] += 1
+            counts = launches[_caller(LAUNCH_HELPERS)]
+            counts["launches"] += 1
+            if any(Path(f.filename).name == "cuda_launch.py" for f in traceback.extract_stack()):
+                counts["through launch()"] += 1
+            else:
+                counts["arrays marshalled"] += sum(hasattr(a, "copy_to_host") for a in args)
         return plain(self, *args)
 
     kernel.FakeCUDAKernel.__call__ = counted_call
@@ -161,10 +169,13 @@ def main(argv=None):
     if launches is not None:
         print(f"kernel launches a step, by where they are made ({iterations / args.steps:.0f} APGD iterations "
               "a step; counted on numba's simulator):")
-        launched = record.table(["made by", "launches a step"])
-        for caller, count in launches.most_common():
-            launched.row(caller, f"{count / args.steps:.1f}", data={"launches by": caller, "launches": count / args.steps})
-        launched.row("all", f"{sum(launches.values()) / args.steps:.1f}")
+        columns = ("launches", "through launch()", "arrays marshalled")
+        launched = record.table(["made by", "launches a step", "of them through launch()",
+                                 "array arguments of the others a step"])
+        for caller, counts in sorted(launches.items(), key=lambda item: -item[1]["launches"]):
+            launched.row(caller, *(f"{counts[c] / args.steps:.1f}" for c in columns),
+                         data={"launches by": caller, **{c: counts[c] / args.steps for c in columns}})
+        launched.row("all", *(f"{sum(counts[c] for counts in launches.values()) / args.steps:.1f}" for c in columns))
 
 
 if __name__ == "__main__":
