@@ -173,9 +173,9 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
             log.warning("%s; settling this cloud again with nothing fixed", error)
             fixed[:] = False
             state, warm, steps = pour.settle(state, fixed, warm, error.step or steps, energy, None, save)
-    state.velocity[:] = 0.0
-    state.angular_velocity[:] = 0.0
-    state.time = 0.0
+    # new arrays, not zeroed in place: a GPU's steps keep device copies of theirs (engine/cuda_state)
+    state = replace(state, velocity=np.zeros_like(state.velocity), angular_velocity=np.zeros_like(state.velocity),
+                    time=0.0)
     return PackingResult(state, column_height(state), solid_fraction(state, settings.r0, settings.height),
                          steps, pour.clock.wall(), warm, clouds, most_fixed, pour.clock.cpu(), pour.history,
                          tuple(sittings_commits(earlier)))
