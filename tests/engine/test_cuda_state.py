@@ -163,3 +163,29 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     moved = np.abs(cpu[-1].state.position - state.position).max()
     assert moved > 0.01
     np.testing.assert_allclose(later[-1].state.position, cpu[-1].state.position, rtol=0, atol=1e-12 * moved)
+
+
+def test_a_gpu_run_goes_on_after_a_step_solved_on_the_cpu():
+    """A step on the GPU whose APGD reaches its cap is solved again by Clarabel on the host (auto's
+    fallback): its increments have no device copy, so its state has none, and the next GPU step
+    copies the particles' arrays from the host again. The same steps on the CPU (the same fallbacks)
+    end on the same positions, to 1e-12 of the motion."""
+    from colsim.engine.state import ParticleState
+    from colsim.engine.stepper import run
+    from colsim.solvers.registry import AutoSolver
+
+    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
+    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
+    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
+    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
+                            walls=Walls(floor=True, cylinder_radius=0.65))
+    ends = {}
+    for kernel in ("cuda", "numba"):
+        capped = list(run(state, settings, 2, AutoSolver(max_iter=10, apgd={"kernel": kernel})))
+        after = next(run(capped[-1].state, settings, 1, AutoSolver(apgd={"kernel": kernel}), first_step=2,
+                         carry=capped[-1].carry))
+        backends = [result.diagnostics.solver_backend for result in capped + [after]]
+        assert backends == ["clarabel-fallback", "clarabel-fallback", "apgd"], backends
+        ends[kernel] = after.state.position
+    moved = np.abs(ends["numba"] - state.position).max()
+    np.testing.assert_allclose(ends["cuda"], ends["numba"], rtol=0, atol=1e-12 * moved)
