@@ -154,15 +154,16 @@ def scaled_coefficients(program: ConeProgram, s: np.ndarray) -> tuple[np.ndarray
     return program.mu * s[:, 0] / s[:, 1], program.mu_r * s[:, 0] / s[:, 3]
 
 
-def length_scale(program: ConeProgram) -> float:
+def length_scale(program: ConeProgram, diameter: float | None = None) -> float:
     """L (length): the root-mean-square free-flight displacement (v dt + g dt^2) of the step, but at
-    least 1e-6 of the mean radius; the length that makes the residuals dimensionless."""
+    least 1e-6 of the mean radius; the length that makes the residuals dimensionless. diameter: the
+    program's :func:`mean_diameter`, where the caller has it (None: made here)."""
     n = program.n_unknowns // 6
     mass = program.mass
     trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
     rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
     # the gravity part of the free flight cannot be told apart from v in fbar
-    return max(rms, 0.5e-6 * mean_diameter(program))
+    return max(rms, 0.5e-6 * (mean_diameter(program) if diameter is None else diameter))
 
 
 def mean_diameter(program: ConeProgram) -> float:

@@ -486,8 +486,8 @@ class ApgdSolver(Solver):
         `length_floor` mean diameters d, whichever is larger), the force floor F0 (from the free
         flight alone) and the primal tolerance (relative to L: `tolerance`, or the overlap
         tolerance's `overlap_tolerance` d / L where that is larger)."""
-        free_flight = length_scale(program)
         diameter = mean_diameter(program)
+        free_flight = length_scale(program, diameter)
         scale = max(free_flight, self.length_floor * diameter)
         return (scale, force_floor(program, free_flight),
                 max(self.tolerance, self.overlap_tolerance * diameter / scale))
