@@ -30,7 +30,7 @@ import numpy as np
 from .contacts import Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
 from .state import PARTICLE, pair_key
 from .cuda_state import midpoints_on_device, particle_array_on_device
-from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, full_on_device,
+from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
 
 #: the CPU's swept test (colsim.engine.contacts.swept_close), compiled for the GPU
@@ -345,7 +345,7 @@ class _SweptPairs:
         # a step's own, made on the device from the last step's (cuda_state), else copied once
         self.position, d_predicted = particle_array_on_device(position), particle_array_on_device(predicted)
         d_midpoint = midpoints_on_device(self.position, d_predicted)
-        self.radius = device_copy_of(radius)   # the particles' radii never change: one copy a run
+        self.radius = particle_array_on_device(radius)   # the particles' radii never change: one copy a run
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
         args = (self.position, d_predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))

@@ -14,13 +14,14 @@ and keeps each as the device copy of the host's array
 - the next state's positions, velocities and angular velocities, from the increments;
 - the predicted motion v dt + g dt^2, from the velocities.
 
-So a step copies no particle's array to the device; the increments come back (48 bytes a particle).
+So after a run's first step no particle's array goes to the device; the increments come back (48
+bytes a particle).
 Each is the host's number, bit for bit: the arithmetic is additions, divisions and products, each
 rounded once. A GPU fuses a product and a sum into one rounding where it can, so every product that
 a sum reads is made by a kernel of its own (the weights m g, the motion v dt), or is exact (x + u/2).
 
 A host array kept so must not change in place (its device copy would not follow): :func:`frozen`
-makes each read-only, so a change fails loudly. Without a GPU the kernels run on numba's simulator
+makes each read-only, so a change fails loudly; so are the radii, whose masses are kept. Without a GPU the kernels run on numba's simulator
 (NUMBA_ENABLE_CUDASIM=1), where tests/engine/test_cuda_state.py compares each with the host's.
 """
 from __future__ import annotations
@@ -61,6 +62,7 @@ def masses_on_device(state, gravity) -> tuple:
         weakref.finalize(state.radius, _particles.pop, id(state.radius), None)
     key = (float(state.density), tuple(float(g) for g in gravity))
     if key not in by_setting:
+        state.radius.flags.writeable = False   # the masses kept follow from these radii
         mass, inertia = state.mass_and_inertia()
         both = cuda.to_device(np.stack([mass, inertia]))
         weight = cuda.device_array((state.n, 3), dtype=np.float64)
