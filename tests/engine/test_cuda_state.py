@@ -141,7 +141,7 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
                             walls=Walls(floor=True, cylinder_radius=0.65))
     n = state.n
-    steps = run(state, settings, 2, ApgdSolver(tolerance=1e-6, kernel="cuda"))
+    steps = run(state, settings, 2, ApgdSolver(tolerance=1e-4, kernel="cuda"))
     next(steps)
     copied = _copies_to_device(monkeypatch)
     device_array = type(cuda.device_array(1))
@@ -159,7 +159,7 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     for size, frames in copied:
         assert not frames & PARTICLE_COPIES and not any(name == "cuda_state.py" for name, _ in frames), size
     assert increments == [48 * n] * sum(result.diagnostics.redone + 1 for result in later)
-    cpu = list(run(state, settings, 2, ApgdSolver(tolerance=1e-6)))
+    cpu = list(run(state, settings, 2, ApgdSolver(tolerance=1e-4)))
     moved = np.abs(cpu[-1].state.position - state.position).max()
     assert moved > 0.01
     np.testing.assert_allclose(later[-1].state.position, cpu[-1].state.position, rtol=0, atol=1e-12 * moved)
@@ -181,11 +181,11 @@ def test_a_gpu_run_goes_on_after_a_step_solved_on_the_cpu():
                             walls=Walls(floor=True, cylinder_radius=0.65))
     ends = {}
     for kernel in ("cuda", "numba"):
-        capped = list(run(state, settings, 2, AutoSolver(max_iter=10, apgd={"kernel": kernel})))
-        after = next(run(capped[-1].state, settings, 1, AutoSolver(apgd={"kernel": kernel}), first_step=2,
-                         carry=capped[-1].carry))
-        backends = [result.diagnostics.solver_backend for result in capped + [after]]
-        assert backends == ["clarabel-fallback", "clarabel-fallback", "apgd"], backends
+        capped = next(run(state, settings, 1, AutoSolver(max_iter=10, apgd={"kernel": kernel})))
+        after = next(run(capped.state, settings, 1, AutoSolver(apgd={"kernel": kernel}), first_step=1,
+                         carry=capped.carry))
+        backends = [result.diagnostics.solver_backend for result in (capped, after)]
+        assert backends == ["clarabel-fallback", "apgd"], backends
         ends[kernel] = after.state.position
     moved = np.abs(ends["numba"] - state.position).max()
     np.testing.assert_allclose(ends["cuda"], ends["numba"], rtol=0, atol=1e-12 * moved)
