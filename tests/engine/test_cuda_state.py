@@ -26,6 +26,18 @@ def _moving_cloud(seed: int):
     return state
 
 
+def _nudged_stack():
+    """(state, settings): 12 spheres (diameter 0.5) stacked 2 x 2 x 3 in a cylinder of radius 0.65
+    on the floor (benchmarks/device_copies.py's stack), nudged sideways; the collapse's law, dt 0.02."""
+    from colsim.engine.state import ParticleState
+
+    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
+    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
+    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
+    return state, StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
+                               walls=Walls(floor=True, cylinder_radius=0.65))
+
+
 def _kept(array):
     from colsim.engine.cuda_operator import kept_device_copy
 
@@ -131,15 +143,10 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
 
     from numba import cuda
 
-    from colsim.engine.state import ParticleState
     from colsim.engine.stepper import run
     from colsim.solvers.apgd import ApgdSolver
 
-    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
-    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
-    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
-    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
-                            walls=Walls(floor=True, cylinder_radius=0.65))
+    state, settings = _nudged_stack()
     n = state.n
     steps = run(state, settings, 2, ApgdSolver(tolerance=1e-4, kernel="cuda"))
     next(steps)
@@ -170,15 +177,10 @@ def test_a_gpu_run_goes_on_after_a_step_solved_on_the_cpu():
     fallback): its increments have no device copy, so its state has none, and the next GPU step
     copies the particles' arrays from the host again. The same steps on the CPU (the same fallbacks)
     end on the same positions, to 1e-12 of the motion."""
-    from colsim.engine.state import ParticleState
     from colsim.engine.stepper import run
     from colsim.solvers.registry import AutoSolver
 
-    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
-    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
-    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
-    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
-                            walls=Walls(floor=True, cylinder_radius=0.65))
+    state, settings = _nudged_stack()
     ends = {}
     for kernel in ("cuda", "numba"):
         capped = next(run(state, settings, 1, AutoSolver(max_iter=10, apgd={"kernel": kernel})))

@@ -176,7 +176,7 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     radii and coefficients (from `law`, a ContactLaw).
 
     others: the other contacts' arrays by name (detect's walls and fixed spheres, made on the host);
-    their rows go to the device in two copies (the numbers, the bodies) and follow the pairs'. Every
+    their rows go to the device in one copy (:meth:`ContactRows.upload`) and follow the pairs'. Every
     contact's lever (the CPU's arithmetic) and pair key (:func:`colsim.engine.state.pair_key`) are made
     there. The pairs' largest overlap R_i + R_j - |x_j - x_i| (length; -inf: no pair) is
     :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
@@ -212,8 +212,8 @@ def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: 
 
     The rows move on the device: one thread a pair looks its key up among the given ones (sorted, a
     binary search), the kept pairs' places are their prefix sums, and one thread a contact copies its
-    row there. What goes to the device is the given pairs (their sorted keys, their rows in two
-    copies); what comes back is the kept pairs' count. Its pairs' largest overlap is not measured
+    row there. What goes to the device is the given pairs (their sorted keys, their rows in one
+    copy); what comes back is the kept pairs' count. Its pairs' largest overlap is not measured
     (None), as on the host."""
     wanted = np.sort(np.asarray(given["i"], dtype=np.int64) * n + np.asarray(given["j"], dtype=np.int64))
     pairs = found.pair_count

@@ -133,17 +133,15 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     base = base_margin(state, settings)
     margin = base if margin is None else margin
     started = time.perf_counter()
-    if upcoming is not None and upcoming.state is state:
-        predicted = upcoming.predicted
-    else:
-        predicted = predicted_displacement(state, settings, solver.device)
+    ahead = upcoming if upcoming is not None and upcoming.state is state else None   # made for this state
+    predicted = predicted_displacement(state, settings, solver.device) if ahead is None else ahead.predicted
     cylinder_margin = np.zeros(state.n)
     renormal, missed = None, 0
     start_from = warm_start
     for attempt in range(settings.max_redo + 1):
         t0 = time.perf_counter()
-        if attempt == 0 and upcoming is not None and upcoming.state is state and upcoming.margin == margin:
-            found = upcoming.contacts
+        if attempt == 0 and ahead is not None and ahead.margin == margin:
+            found = ahead.contacts
         else:
             found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
                                              settings.detection_slack, cylinder_margin, renormal,

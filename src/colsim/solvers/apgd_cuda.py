@@ -573,10 +573,10 @@ class CudaIteration:
         """Does the first iterate hold a force (a warm start)? Asked before iterating."""
         return bool(np.any(self.host_x())) if self.warm is None else self.warm
 
-    def increments(self, program, forces=None) -> np.ndarray:
+    def increments(self, program) -> np.ndarray:
         """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate, made on the device from B' lam = B' S z,
         the device's hx, so only u comes back, keeping the device's as its copy for the step's update
-        (:func:`colsim.engine.cuda_state.advance_on_device`); `forces`, the host's lam, is not needed."""
+        (:func:`colsim.engine.cuda_state.advance_on_device`)."""
         return increments_on_device(program.fbar, self.hx, program.mass)
 
     def forces(self) -> np.ndarray:
