@@ -101,8 +101,12 @@ def contact_arrays_on_device(contacts, names, dtype=np.float64) -> list:
     kept = [kept_device_copy(array) for array in host]
     if all(copy is not None for copy in kept):
         return kept
-    stacked = cuda.to_device(np.stack(host).astype(dtype, copy=False))
-    copies = [stacked[k] for k in range(len(host))]
+    rows = np.stack(host).astype(dtype, copy=False)
+    m = rows.shape[1]
+    if not m:   # a card cannot index an array of no bytes (it has no pointer): empty views of one row
+        rows = np.zeros((len(host), 1) + rows.shape[2:], dtype=dtype)
+    stacked = cuda.to_device(rows)
+    copies = [stacked[k][:m] for k in range(len(host))]
     for array, copy in zip(host, copies):
         keep_device_copy(array, copy)
     return copies
