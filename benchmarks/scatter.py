@@ -25,6 +25,7 @@ import json
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -33,6 +34,10 @@ import numpy as np
 
 import record
 
+# HDF5, under netCDF4, is not safe to call from two threads at once: `--jobs 14` segfaulted in
+# libhdf5 on the 16-core GPU host (2026-11-28). The runs themselves are child processes; only this
+# process's reads and writes of the files are serialised.
+NETCDF_LOCK = threading.Lock()
 
 def draws_of(text: str) -> list[int]:
     """'1-10' or '3' or '1,4,7' -> the draws' seeds."""
@@ -47,13 +52,15 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     """A copy of `column` with every position moved by epsilon * (mean diameter) * uniform(-1, 1)."""
     import xarray as xr
 
-    dataset = xr.load_dataset(column)
+    with NETCDF_LOCK:
+        dataset = xr.load_dataset(column)
     diameter = 2.0 * float(dataset["radius"].mean())
     rng = np.random.default_rng(draw)
     dataset["position"] = dataset["position"] + epsilon * diameter * rng.uniform(-1.0, 1.0, dataset["position"].shape)
     dataset.attrs["scatter_perturbation"] = f"positions + {epsilon:g} d uniform(-1, 1), default_rng({draw})"
     path = folder / f"draw{draw}.nc"
-    dataset.to_netcdf(path)
+    with NETCDF_LOCK:
+        dataset.to_netcdf(path)
     return path
 
 
@@ -75,10 +82,11 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                         "--output", str(folder / "analysis.nc"), "-q"], check=True, capture_output=True)
         import xarray as xr
 
-        with xr.open_dataset(folder / "collapse.nc") as trajectory:
-            steps = int(trajectory.attrs["n_steps"])
-        with xr.open_dataset(folder / "analysis.nc") as analysis:
-            h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
+        with NETCDF_LOCK:
+            with xr.open_dataset(folder / "collapse.nc") as trajectory:
+                steps = int(trajectory.attrs["n_steps"])
+            with xr.open_dataset(folder / "analysis.nc") as analysis:
+                h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
     return {"column": str(column), "device": device, "kind": run["kind"], "value": run["value"],
             "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
