@@ -273,7 +273,8 @@ PHASES = ("detection", "assembly", "matching", "setup", "solve", "check")
 def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
-    and bookkeeping, the collapse's frames and checkpoints between steps), iterations a step,
+    and bookkeeping, the collapse's frames and checkpoints between steps; the part of it in redone
+    steps, and their count, apart), iterations a step,
     the end positions; profile: a file for cProfile's statistics of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
@@ -291,10 +292,12 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     wall = time.perf_counter() - start
     d = run.diagnostics
     shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall for name in PHASES}
+    redone = [x for x in d if x.redone]   # their rest: mostly the attempts they threw away
+    redone_rest = sum(x.wall_time - sum(getattr(x, f"{name}_time") for name in PHASES) for x in redone) / wall
     last_step, last = run.frames[-1]
     assert last_step == len(d) == steps, (last_step, len(d), steps)   # the end state, not the column's
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
-            "s_by_step": [x.wall_time for x in d],
+            "redone_steps": len(redone), "redone_rest_share": redone_rest, "s_by_step": [x.wall_time for x in d],
             "iterations": float(np.mean([x.solver_iterations for x in d])), "end": last.position,
             "diameter": 2 * float(state.radius.mean())}
 
@@ -440,7 +443,8 @@ def collapse_table(args, device: str) -> None:
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
                           f"GPU s a step ({device})", "APGD share (GPU)", "GPU vs CPU", "iterations a step (CPU; GPU)",
                           "end positions apart / mean diameter",
-                          "GPU's " + ", ".join(name for name in PHASES if name != "solve") + ", rest (shares)"],
+                          "GPU's " + ", ".join(name for name in PHASES if name != "solve")
+                          + ", rest (shares; the rest's in redone steps)"],
                          title=f"the first {args.steps} collapse steps")
     if args.profile:
         Path(args.profile).mkdir(parents=True, exist_ok=True)
@@ -464,13 +468,15 @@ def collapse_table(args, device: str) -> None:
         steps.row(column, gpu["spheres"], _shown(cpu["s_a_step"], ".3f"), _shown(cpu["solve_share"], ".0%"),
                   f"{gpu['s_a_step']:.3f}", f"{gpu['solve_share']:.0%}", _shown(cpu["s_a_step"] / gpu["s_a_step"], ".1f"),
                   f"{_shown(cpu['iterations'], '.0f')}; {gpu['iterations']:.0f}", _shown(apart, ".1e"),
-                  ", ".join(f"{x:.0%}" for x in [shares[name] for name in PHASES if name != "solve"] + [rest]),
+                  ", ".join(f"{x:.0%}" for x in [shares[name] for name in PHASES if name != "solve"] + [rest])
+                  + f" ({gpu['redone_rest_share']:.0%} in {gpu['redone_steps']} redone)",
                   data={"column": column, "spheres": gpu["spheres"], "steps": args.steps, "cpu_steps": cpu_steps,
                         "device": device, "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
                         "gpu_s_by_step": gpu["s_by_step"],
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
                         "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
-                        "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares})
+                        "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares,
+                        "gpu_redone_steps": gpu["redone_steps"], "gpu_redone_rest_share": gpu["redone_rest_share"]})
 
 
 def _shown(value: float, spec: str) -> str:
