@@ -41,25 +41,32 @@ fi
 # The same answer (issue 46): `python -m benchmarks scatter` on SCATTER_COLUMN (default r0_3_a2_seed1 of
 # .gpu/rest/) with its settings, on both devices at once: the GPU's runs (the settings' own, each of
 # SCATTER_TOLERANCES, default "9e-6 1.1e-5", and each draw of SCATTER_GPU_DRAWS, default "1-2": positions
-# moved by 1e-12 d) one after another, and beside them the CPU's (the settings' own, the same
-# tolerances and SCATTER_CPU_DRAWS, default "1-10") on the host's other cores, one thread each. Both
-# scatters' tables (h_inf/r0 and run-out: range, mean, sd), then both together with each GPU run placed in
-# the CPU's scatter, come back as scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there).
+# moved by 1e-12 d), SCATTER_GPU_JOBS (default 1) at once on the one card, and beside them the CPU's (the
+# settings' own, the same tolerances and SCATTER_CPU_DRAWS, default "1-10"; "none": no CPU runs, e.g.
+# when SCATTER_ALSO names a record of them made elsewhere) on the host's other cores, one thread each.
+# Both scatters' tables (h_inf/r0 and run-out: range, mean, sd), then both together with each GPU run
+# placed in the CPU's scatter (this call's CPU runs and SCATTER_ALSO's records), come back as
+# scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there).
 if [[ "$stages" == *" scatter "* ]]; then
     column=.gpu/rest/${SCATTER_COLUMN:-r0_3_a2_seed1}
     common=("$column.nc" --settings "$column.settings.yaml" --tolerances ${SCATTER_TOLERANCES:-9e-6 1.1e-5})
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cpu \
-        --draws "${SCATTER_CPU_DRAWS:-1-10}" --jobs "$(( $(nproc) - 2 ))" --record results/scatter-cpu.jsonl \
-        > /tmp/scatter-cpu.log 2>&1 &
-    cpu_scatter=$!
+    cpu_scatter=
+    if [ "${SCATTER_CPU_DRAWS:-1-10}" != none ]; then
+        python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cpu \
+            --draws "${SCATTER_CPU_DRAWS:-1-10}" --jobs "$(( $(nproc) - 2 * ${SCATTER_GPU_JOBS:-1} ))" \
+            --record results/scatter-cpu.jsonl > /tmp/scatter-cpu.log 2>&1 &
+        cpu_scatter=$!
+    fi
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
-        --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --record results/scatter-gpu.jsonl \
-        || echo "scatter on the GPU: failed (exit $?)"
-    wait "$cpu_scatter" || echo "scatter on the CPU: failed (exit $?)"
-    cat /tmp/scatter-cpu.log
+        --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --jobs "${SCATTER_GPU_JOBS:-1}" \
+        --record results/scatter-gpu.jsonl || echo "scatter on the GPU: failed (exit $?)"
+    if [ -n "$cpu_scatter" ]; then
+        wait "$cpu_scatter" || echo "scatter on the CPU: failed (exit $?)"
+        cat /tmp/scatter-cpu.log
+    fi
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
-        --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl --also results/scatter-cpu.jsonl \
-        || echo "scatter: the tables of both failed (exit $?)"
+        --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl \
+        --also results/scatter-cpu.jsonl ${SCATTER_ALSO:-} || echo "scatter: the tables of both failed (exit $?)"
 fi
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
