@@ -32,6 +32,30 @@ from colsim.stages.settings import PackSettings
 from solver_cases import COLLAPSE, collapse_program, small_pile
 from helpers import COLLAPSE_LAW, DT, G, PACKING_R0, max_speed
 
+
+def _index_like_a_card() -> None:
+    """Make the simulator's device arrays refuse what a card's do: an allocation of no bytes has no
+    pointer on a card, and numba-cuda cannot index it ("non-empty slice into empty slice"; seen on an
+    H200, 2026-11-28, where the simulator had let it pass). A zero-length view of a larger allocation
+    has a pointer and stays allowed."""
+    from numba.cuda.simulator.cudadrv import devicearray
+
+    plain = devicearray.FakeCUDAArray.__getitem__
+
+    def getitem(self, index):
+        allocation = self._ary
+        while isinstance(allocation.base, np.ndarray):
+            allocation = allocation.base
+        if allocation.nbytes == 0:
+            raise RuntimeError("non-empty slice into empty slice: a card cannot index a device array of no bytes")
+        return plain(self, index)
+
+    devicearray.FakeCUDAArray.__getitem__ = getitem
+
+
+if os.environ["NUMBA_ENABLE_CUDASIM"] == "1":
+    _index_like_a_card()
+
 CYLINDER_RADIUS = 1.5
 N_SPHERES = 200
 POUR_STEPS = 150
