@@ -23,7 +23,9 @@ default study's settings: mu_r = 0.12, dt/sqrt(h0/g) = 0.004, `auto`, warm-start
 packing's forces) with APGD on the CPU's threads and on the GPU (`--device cuda`): seconds a step,
 APGD's share of them, iterations a step, and how far the two end positions are apart over a mean
 diameter (one step of each first, to compile the kernels), and where the GPU's step spends the rest
-(detection, assembly, the warm start's matching, the solver's set-up, the overlap check); with --profile
+(detection, assembly, the warm start's matching, the solver's set-up, the overlap check), and the
+share of the GPU's steps in which a kernel ran (NVML's utilisation, sampled: the issue's "kernels at
+least 80 % of a step"; :func:`kernels_busy`); with --profile
 FOLDER, cProfile's statistics of each column's steps on each device.
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
@@ -49,6 +51,7 @@ import contextlib
 import cProfile
 import math
 import tempfile
+import threading
 import time
 
 from pathlib import Path
@@ -270,12 +273,47 @@ def _timed_call(call, *args) -> float:
 PHASES = ("detection", "assembly", "matching", "setup", "solve", "check")
 
 
+@contextlib.contextmanager
+def kernels_busy(interval: float = 0.05):
+    """Yields a dict that holds, after the block, "busy": the share of the block's wall time in which
+    the GPU ran a kernel, the mean of NVML's utilisation read every `interval` seconds by a thread
+    (nvmlDeviceGetUtilizationRates(...).gpu: the percent of its last sample period, 1/6 to 1 s by
+    card, in which one or more kernels ran), and "samples", how many; NaN and 0 where NVML or a GPU
+    is not at hand (numba's simulator, no nvidia-ml-py). Another process's kernels count too."""
+    found = {"busy": math.nan, "samples": 0}
+    try:
+        import pynvml
+
+        pynvml.nvmlInit()
+        handle = pynvml.nvmlDeviceGetHandleByIndex(0)
+    except Exception:   # no nvidia-ml-py, no driver or no GPU: nothing to read
+        yield found
+        return
+    readings, stop = [], threading.Event()
+
+    def sample():
+        while not stop.wait(interval):
+            readings.append(pynvml.nvmlDeviceGetUtilizationRates(handle).gpu)
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
+    try:
+        yield found
+    finally:
+        stop.set()
+        sampler.join()
+        pynvml.nvmlShutdown()
+        if readings:
+            found.update(busy=float(np.mean(readings)) / 100.0, samples=len(readings))
+
+
 def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
     and bookkeeping, the collapse's frames and checkpoints between steps; the part of it in redone
     steps, and their count, apart), iterations a step,
-    the end positions; profile: a file for cProfile's statistics of the steps (None: none)."""
+    the end positions, and on a GPU the share of the wall time its kernels ran (:func:`kernels_busy`);
+    profile: a file for cProfile's statistics of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
     from colsim.stages.collapse import collapse
@@ -285,8 +323,9 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     settings = CollapseSettings(mu_r=0.12, checkpoint_every=10**9, frame_every=steps)   # the last step a frame
     solver = make_solver("auto", scaled_time_step=settings.scaled_step,
                          apgd={"kernel": "cuda"} if device == "cuda" else {})
+    busy = contextlib.nullcontext({"busy": math.nan, "samples": 0}) if device == "cpu" else kernels_busy()
     start = time.perf_counter()
-    with _profiled(profile):
+    with _profiled(profile), busy as kernels:
         run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
                        stop_after=steps)
     wall = time.perf_counter() - start
@@ -297,7 +336,8 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     last_step, last = run.frames[-1]
     assert last_step == len(d) == steps, (last_step, len(d), steps)   # the end state, not the column's
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
-            "redone_steps": len(redone), "redone_rest_share": redone_rest, "s_by_step": [x.wall_time for x in d],
+            "redone_steps": len(redone), "redone_rest_share": redone_rest, "kernels_busy": kernels["busy"],
+            "busy_samples": kernels["samples"], "s_by_step": [x.wall_time for x in d],
             "iterations": float(np.mean([x.solver_iterations for x in d])), "end": last.position,
             "diameter": 2 * float(state.radius.mean())}
 
@@ -441,7 +481,8 @@ def main(argv=None):
 def collapse_table(args, device: str) -> None:
     """The table of the first `args.steps` collapse steps of each column on both devices."""
     steps = record.table(["column", "spheres", f"CPU s a step ({threads()} threads)", "APGD share (CPU)",
-                          f"GPU s a step ({device})", "APGD share (GPU)", "GPU vs CPU", "iterations a step (CPU; GPU)",
+                          f"GPU s a step ({device})", "APGD share (GPU)", "GPU busy (NVML)", "GPU vs CPU",
+                          "iterations a step (CPU; GPU)",
                           "end positions apart / mean diameter",
                           "GPU's " + ", ".join(name for name in PHASES if name != "solve")
                           + ", rest (shares; the rest's in redone steps)"],
@@ -466,7 +507,8 @@ def collapse_table(args, device: str) -> None:
         else:
             apart = float(np.abs(cpu["end"] - gpu["end"]).max() / cpu["diameter"]) if cpu_steps == args.steps else math.nan
         steps.row(column, gpu["spheres"], _shown(cpu["s_a_step"], ".3f"), _shown(cpu["solve_share"], ".0%"),
-                  f"{gpu['s_a_step']:.3f}", f"{gpu['solve_share']:.0%}", _shown(cpu["s_a_step"] / gpu["s_a_step"], ".1f"),
+                  f"{gpu['s_a_step']:.3f}", f"{gpu['solve_share']:.0%}", _shown(gpu["kernels_busy"], ".0%"),
+                  _shown(cpu["s_a_step"] / gpu["s_a_step"], ".1f"),
                   f"{_shown(cpu['iterations'], '.0f')}; {gpu['iterations']:.0f}", _shown(apart, ".1e"),
                   ", ".join(f"{x:.0%}" for x in [shares[name] for name in PHASES if name != "solve"] + [rest])
                   + f" ({gpu['redone_rest_share']:.0%} in {gpu['redone_steps']} redone)",
@@ -476,7 +518,8 @@ def collapse_table(args, device: str) -> None:
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
                         "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
                         "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares,
-                        "gpu_redone_steps": gpu["redone_steps"], "gpu_redone_rest_share": gpu["redone_rest_share"]})
+                        "gpu_redone_steps": gpu["redone_steps"], "gpu_redone_rest_share": gpu["redone_rest_share"],
+                        "gpu_kernels_busy": gpu["kernels_busy"], "gpu_busy_samples": gpu["busy_samples"]})
 
 
 def _shown(value: float, spec: str) -> str:

@@ -29,6 +29,23 @@ if [ -n "${GPU_TESTS:-}" ]; then
 fi
 
 stages=" ${STAGES:-bench rest pour} "
+
+# busy COMMAND...: runs it, then prints the share of its wall time in which the GPU ran a kernel
+# (issue 46's "kernels at least 80 % of a step"): the mean of nvidia-smi's utilisation, read every
+# 200 ms in the background (each reading: the share of its last sample period with a kernel running),
+# its start, imports and kernels' compilation included. Returns the command's exit status.
+busy() {
+    local samples status=0 sampler
+    samples=$(mktemp)
+    nvidia-smi --query-gpu=utilization.gpu --format=csv,noheader,nounits -lms 200 > "$samples" 2>/dev/null &
+    sampler=$!
+    "$@" || status=$?
+    kill "$sampler" 2>/dev/null || true
+    wait "$sampler" 2>/dev/null || true
+    awk '$1 ~ /^[0-9]+$/ {s += $1; n++} END {if (n) printf "GPU busy: %.0f %% (nvidia-smi, %d readings, the start included)\n", s / n, n}' "$samples"
+    rm -f "$samples"
+    return "$status"
+}
 if [[ "$stages" == *" bench "* ]]; then
     if [ $# -eq 0 ]; then
         columns=(.gpu/*.nc)
@@ -87,14 +104,15 @@ for column in .gpu/rest/*.nc; do
         [ "$tolerance" = settings ] || { name="$base-tol$tolerance"; flags=(--solver-tolerance "$tolerance"); }
         out=/tmp/rest-out; mkdir -p "$out" results/gpu-rest
         start=$(date +%s)
-        timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$base.settings.yaml" \
+        busy timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/rest/$base.settings.yaml" \
             --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 "${flags[@]}" \
             --output "results/gpu-rest/$name.nc" > "$out/$name.log" 2>&1 \
             && python3 -m colsim.cli analyse --input "results/gpu-rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
             && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "results/gpu-rest/$name.nc" 2>&1 \
                 | grep "^|" >> "$out/$name.log" \
             || echo "$name: stopped or failed (exit $?); see rest.tgz"
-        echo "$name: $(( $(date +%s) - start )) s of wall"; tail -n 3 "$out/$name.log"
+        echo "$name: $(( $(date +%s) - start )) s of wall"; grep "^GPU busy" "$out/$name.log" || true
+        tail -n 3 "$out/$name.log"
         tar czf "${OUT:-results/benchmarks}/rest.tgz" -C /tmp rest-out   # each run's log and analysis, one file
     done
 done
@@ -112,22 +130,23 @@ for settings in .gpu/pour/*.pack.yaml; do
     mkdir -p "$out" "$work"
     start=$(date +%s)
     [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
-    timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
+    busy timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
-    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
+    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
+    grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
         --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
-    timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/pour/$name.collapse.yaml" \
+    busy timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/pour/$name.collapse.yaml" \
         --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
             >> "$out/$name.collapse.log" 2>&1 \
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
-    tail -n 3 "$out/$name.collapse.log"
+    grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 3 "$out/$name.collapse.log"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
 
