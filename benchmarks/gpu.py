@@ -311,9 +311,9 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
     and bookkeeping, the collapse's frames and checkpoints between steps; the part of it in redone
-    steps, and their count, apart), iterations a step,
-    the end positions, and on a GPU the share of the wall time its kernels ran (:func:`kernels_busy`);
-    profile: a file for cProfile's statistics of the steps (None: none)."""
+    steps, and their count, apart), iterations a step, the end positions, and on a GPU the share of
+    the wall time its kernels ran (:func:`kernels_busy`); profile: a file for cProfile's statistics
+    of the steps (None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
     from colsim.stages.collapse import collapse

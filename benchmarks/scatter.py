@@ -39,6 +39,7 @@ import record
 # process's reads and writes of the files are serialised.
 NETCDF_LOCK = threading.Lock()
 
+
 def draws_of(text: str) -> list[int]:
     """'1-10' or '3' or '1,4,7' -> the draws' seeds."""
     out = []
