@@ -16,7 +16,7 @@ one JSON line, and runs already there are skipped, so a killed scatter resumes. 
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
 records (`--also` adds another's) hold the CPU's runs and another device's, where each of the
-other's deposits lies in the CPU's scatter.
+other's deposits lies in the CPU's scatter and whether the other's mean is the CPU's (:func:`compared`).
 """
 from __future__ import annotations
 
@@ -110,6 +110,17 @@ def placed(value: float, values: np.ndarray) -> str:
     return f"{value:.3f}: {(value - values.mean()) / sd:+.1f} sd ({inside})"
 
 
+def compared(cpu: np.ndarray, other: np.ndarray) -> dict:
+    """Whether another device's deposits (one quantity, a run each) share the CPU's mean: the
+    difference of the means, Welch's t and its two-sided p, and the Mann-Whitney U test's two-sided p
+    (which asks no normal law of a run-out's heavy tail)."""
+    from scipy import stats
+
+    welch = stats.ttest_ind(other, cpu, equal_var=False)
+    return {"difference": float(other.mean() - cpu.mean()), "t": float(welch.statistic),
+            "p_welch": float(welch.pvalue), "p_mann_whitney": float(stats.mannwhitneyu(other, cpu).pvalue)}
+
+
 def report(records: list[dict], compare: list[float] | None) -> None:
     table = record.table(["device", "run", "h_inf/r0", "run-out/r0", "steps", "wall s"], title="runs")
     for r in records:
@@ -139,6 +150,19 @@ def report(records: list[dict], compare: list[float] | None) -> None:
         for r in others:
             table.row(r["device"], label(r), *(placed(r[name], np.array([c[name] for c in cpu]))
                                                for name in ("h_inf_over_r0", "runout_over_r0")))
+        print()
+        table = record.table(["device", "quantity", "runs (CPU; device)", "mean difference", "Welch's t (p)",
+                              "Mann-Whitney p"], title="the same mean as the CPU's?")
+        for device in sorted({r["device"] for r in others}):
+            for name in ("h_inf_over_r0", "runout_over_r0"):
+                mine = np.array([r[name] for r in others if r["device"] == device])
+                theirs = np.array([c[name] for c in cpu])
+                if len(mine) < 2 or len(theirs) < 2:
+                    continue
+                c = compared(theirs, mine)
+                table.row(device, name, f"{len(theirs)}; {len(mine)}", f"{c['difference']:+.3f}",
+                          f"{c['t']:.2f} ({c['p_welch']:.3f})", f"{c['p_mann_whitney']:.3f}", data={"device": device,
+                          "quantity": name, **c})
 
 
 def main(argv=None):

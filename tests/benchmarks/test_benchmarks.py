@@ -238,3 +238,19 @@ def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp
     change = np.abs(after.position - before.position)
     assert 0 < change.max() <= 1e-3 * 0.5 and "default_rng(3)" in dataset.attrs["scatter_perturbation"]
     assert scatter.draws_of("1-3,7") == [1, 2, 3, 7]
+
+
+def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
+    """scatter.compared on draws of one law and of that law shifted by three standard deviations:
+    the difference of the means is the shift to within its standard error, and the p of both tests
+    is large for the same law and small for the shifted one (fixed draws, so the same every run)."""
+    import scatter
+
+    rng = np.random.default_rng(46)
+    cpu, same = rng.normal(1.7, 0.07, 45), rng.normal(1.7, 0.07, 9)
+    shifted = same + 0.21
+    alike, apart = scatter.compared(cpu, same), scatter.compared(cpu, shifted)
+    assert abs(apart["difference"] - alike["difference"] - 0.21) < 1e-12
+    assert abs(alike["difference"]) < 3 * 0.07 * np.sqrt(1 / 45 + 1 / 9)
+    assert alike["p_welch"] > 0.05 and alike["p_mann_whitney"] > 0.05 and alike["t"] * alike["difference"] >= 0
+    assert apart["p_welch"] < 1e-3 and apart["p_mann_whitney"] < 1e-3 and apart["t"] > 0
