@@ -21,8 +21,9 @@ rounded once. A GPU fuses a product and a sum into one rounding where it can, so
 a sum reads is made by a kernel of its own (the weights m g, the motion v dt), or is exact (x + u/2).
 
 A host array kept so must not change in place (its device copy would not follow): :func:`frozen`
-makes each read-only, so a change fails loudly; so are the radii, whose masses are kept. Without a GPU the kernels run on numba's simulator
-(NUMBA_ENABLE_CUDASIM=1), where tests/engine/test_cuda_state.py compares each with the host's.
+makes each read-only, so a change fails loudly; so are the radii, whose masses are kept. Without a
+GPU the kernels run on numba's simulator (NUMBA_ENABLE_CUDASIM=1), where
+tests/engine/test_cuda_state.py compares each with the host's.
 """
 from __future__ import annotations
 
