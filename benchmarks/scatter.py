@@ -11,7 +11,9 @@ for each of `--draws` with every starting position moved by `--epsilon` (1e-12) 
 a uniform draw in (-1, 1) (numpy's default_rng(draw)), a change of the size of rounding. The
 collapse is chaotic, so these end on different deposits; their spread is what "the same answer"
 means for two devices, whose arithmetic rounds differently. `--device` and `--threads` pass to
-`colsim collapse`; `--jobs` runs that many at once. Each finished run is appended to `--record` as
+`colsim collapse`; `--fused` runs it with the CPU's kernels compiled to fuse multiply-adds as a
+GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused"; `--jobs` runs that
+many at once. Each finished run is appended to `--record` as
 one JSON line, and runs already there are skipped, so a killed scatter resumes. The tables: each
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
@@ -65,13 +67,21 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float) -> dict:
-    """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...})."""
+#: the device a `--fused` run is recorded as
+FUSED = "cpu-fused"
+
+
+def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
+            fused: bool = False) -> dict:
+    """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
+    with the CPU's kernels fusing multiply-adds (device "cpu" only)."""
     with tempfile.TemporaryDirectory(prefix="scatter-") as scratch:
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
         flags = ["--solver-tolerance", f"{run['value']:g}"] if run["kind"] == "tolerance" else []
-        command = [sys.executable, "-m", "colsim.cli", "collapse", "--settings", str(settings), "--input",
+        colsim = [sys.executable, str(Path(__file__).with_name("fused.py"))] if fused else [sys.executable, "-m",
+                                                                                          "colsim.cli"]
+        command = [*colsim, "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
                    "--threads", str(threads), "-q", *flags]
         started = time.perf_counter()
@@ -88,7 +98,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": device, "kind": run["kind"], "value": run["value"],
+    return {"column": str(column), "device": FUSED if fused else device, "kind": run["kind"], "value": run["value"],
             "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -174,6 +184,8 @@ def main(argv=None):
     parser.add_argument("--epsilon", type=float, default=1e-12, help="the perturbation, mean diameters")
     parser.add_argument("--no-own", action="store_true", help="skip the run with the settings' own tolerance")
     parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
+    parser.add_argument("--fused", action="store_true",
+                        help="the CPU's kernels fuse multiply-adds, as a GPU's compiler does (device cpu-fused)")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once")
     parser.add_argument("--record", type=Path, default=Path("scatter.jsonl"))
@@ -183,6 +195,9 @@ def main(argv=None):
     parser.add_argument("--compare", type=float, nargs=2, metavar=("H", "RUNOUT"),
                         help="another device's h_inf/r0 and run-out, placed in the scatter")
     args = parser.parse_args(argv)
+    if args.fused and args.device != "cpu":
+        parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
+    device = FUSED if args.fused else args.device
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]
@@ -190,11 +205,11 @@ def main(argv=None):
     plan = ([] if args.no_own else [{"kind": "settings", "value": None}])
     plan += [{"kind": "tolerance", "value": t} for t in args.tolerances]
     plan += [{"kind": "draw", "value": d} for d in args.draws]
-    plan = [run for run in plan if (args.device, run["kind"], run["value"]) not in done]
+    plan = [run for run in plan if (device, run["kind"], run["value"]) not in done]
     args.record.parent.mkdir(parents=True, exist_ok=True)
 
     def one(run):
-        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon)
+        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon, args.fused)
 
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         for result in pool.map(one, plan):

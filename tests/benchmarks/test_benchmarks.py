@@ -254,3 +254,45 @@ def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
     assert abs(alike["difference"]) < 3 * 0.07 * np.sqrt(1 / 45 + 1 / 9)
     assert alike["p_welch"] > 0.05 and alike["p_mann_whitney"] > 0.05 and alike["t"] * alike["difference"] >= 0
     assert apart["p_welch"] < 1e-3 and apart["p_mann_whitney"] < 1e-3 and apart["t"] > 0
+
+
+def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
+    """benchmarks/fused.py's njit adds LLVM's contract flag (and only it) to a kernel's own options."""
+    import numba
+
+    import fused
+
+    def multiply_add(a, b, c):
+        return a * b + c
+
+    plain = fused.contracting(numba.njit)(multiply_add)
+    asked = fused.contracting(numba.njit)(parallel=True, fastmath={"nnan"})(multiply_add)
+    every = fused.contracting(numba.njit)(fastmath=True)(multiply_add)
+    assert plain.targetoptions["fastmath"] == {"contract"}
+    assert asked.targetoptions["fastmath"] == {"nnan", "contract"} and asked.targetoptions["parallel"] is True
+    assert every.targetoptions["fastmath"] is True
+    # a * b = 1 - 2**-60 exactly: fused, a * b + c is -2**-60; rounded first (no FMA unit: contract
+    # allows a fusion, it does not force one), 0
+    a, b, c = 1.0 + 2.0 ** -30, 1.0 - 2.0 ** -30, -1.0
+    assert plain(a, b, c) in (-(2.0 ** -60), 0.0) and multiply_add(a, b, c) == 0.0
+
+
+def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
+    """`benchmarks scatter --fused`: the collapse run by benchmarks/fused.py, recorded as "cpu-fused",
+    on the same deposit as the plain runs (the stack at rest, within APGD's overlap tolerance); with a
+    GPU device it is an error, exit 2."""
+    from helpers import tiny_state_files
+
+    tiny_state_files(tmp_path)
+    settings = tmp_path / "settings.yaml"
+    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
+    record_file = tmp_path / "scatter.jsonl"
+    arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
+                 str(settings), "--no-own", "--tolerances", "1e-6", "--record", str(record_file)]
+    done = benchmarks(*arguments, "--fused")
+    assert done.returncode == 0, done.stderr
+    (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
+    assert run["device"] == "cpu-fused" and run["steps"] == 5
+    assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
+    wrong = benchmarks(*arguments, "--fused", "--device", "cuda")
+    assert wrong.returncode == 2 and "--fused" in wrong.stderr
