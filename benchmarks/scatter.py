@@ -12,8 +12,9 @@ a uniform draw in (-1, 1) (numpy's default_rng(draw)), a change of the size of r
 collapse is chaotic, so these end on different deposits; their spread is what "the same answer"
 means for two devices, whose arithmetic rounds differently. `--device` and `--threads` pass to
 `colsim collapse`; `--fused` runs it with the CPU's kernels compiled to fuse multiply-adds as a
-GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused"; `--jobs` runs that
-many at once. Each finished run is appended to `--record` as
+GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused" (`--fused
+colsim.solvers`: only the kernels of the modules named, "cpu-fused:colsim.solvers"); `--jobs` runs
+that many at once. Each finished run is appended to `--record` as
 one JSON line, and runs already there are skipped, so a killed scatter resumes. The tables: each
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
@@ -24,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -67,25 +69,29 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-#: the device a `--fused` run is recorded as
-FUSED = "cpu-fused"
+def fused_device(modules: list[str]) -> str:
+    """The device a `--fused` run is recorded as: "cpu-fused", or "cpu-fused:" and the modules."""
+    return ":".join(["cpu-fused", ",".join(modules)]) if modules else "cpu-fused"
 
 
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
-            fused: bool = False) -> dict:
+            fused: list[str] | None = None) -> dict:
     """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
-    with the CPU's kernels fusing multiply-adds (device "cpu" only)."""
+    with the CPU's kernels fusing multiply-adds, those of the modules listed or (empty) all (device
+    "cpu" only)."""
     with tempfile.TemporaryDirectory(prefix="scatter-") as scratch:
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
         flags = ["--solver-tolerance", f"{run['value']:g}"] if run["kind"] == "tolerance" else []
-        colsim = [sys.executable, str(Path(__file__).with_name("fused.py"))] if fused else [sys.executable, "-m",
-                                                                                          "colsim.cli"]
+        fusing = fused is not None
+        colsim = [sys.executable, str(Path(__file__).with_name("fused.py"))] if fusing else [sys.executable, "-m",
+                                                                                           "colsim.cli"]
         command = [*colsim, "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
                    "--threads", str(threads), "-q", *flags]
         started = time.perf_counter()
-        done = subprocess.run(command, capture_output=True, text=True)
+        environment = {**os.environ, "COLSIM_FUSED_MODULES": ",".join(fused)} if fusing else None
+        done = subprocess.run(command, capture_output=True, text=True, env=environment)
         wall = time.perf_counter() - started
         if done.returncode:
             raise RuntimeError(f"{run}: colsim collapse failed:\n{done.stderr[-2000:]}")
@@ -98,7 +104,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": FUSED if fused else device, "kind": run["kind"], "value": run["value"],
+    return {"column": str(column), "device": fused_device(fused) if fusing else device, "kind": run["kind"], "value": run["value"],
             "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -184,8 +190,9 @@ def main(argv=None):
     parser.add_argument("--epsilon", type=float, default=1e-12, help="the perturbation, mean diameters")
     parser.add_argument("--no-own", action="store_true", help="skip the run with the settings' own tolerance")
     parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
-    parser.add_argument("--fused", action="store_true",
-                        help="the CPU's kernels fuse multiply-adds, as a GPU's compiler does (device cpu-fused)")
+    parser.add_argument("--fused", nargs="*", metavar="MODULE", default=None,
+                        help="the CPU's kernels fuse multiply-adds, as a GPU's compiler does (device cpu-fused); "
+                             "with module prefixes, only theirs")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once")
     parser.add_argument("--record", type=Path, default=Path("scatter.jsonl"))
@@ -195,9 +202,9 @@ def main(argv=None):
     parser.add_argument("--compare", type=float, nargs=2, metavar=("H", "RUNOUT"),
                         help="another device's h_inf/r0 and run-out, placed in the scatter")
     args = parser.parse_args(argv)
-    if args.fused and args.device != "cpu":
+    if args.fused is not None and args.device != "cpu":
         parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
-    device = FUSED if args.fused else args.device
+    device = fused_device(args.fused) if args.fused is not None else args.device
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]

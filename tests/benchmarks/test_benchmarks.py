@@ -257,7 +257,8 @@ def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
 
 
 def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
-    """benchmarks/fused.py's njit adds LLVM's contract flag (and only it) to a kernel's own options."""
+    """benchmarks/fused.py's njit adds LLVM's contract flag (and only it) to a kernel's own options,
+    and with module prefixes only to the kernels defined in those modules."""
     import numba
 
     import fused
@@ -271,6 +272,9 @@ def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
     assert plain.targetoptions["fastmath"] == {"contract"}
     assert asked.targetoptions["fastmath"] == {"nnan", "contract"} and asked.targetoptions["parallel"] is True
     assert every.targetoptions["fastmath"] is True
+    elsewhere = fused.contracting(numba.njit, ("colsim.solvers",))(cache=False)(multiply_add)
+    here = fused.contracting(numba.njit, ("colsim.solvers", __name__))(multiply_add)
+    assert "fastmath" not in elsewhere.targetoptions and here.targetoptions["fastmath"] == {"contract"}
     # a * b = 1 - 2**-60 exactly: fused, a * b + c is -2**-60; rounded first (no FMA unit: contract
     # allows a fusion, it does not force one), 0
     a, b, c = 1.0 + 2.0 ** -30, 1.0 - 2.0 ** -30, -1.0
@@ -294,5 +298,8 @@ def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
     assert run["device"] == "cpu-fused" and run["steps"] == 5
     assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
+    solvers = benchmarks(*arguments, "--fused", "colsim.solvers")
+    assert solvers.returncode == 0, solvers.stderr
+    assert json.loads(record_file.read_text().splitlines()[1])["device"] == "cpu-fused:colsim.solvers"
     wrong = benchmarks(*arguments, "--fused", "--device", "cuda")
     assert wrong.returncode == 2 and "--fused" in wrong.stderr
