@@ -104,8 +104,8 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": fused_device(fused) if fusing else device, "kind": run["kind"], "value": run["value"],
-            "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
+    return {"column": str(column), "device": fused_device(fused) if fusing else device, "kind": run["kind"],
+            "value": run["value"], "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
 def label(r: dict) -> str:
