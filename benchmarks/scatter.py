@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+import fused as fused_build
 import record
 
 # HDF5, under netCDF4, is not safe to call from two threads at once: `--jobs 14` segfaulted in
@@ -69,9 +70,12 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def fused_device(modules: list[str]) -> str:
-    """The device a `--fused` run is recorded as: "cpu-fused", or "cpu-fused:" and the modules."""
-    return ":".join(["cpu-fused", ",".join(modules)]) if modules else "cpu-fused"
+def recorded_device(device: str, fused: list[str] | None) -> str:
+    """The device a run is recorded as: `device`, or for a `--fused` run "cpu-fused", or "cpu-fused:"
+    and the modules."""
+    if fused is None:
+        return device
+    return ":".join(["cpu-fused", ",".join(fused)]) if fused else "cpu-fused"
 
 
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
@@ -83,14 +87,12 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
         flags = ["--solver-tolerance", f"{run['value']:g}"] if run["kind"] == "tolerance" else []
-        fusing = fused is not None
-        colsim = [sys.executable, str(Path(__file__).with_name("fused.py"))] if fusing else [sys.executable, "-m",
-                                                                                           "colsim.cli"]
+        colsim = [sys.executable, "-m", "colsim.cli"] if fused is None else [sys.executable, fused_build.__file__]
         command = [*colsim, "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
                    "--threads", str(threads), "-q", *flags]
         started = time.perf_counter()
-        environment = {**os.environ, "COLSIM_FUSED_MODULES": ",".join(fused)} if fusing else None
+        environment = None if fused is None else {**os.environ, fused_build.MODULES: ",".join(fused)}
         done = subprocess.run(command, capture_output=True, text=True, env=environment)
         wall = time.perf_counter() - started
         if done.returncode:
@@ -104,7 +106,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": fused_device(fused) if fusing else device, "kind": run["kind"],
+    return {"column": str(column), "device": recorded_device(device, fused), "kind": run["kind"],
             "value": run["value"], "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -204,7 +206,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.fused is not None and args.device != "cpu":
         parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
-    device = fused_device(args.fused) if args.fused is not None else args.device
+    device = recorded_device(args.device, args.fused)
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]
