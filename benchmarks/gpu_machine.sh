@@ -63,10 +63,17 @@ fi
 # when SCATTER_ALSO names a record of them made elsewhere) on the host's other cores, one thread each.
 # Both scatters' tables (h_inf/r0 and run-out: range, mean, sd), then both together with each GPU run
 # placed in the CPU's scatter (this call's CPU runs and SCATTER_ALSO's records), come back as
-# scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there).
+# scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there). With SCATTER_GPU_UNFUSED=1 the
+# GPU's runs are benchmarks/unfused.py's (kernels compiled with libNVVM's -fma=0, rounding as the plain
+# CPU; recorded as "cuda-unfused"), after its check that a kernel's a * b + c is then not fused.
 if [[ "$stages" == *" scatter "* ]]; then
     column=.gpu/rest/${SCATTER_COLUMN:-r0_3_a2_seed1}
     common=("$column.nc" --settings "$column.settings.yaml" --tolerances ${SCATTER_TOLERANCES:-9e-6 1.1e-5})
+    gpu=(--device cuda)
+    if [ "${SCATTER_GPU_UNFUSED:-0}" = 1 ]; then
+        gpu+=(--unfused)
+        python3 benchmarks/unfused.py --check || echo "unfused check: the unfused kernel fused (exit $?)"
+    fi
     cpu_scatter=
     if [ "${SCATTER_CPU_DRAWS:-1-10}" != none ]; then
         python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cpu \
@@ -74,14 +81,14 @@ if [[ "$stages" == *" scatter "* ]]; then
             --record results/scatter-cpu.jsonl > /tmp/scatter-cpu.log 2>&1 &
         cpu_scatter=$!
     fi
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" "${gpu[@]}" \
         --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --jobs "${SCATTER_GPU_JOBS:-1}" \
         --record results/scatter-gpu.jsonl || echo "scatter on the GPU: failed (exit $?)"
     if [ -n "$cpu_scatter" ]; then
         wait "$cpu_scatter" || echo "scatter on the CPU: failed (exit $?)"
         cat /tmp/scatter-cpu.log
     fi
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cuda \
+    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" "${gpu[@]}" \
         --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl \
         --also results/scatter-cpu.jsonl ${SCATTER_ALSO:-} || echo "scatter: the tables of both failed (exit $?)"
 fi

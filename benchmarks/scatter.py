@@ -13,8 +13,9 @@ collapse is chaotic, so these end on different deposits; their spread is what "t
 means for two devices, whose arithmetic rounds differently. `--device` and `--threads` pass to
 `colsim collapse`; `--fused` runs it with the CPU's kernels compiled to fuse multiply-adds as a
 GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused" (`--fused
-colsim.solvers`: only the kernels of the modules named, "cpu-fused:colsim.solvers"); `--jobs` runs
-that many at once. Each finished run is appended to `--record` as
+colsim.solvers`: only the kernels of the modules named, "cpu-fused:colsim.solvers"), and `--unfused`
+with the GPU's kernels compiled not to fuse them, as the plain CPU (benchmarks/unfused.py),
+"cuda-unfused"; `--jobs` runs that many at once. Each finished run is appended to `--record` as
 one JSON line, and runs already there are skipped, so a killed scatter resumes. The tables: each
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
@@ -38,6 +39,7 @@ import numpy as np
 
 import fused as fused_build
 import record
+import unfused as unfused_build
 
 # HDF5, under netCDF4, is not safe to call from two threads at once: `--jobs 14` segfaulted in
 # libhdf5 on the 16-core GPU host (2026-11-28). The runs themselves are child processes; only this
@@ -70,29 +72,40 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def recorded_device(device: str, fused: list[str] | None) -> str:
+def recorded_device(device: str, fused: list[str] | None, unfused: bool = False) -> str:
     """The device a run is recorded as: `device`, or for a `--fused` run "cpu-fused", or "cpu-fused:"
-    and the modules."""
+    and the modules fused; for an `--unfused` one "cuda-unfused"."""
+    if unfused:
+        return f"{device}-unfused"
     if fused is None:
         return device
     return ":".join(["cpu-fused", ",".join(fused)]) if fused else "cpu-fused"
 
 
+def colsim_command(fused: list[str] | None, unfused: bool) -> tuple[list[str], dict | None]:
+    """The command that runs colsim's CLI, and its environment (None: this one's), for a run of the
+    plain build, the CPU's fused one (fused: the modules, empty for all) or the GPU's unfused one."""
+    if unfused:
+        return [sys.executable, unfused_build.__file__], None
+    if fused is not None:
+        return [sys.executable, fused_build.__file__], {**os.environ, fused_build.MODULES: ",".join(fused)}
+    return [sys.executable, "-m", "colsim.cli"], None
+
+
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
-            fused: list[str] | None = None) -> dict:
+            fused: list[str] | None = None, unfused: bool = False) -> dict:
     """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
     with the CPU's kernels fusing multiply-adds, those of the modules listed or (empty) all (device
-    "cpu" only)."""
+    "cpu" only); unfused: with the GPU's kernels not fusing them (device "cuda" only)."""
     with tempfile.TemporaryDirectory(prefix="scatter-") as scratch:
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
         flags = ["--solver-tolerance", f"{run['value']:g}"] if run["kind"] == "tolerance" else []
-        colsim = [sys.executable, "-m", "colsim.cli"] if fused is None else [sys.executable, fused_build.__file__]
+        colsim, environment = colsim_command(fused, unfused)
         command = [*colsim, "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
                    "--threads", str(threads), "-q", *flags]
         started = time.perf_counter()
-        environment = None if fused is None else {**os.environ, fused_build.MODULES: ",".join(fused)}
         done = subprocess.run(command, capture_output=True, text=True, env=environment)
         wall = time.perf_counter() - started
         if done.returncode:
@@ -106,7 +119,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": recorded_device(device, fused), "kind": run["kind"],
+    return {"column": str(column), "device": recorded_device(device, fused, unfused), "kind": run["kind"],
             "value": run["value"], "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -195,6 +208,9 @@ def main(argv=None):
     parser.add_argument("--fused", nargs="*", metavar="MODULE", default=None,
                         help="the CPU's kernels fuse multiply-adds, as a GPU's compiler does (device cpu-fused); "
                              "with module prefixes, only theirs")
+    parser.add_argument("--unfused", action="store_true",
+                        help="the GPU's kernels compiled without fused multiply-adds, as the plain CPU's "
+                             "(device cuda-unfused)")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once")
     parser.add_argument("--record", type=Path, default=Path("scatter.jsonl"))
@@ -206,7 +222,9 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.fused is not None and args.device != "cpu":
         parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
-    device = recorded_device(args.device, args.fused)
+    if args.unfused and args.device != "cuda":
+        parser.error("--unfused is a GPU run's (the CPU's kernels fuse nothing unless --fused)")
+    device = recorded_device(args.device, args.fused, args.unfused)
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]
@@ -218,7 +236,8 @@ def main(argv=None):
     args.record.parent.mkdir(parents=True, exist_ok=True)
 
     def one(run):
-        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon, args.fused)
+        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon, args.fused,
+                       args.unfused)
 
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         for result in pool.map(one, plan):

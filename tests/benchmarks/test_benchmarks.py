@@ -303,3 +303,60 @@ def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     assert json.loads(record_file.read_text().splitlines()[1])["device"] == "cpu-fused:colsim.solvers"
     wrong = benchmarks(*arguments, "--fused", "--device", "cuda")
     assert wrong.returncode == 2 and "--fused" in wrong.stderr
+
+
+PTX_OF_MULTIPLY_ADD = """
+import json, sys
+from numba import cuda
+from numba.cuda.cudadrv import nvvm
+import unfused
+try:
+    nvvm.NVVM()
+except Exception as error:   # numba's NvvmSupportError, or ctypes' OSError
+    sys.exit(f"no libNVVM: {error}")
+def multiply_add(a, b, c, out):
+    out[0] = a[0] * b[0] + c[0]
+def instructions(**options):
+    ptx, _ = cuda.compile_ptx(multiply_add, "void(float64[:], float64[:], float64[:], float64[:])", cc=(9, 0), **options)
+    return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+default = instructions()
+unfused.unfuse()
+print(json.dumps({"default": default, "unfused": instructions(), "fastmath": instructions(fastmath=True)}))
+"""
+
+
+def test_unfused_kernels_compile_a_product_and_a_sum():
+    """benchmarks/unfused.py: with libNVVM given -fma=0, a * b + c compiles to a product and a sum, each
+    rounded (mul.rn, add.rn), where by default it is one fma.rn; a kernel asking for fastmath keeps its
+    FMA. PTX only, no card; needs libNVVM (a CUDA toolkit), else skipped."""
+    path = os.pathsep.join([str(REPOSITORY / "benchmarks"), os.environ.get("PYTHONPATH", "")])
+    child = subprocess.run([sys.executable, "-c", PTX_OF_MULTIPLY_ADD], capture_output=True, text=True, timeout=300,
+                           env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": path})
+    if child.returncode and "no libNVVM" in child.stderr:
+        pytest.skip(child.stderr.strip().splitlines()[-1])
+    assert child.returncode == 0, child.stderr
+    compiled = json.loads(child.stdout)
+    assert "fma.rn.f64" in compiled["default"]
+    assert {"mul.rn.f64", "add.rn.f64"} <= set(compiled["unfused"]) and "fma.rn.f64" not in compiled["unfused"]
+    assert "fma.rn.f64" in compiled["fastmath"]
+
+
+def test_an_unfused_scatter_run_is_recorded_as_its_own_device(tmp_path):
+    """`benchmarks scatter --device cuda --unfused` (here on numba's simulator, where nothing is fused
+    either way): the collapse run by benchmarks/unfused.py, recorded as "cuda-unfused", on the stack's
+    deposit; on the CPU it is an error, exit 2."""
+    from helpers import tiny_state_files
+
+    tiny_state_files(tmp_path)
+    settings = tmp_path / "settings.yaml"
+    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
+    record_file = tmp_path / "scatter.jsonl"
+    arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
+                 str(settings), "--no-own", "--tolerances", "1e-6", "--record", str(record_file)]
+    done = benchmarks(*arguments, "--unfused", "--device", "cuda", env={"NUMBA_ENABLE_CUDASIM": "1"})
+    assert done.returncode == 0, done.stderr
+    (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
+    assert run["device"] == "cuda-unfused" and run["steps"] == 5
+    assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
+    wrong = benchmarks(*arguments, "--unfused")
+    assert wrong.returncode == 2 and "--unfused" in wrong.stderr
