@@ -33,7 +33,7 @@ import record   # noqa: E402
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
          "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
-         "device_copies", "host_work", "scatter")
+         "device_copies", "ptx", "host_work", "scatter")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -62,6 +62,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
             "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
             "device_copies": _cuda(["--steps", "1"]),
+            "ptx": _card_compiler([]),
             "host_work": [*c, "--repeat", "1"],
             "scatter": None,
         }[name]
@@ -75,6 +76,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "cuda_operator": _cuda([]),
         "gpu": _cuda([]),
         "device_copies": _cuda([]),
+        "ptx": _card_compiler([]),
         "host_work": c,
         "scatter": None,
     }[name]
@@ -88,6 +90,14 @@ def _cuda(arguments: list[str]) -> list[str] | None:
         return arguments if cuda.is_available() else None
     except ImportError:
         return None
+
+
+def _card_compiler(arguments: list[str]) -> list[str] | None:
+    """A benchmark's arguments where a card's kernels can be compiled here (numba-cuda and libNVVM,
+    benchmarks/ptx.py), else None (skipped)."""
+    import ptx
+
+    return None if ptx.compiler_missing() else arguments
 
 
 def _study_results() -> list[str] | None:

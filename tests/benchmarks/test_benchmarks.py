@@ -21,7 +21,7 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 import record   # noqa: E402
 
 NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "host_work",
-         "packings", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
+         "packings", "ptx", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 
@@ -360,3 +360,24 @@ def test_an_unfused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
     wrong = benchmarks(*arguments, "--unfused")
     assert wrong.returncode == 2 and "--unfused" in wrong.stderr
+
+
+def test_every_cuda_kernel_a_collapse_launches_compiles_for_a_card(tmp_path):
+    """`benchmarks ptx`, where numba-cuda and libNVVM are installed (no card needed; else skipped):
+    every kernel a GPU collapse launches on the simulator compiles to PTX for sm_90 with the argument
+    types it was launched with, some of them hold FMAs by default, and none does unfused."""
+    path = os.pathsep.join([str(REPOSITORY / "benchmarks"), str(REPOSITORY / "src"), os.environ.get("PYTHONPATH", "")])
+    probe = subprocess.run([sys.executable, "-c", "import ptx; print(ptx.compiler_missing())"], capture_output=True,
+                           text=True, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": path})
+    assert probe.returncode == 0, probe.stderr
+    if probe.stdout.strip():
+        pytest.skip(probe.stdout.strip())
+    done = benchmarks("--results", str(tmp_path), "ptx")
+    assert done.returncode == 0, done.stderr[-3000:]
+    (written,) = tmp_path.glob("ptx-*.json")
+    rows = json.loads(written.read_text())["tables"][0]["data"]
+    modules = {row["module"] for row in rows}
+    assert {"colsim.engine.cuda_contacts", "colsim.engine.cuda_operator", "colsim.engine.cuda_state",
+            "colsim.engine.cuda_warm_start", "colsim.solvers.apgd_cuda"} <= modules
+    assert all(row["error"] == "" and row["fma_unfused"] == 0 for row in rows), [r for r in rows if r["error"]]
+    assert sum(row["fma"] for row in rows) > 0

@@ -1,0 +1,185 @@
+"""Every CUDA kernel a GPU collapse launches, compiled for a card without one: the check numba's
+simulator cannot make (it runs a kernel's Python; it never types or compiles it), and how many fused
+multiply-adds each kernel holds (issue 46: the card's rounding).
+
+    python -m benchmarks ptx                 # sm_90 (H100, H200): no card; numba-cuda and libNVVM
+    python -m benchmarks ptx --cc 8.0        # another compute capability
+
+First, two steps of `colsim collapse --device cuda` on numba's simulator (a 27-sphere column poured
+on the CPU: a pour on the simulator takes many minutes, and `colsim pack --device cuda` steps with the
+same stepper) record the types of every kernel launch's arguments (colsim's kernels only). Then,
+with the simulator off, each kernel is compiled with each of its argument types by
+`numba.cuda.compile_ptx` (libNVVM; no driver, no card), once by default and once with libNVVM's
+`-fma=0` (benchmarks/unfused.py). It needs numba-cuda, the compiler a card's run uses (`pip install
+-e .[gpu]`; numba's own deprecated numba.cuda fails to type some of the kernels, e.g. `max` in a device
+function, which numba-cuda compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda). The table: each kernel, its signatures, its PTX's double-precision
+instructions, and how many of them are fused multiply-adds (fma.rn.f64), by default and unfused.
+Exit 1 if a kernel does not compile or an unfused one still holds an FMA.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import record
+
+#: the column the launches are recorded on: a 27-sphere pour (r0 = 0.8), trimmed at a = 1
+POUR = ["pack", "--r0", "0.8", "--height", "0.8", "--seed", "1"]
+COLLAPSE = ["collapse", "--steps", "2", "--duration", "0.008", "--device", "cuda"]
+
+
+def argument_type(value):
+    """The numba type a launch on a card gives `value` (a simulator's array typed as its numpy array,
+    never read-only: device arrays are not)."""
+    import numba
+    from numba import types
+    from numba.cuda.simulator.cudadrv.devicearray import FakeCUDAArray
+
+    if isinstance(value, FakeCUDAArray):
+        value = value._ary
+    found = numba.typeof(value)
+    if isinstance(found, types.Array):
+        return types.Array(found.dtype, found.ndim, found.layout)
+    return found
+
+
+def record_launches(folder: Path) -> dict[tuple[str, str], set]:
+    """{(module, kernel name): {argument types, one tuple per distinct launch}} of colsim's kernels in
+    a GPU collapse on numba's simulator (NUMBA_ENABLE_CUDASIM=1 in this process)."""
+    from numba.cuda.simulator import kernel as simulated
+
+    from colsim.cli.entry import main as colsim
+
+    launches: dict[tuple[str, str], set] = {}
+    call = simulated.FakeCUDAKernel.__call__
+
+    def recorded(self, *args):
+        if not self._device and self.fn.__module__.startswith("colsim."):
+            launches.setdefault((self.fn.__module__, self.fn.__name__), set()).add(
+                tuple(argument_type(a) for a in args))
+        return call(self, *args)
+
+    simulated.FakeCUDAKernel.__call__ = recorded
+    try:
+        for argv in ([*POUR, "--output", str(folder / "pack.nc")],
+                     ["trim", "--input", str(folder / "pack.nc"), "--aspect-ratio", "1",
+                      "--output", str(folder / "column.nc")],
+                     [*COLLAPSE, "--input", str(folder / "column.nc"), "--output", str(folder / "collapse.nc")]):
+            if colsim(["-q", *argv]):
+                raise RuntimeError(f"colsim {' '.join(argv)} failed")
+    finally:
+        simulated.FakeCUDAKernel.__call__ = call
+    return launches
+
+
+def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
+    """Each kernel compiled to PTX with each of its argument types, by default and unfused (with the
+    simulator off in this process): {module, kernel, signatures, f64 instructions, fma (default,
+    unfused), error}."""
+    from types import SimpleNamespace
+
+    from numba import cuda
+    from numba.cuda import dispatcher
+    from numba.cuda.cudadrv import nvvm
+
+    import unfused
+
+    # a device function a kernel calls compiles for the current device's compute capability: with no
+    # driver, for `cc`
+    dispatcher.get_current_device = lambda: SimpleNamespace(compute_capability=cc)
+
+    def instructions(function, signature) -> list[str]:
+        ptx, _ = cuda.compile_ptx(function, signature, cc=cc)
+        return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+
+    rows = []
+    default_compile = nvvm.compile_ir
+    for (module, name), signatures in sorted(launches.items()):
+        row = {"module": module, "kernel": name, "signatures": len(signatures), "f64": 0, "fma": 0,
+               "fma_unfused": 0, "error": ""}
+        try:
+            function = getattr(importlib.import_module(module), name).py_func
+            for signature in signatures:
+                nvvm.compile_ir = default_compile
+                fused = instructions(function, signature)
+                nvvm.compile_ir = unfused.without_fma(default_compile)
+                separate = instructions(function, signature)
+                row["f64"] += len(fused)
+                row["fma"] += fused.count("fma.rn.f64")
+                row["fma_unfused"] += separate.count("fma.rn.f64")
+        except Exception as error:   # a kernel that does not compile is this check's finding
+            row["error"] = f"{type(error).__name__}: {str(error).splitlines()[0][:200]}"
+        finally:
+            nvvm.compile_ir = default_compile
+        rows.append(row)
+    return rows
+
+
+def compiler_missing() -> str:
+    """Why a card's kernels cannot be compiled here, or "" (numba-cuda and libNVVM are installed)."""
+    try:
+        import numba_cuda  # noqa: F401   numba-cuda, not numba's own deprecated numba.cuda
+        from numba.cuda.cudadrv import nvvm
+
+        nvvm.NVVM()
+    except ImportError:
+        return "no numba-cuda here: `pip install -e .[gpu]` (numba-cuda, the compiler of a card's runs)"
+    except Exception as error:   # numba's NvvmSupportError, or ctypes' OSError
+        return f"no libNVVM here ({str(error).strip()[:200]}): a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda"
+    return ""
+
+
+def child(phase: str, folder: Path, cc: str) -> None:
+    """Run this file's `phase` in a child process: "record" on the simulator, "compile" without."""
+    environment = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if phase == "record" else "0"}
+    done = subprocess.run([sys.executable, __file__, "--phase", phase, "--folder", str(folder), "--cc", cc],
+                          capture_output=True, text=True, env=environment)
+    if done.returncode:
+        raise RuntimeError(f"the {phase} phase failed:\n{done.stderr[-3000:]}")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cc", default="9.0", help="the compute capability compiled for (H100, H200: 9.0)")
+    parser.add_argument("--phase", choices=("record", "compile"), help=argparse.SUPPRESS)
+    parser.add_argument("--folder", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    cc = tuple(int(part) for part in args.cc.split("."))
+    if args.phase == "record":
+        launches = record_launches(args.folder)
+        (args.folder / "launches.pickle").write_bytes(pickle.dumps(launches))
+        return 0
+    if args.phase == "compile":
+        missing = compiler_missing()
+        if missing:
+            sys.exit(missing)
+        launches = pickle.loads((args.folder / "launches.pickle").read_bytes())
+        (args.folder / "compiled.json").write_text(json.dumps(compiled(launches, cc)))
+        return 0
+    with tempfile.TemporaryDirectory(prefix="ptx-") as scratch:
+        folder = Path(scratch)
+        child("record", folder, args.cc)
+        child("compile", folder, args.cc)
+        rows = json.loads((folder / "compiled.json").read_text())
+    table = record.table(["kernel", "signatures", "f64 instructions", "fma.rn.f64", "fma.rn.f64 unfused", "error"],
+                         title=f"colsim's CUDA kernels compiled to PTX for sm_{cc[0]}{cc[1]}")
+    for row in rows:
+        table.row(f"{row['module'].rsplit('.', 1)[-1]}.{row['kernel']}", row["signatures"], row["f64"], row["fma"],
+                  row["fma_unfused"], row["error"], data=row)
+    failed = [row["kernel"] for row in rows if row["error"] or row["fma_unfused"]]
+    print(f"{len(rows)} kernels, {sum(row['signatures'] for row in rows)} signatures; "
+          f"{sum(row['fma'] for row in rows)} FMAs by default, {sum(row['fma_unfused'] for row in rows)} unfused")
+    if failed:
+        raise SystemExit(f"{len(failed)} kernels failed: {', '.join(failed)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
