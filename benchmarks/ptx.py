@@ -10,10 +10,11 @@ on the CPU: a pour on the simulator takes many minutes, and `colsim pack --devic
 same stepper) record the types of every kernel launch's arguments (colsim's kernels only). Then,
 with the simulator off, each kernel is compiled with each of its argument types by
 `numba.cuda.compile_ptx` (libNVVM; no driver, no card), once by default and once with libNVVM's
-`-fma=0` (benchmarks/unfused.py). It needs numba-cuda, the compiler a card's run uses (`pip install
--e .[gpu]`; numba's own deprecated numba.cuda fails to type some of the kernels, e.g. `max` in a device
-function, which numba-cuda compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda). The table: each kernel, its signatures, its PTX's double-precision
-instructions, and how many of them are fused multiply-adds (fma.rn.f64), by default and unfused.
+`-fma=0` (benchmarks/unfused.py). The table: each kernel, its signatures, its PTX's
+double-precision instructions, and how many of them are fused multiply-adds (fma.rn.f64), by default
+and unfused. It needs numba-cuda, the compiler a card's run uses (`pip install -e .[gpu]`; numba's
+own deprecated numba.cuda fails to type some of the kernels, e.g. `max` in a device function, which
+numba-cuda compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda).
 Exit 1 if a kernel does not compile or an unfused one still holds an FMA.
 """
 from __future__ import annotations
