@@ -242,8 +242,9 @@ def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp
 
 def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
     """scatter.compared on draws of one law and of that law shifted by three standard deviations:
-    the difference of the means is the shift to within its standard error, and the p of both tests
-    is large for the same law and small for the shifted one (fixed draws, so the same every run)."""
+    the difference of the means is the shift to within its standard error, the p of both tests is
+    large for the same law and small for the shifted one, and the difference's interval holds 0 for
+    the same law only (fixed draws, so the same every run)."""
     import scatter
 
     rng = np.random.default_rng(46)
@@ -254,6 +255,10 @@ def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
     assert abs(alike["difference"]) < 3 * 0.07 * np.sqrt(1 / 45 + 1 / 9)
     assert alike["p_welch"] > 0.05 and alike["p_mann_whitney"] > 0.05 and alike["t"] * alike["difference"] >= 0
     assert apart["p_welch"] < 1e-3 and apart["p_mann_whitney"] < 1e-3 and apart["t"] > 0
+    # the 95 % interval holds the difference, and holds 0 exactly where Welch's p is above 0.05
+    for c in (alike, apart):
+        assert c["low"] < c["difference"] < c["high"]
+    assert alike["low"] < 0 < alike["high"] and apart["low"] > 0
 
 
 def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
@@ -281,18 +286,24 @@ def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
     assert plain(a, b, c) in (-(2.0 ** -60), 0.0) and multiply_add(a, b, c) == 0.0
 
 
+def stack_scatter(folder: Path) -> tuple[list[str], Path]:
+    """(`benchmarks scatter` arguments, its record): one 5-step run of the two-sphere stack at APGD
+    tolerance 1e-6, the files in `folder`."""
+    from helpers import tiny_state_files
+
+    tiny_state_files(folder)
+    settings = folder / "settings.yaml"
+    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
+    record_file = folder / "scatter.jsonl"
+    return (["--results", str(folder / "results"), "scatter", str(folder / "column.nc"), "--settings", str(settings),
+             "--no-own", "--tolerances", "1e-6", "--record", str(record_file)], record_file)
+
+
 def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     """`benchmarks scatter --fused`: the collapse run by benchmarks/fused.py, recorded as "cpu-fused",
     on the same deposit as the plain runs (the stack at rest, within APGD's overlap tolerance); with a
     GPU device it is an error, exit 2."""
-    from helpers import tiny_state_files
-
-    tiny_state_files(tmp_path)
-    settings = tmp_path / "settings.yaml"
-    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
-    record_file = tmp_path / "scatter.jsonl"
-    arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
-                 str(settings), "--no-own", "--tolerances", "1e-6", "--record", str(record_file)]
+    arguments, record_file = stack_scatter(tmp_path)
     done = benchmarks(*arguments, "--fused")
     assert done.returncode == 0, done.stderr
     (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
@@ -345,14 +356,7 @@ def test_an_unfused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     """`benchmarks scatter --device cuda --unfused` (here on numba's simulator, where nothing is fused
     either way): the collapse run by benchmarks/unfused.py, recorded as "cuda-unfused", on the stack's
     deposit; on the CPU it is an error, exit 2."""
-    from helpers import tiny_state_files
-
-    tiny_state_files(tmp_path)
-    settings = tmp_path / "settings.yaml"
-    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
-    record_file = tmp_path / "scatter.jsonl"
-    arguments = ["--results", str(tmp_path / "results"), "scatter", str(tmp_path / "column.nc"), "--settings",
-                 str(settings), "--no-own", "--tolerances", "1e-6", "--record", str(record_file)]
+    arguments, record_file = stack_scatter(tmp_path)
     done = benchmarks(*arguments, "--unfused", "--device", "cuda", env={"NUMBA_ENABLE_CUDASIM": "1"})
     assert done.returncode == 0, done.stderr
     (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
