@@ -80,61 +80,65 @@ def record_launches(folder: Path) -> dict[tuple[str, str], set]:
     return launches
 
 
+def f64_instructions(function, signature, cc: tuple[int, int], **options) -> list[str]:
+    """The double-precision instructions (e.g. "fma.rn.f64") of `function` compiled to PTX for `cc` with
+    argument types `signature` (numba-cuda's compile_ptx: libNVVM, no driver, no card)."""
+    from numba import cuda
+
+    ptx, _ = cuda.compile_ptx(function, signature, cc=cc, **options)
+    return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+
+
 def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
     """Each kernel compiled to PTX with each of its argument types, by default and unfused (with the
     simulator off in this process): {module, kernel, signatures, f64 instructions, fma (default,
     unfused), error}."""
     from types import SimpleNamespace
 
-    from numba import cuda
     from numba.cuda import dispatcher
-    from numba.cuda.cudadrv import nvvm
 
     import unfused
 
     # a device function a kernel calls compiles for the current device's compute capability: with no
     # driver, for `cc`
     dispatcher.get_current_device = lambda: SimpleNamespace(compute_capability=cc)
-
-    def instructions(function, signature) -> list[str]:
-        ptx, _ = cuda.compile_ptx(function, signature, cc=cc)
-        return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
-
     rows = []
-    default_compile = nvvm.compile_ir
     for (module, name), signatures in sorted(launches.items()):
         row = {"module": module, "kernel": name, "signatures": len(signatures), "f64": 0, "fma": 0,
                "fma_unfused": 0, "error": ""}
         try:
             function = getattr(importlib.import_module(module), name).py_func
             for signature in signatures:
-                nvvm.compile_ir = default_compile
-                fused = instructions(function, signature)
-                nvvm.compile_ir = unfused.without_fma(default_compile)
-                separate = instructions(function, signature)
+                fused = f64_instructions(function, signature, cc)
+                with unfused.unfused_compilation():
+                    separate = f64_instructions(function, signature, cc)
                 row["f64"] += len(fused)
                 row["fma"] += fused.count("fma.rn.f64")
                 row["fma_unfused"] += separate.count("fma.rn.f64")
         except Exception as error:   # a kernel that does not compile is this check's finding
             row["error"] = f"{type(error).__name__}: {str(error).splitlines()[0][:200]}"
-        finally:
-            nvvm.compile_ir = default_compile
         rows.append(row)
     return rows
+
+
+def nvvm_missing() -> str:
+    """Why libNVVM cannot be loaded here, or "" (it can)."""
+    try:
+        from numba.cuda.cudadrv import nvvm
+
+        nvvm.NVVM()
+    except Exception as error:   # numba's NvvmSupportError, or ctypes' OSError
+        return f"no libNVVM here ({str(error).strip()[:200]}): a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda"
+    return ""
 
 
 def compiler_missing() -> str:
     """Why a card's kernels cannot be compiled here, or "" (numba-cuda and libNVVM are installed)."""
     try:
         import numba_cuda  # noqa: F401   numba-cuda, not numba's own deprecated numba.cuda
-        from numba.cuda.cudadrv import nvvm
-
-        nvvm.NVVM()
     except ImportError:
         return "no numba-cuda here: `pip install -e .[gpu]` (numba-cuda, the compiler of a card's runs)"
-    except Exception as error:   # numba's NvvmSupportError, or ctypes' OSError
-        return f"no libNVVM here ({str(error).strip()[:200]}): a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda"
-    return ""
+    return nvvm_missing()
 
 
 def child(phase: str, folder: Path, cc: str) -> None:

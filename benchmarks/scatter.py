@@ -195,8 +195,8 @@ def report(records: list[dict], compare: list[float] | None) -> None:
                     continue
                 c = compared(theirs, mine)
                 table.row(device, name, f"{len(theirs)}; {len(mine)}", f"{c['difference']:+.3f}",
-                          f"{c['low']:+.3f} to {c['high']:+.3f}", f"{c['t']:.2f} ({c['p_welch']:.3f})", f"{c['p_mann_whitney']:.3f}", data={"device": device,
-                          "quantity": name, **c})
+                          f"{c['low']:+.3f} to {c['high']:+.3f}", f"{c['t']:.2f} ({c['p_welch']:.3f})",
+                          f"{c['p_mann_whitney']:.3f}", data={"device": device, "quantity": name, **c})
 
 
 def main(argv=None):

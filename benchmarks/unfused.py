@@ -13,6 +13,7 @@ On numba's simulator there is no NVVM and nothing changes.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -41,6 +42,19 @@ def unfuse() -> None:
     from numba.cuda.cudadrv import nvvm   # numba.cuda's codegen calls nvvm.compile_ir through the module
 
     nvvm.compile_ir = without_fma(nvvm.compile_ir)
+
+
+@contextlib.contextmanager
+def unfused_compilation():
+    """Every numba.cuda compilation inside the block unfused (:func:`unfuse`), the default after it."""
+    from numba.cuda.cudadrv import nvvm
+
+    default = nvvm.compile_ir
+    unfuse()
+    try:
+        yield
+    finally:
+        nvvm.compile_ir = default
 
 
 def check() -> int:

@@ -318,21 +318,18 @@ def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
 
 PTX_OF_MULTIPLY_ADD = """
 import json, sys
-from numba import cuda
-from numba.cuda.cudadrv import nvvm
-import unfused
-try:
-    nvvm.NVVM()
-except Exception as error:   # numba's NvvmSupportError, or ctypes' OSError
-    sys.exit(f"no libNVVM: {error}")
+import ptx, unfused
+missing = ptx.nvvm_missing()
+if missing:
+    sys.exit(missing)
 def multiply_add(a, b, c, out):
     out[0] = a[0] * b[0] + c[0]
-def instructions(**options):
-    ptx, _ = cuda.compile_ptx(multiply_add, "void(float64[:], float64[:], float64[:], float64[:])", cc=(9, 0), **options)
-    return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
-default = instructions()
-unfused.unfuse()
-print(json.dumps({"default": default, "unfused": instructions(), "fastmath": instructions(fastmath=True)}))
+signature = "void(float64[:], float64[:], float64[:], float64[:])"
+default = ptx.f64_instructions(multiply_add, signature, (9, 0))
+with unfused.unfused_compilation():
+    separate = ptx.f64_instructions(multiply_add, signature, (9, 0))
+    asked = ptx.f64_instructions(multiply_add, signature, (9, 0), fastmath=True)
+print(json.dumps({"default": default, "unfused": separate, "fastmath": asked}))
 """
 
 
@@ -343,7 +340,7 @@ def test_unfused_kernels_compile_a_product_and_a_sum():
     path = os.pathsep.join([str(REPOSITORY / "benchmarks"), os.environ.get("PYTHONPATH", "")])
     child = subprocess.run([sys.executable, "-c", PTX_OF_MULTIPLY_ADD], capture_output=True, text=True, timeout=300,
                            env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": path})
-    if child.returncode and "no libNVVM" in child.stderr:
+    if child.returncode and "no libNVVM here" in child.stderr:
         pytest.skip(child.stderr.strip().splitlines()[-1])
     assert child.returncode == 0, child.stderr
     compiled = json.loads(child.stdout)
@@ -355,7 +352,8 @@ def test_unfused_kernels_compile_a_product_and_a_sum():
 def test_an_unfused_scatter_run_is_recorded_as_its_own_device(tmp_path):
     """`benchmarks scatter --device cuda --unfused` (here on numba's simulator, where nothing is fused
     either way): the collapse run by benchmarks/unfused.py, recorded as "cuda-unfused", on the stack's
-    deposit; on the CPU it is an error, exit 2."""
+    deposit (at rest: h_inf/r0 1 and run-out -0.75 within 5e-5, APGD's overlap tolerance); on the CPU it
+    is an error, exit 2."""
     arguments, record_file = stack_scatter(tmp_path)
     done = benchmarks(*arguments, "--unfused", "--device", "cuda", env={"NUMBA_ENABLE_CUDASIM": "1"})
     assert done.returncode == 0, done.stderr
