@@ -63,7 +63,9 @@ fi
 # when SCATTER_ALSO names a record of them made elsewhere) on the host's other cores, one thread each.
 # Both scatters' tables (h_inf/r0 and run-out: range, mean, sd), then both together with each GPU run
 # placed in the CPU's scatter (this call's CPU runs and SCATTER_ALSO's records), come back as
-# scatter-*.json (the runs, resumable, in results/scatter-*.jsonl there). With SCATTER_GPU_UNFUSED=1 the
+# scatter-*.json, and the runs' records as scatter-*.jsonl (resumable in results/ there; on a warm machine
+# a later call goes on from them). SCATTER_LIMIT (seconds) stops the GPU's scatter, its finished runs
+# kept, its tables then left to be made here (`scatter --also`). With SCATTER_GPU_UNFUSED=1 the
 # GPU's runs are benchmarks/unfused.py's (kernels compiled with libNVVM's -fma=0, rounding as the plain
 # CPU; recorded as "cuda-unfused"), after its check that a kernel's a * b + c is then not fused.
 if [[ "$stages" == *" scatter "* ]]; then
@@ -81,16 +83,19 @@ if [[ "$stages" == *" scatter "* ]]; then
             --record results/scatter-cpu.jsonl > /tmp/scatter-cpu.log 2>&1 &
         cpu_scatter=$!
     fi
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" "${gpu[@]}" \
-        --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --jobs "${SCATTER_GPU_JOBS:-1}" \
-        --record results/scatter-gpu.jsonl || echo "scatter on the GPU: failed (exit $?)"
+    stopped=0
+    timeout "${SCATTER_LIMIT:-86400}" python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter \
+        "${common[@]}" "${gpu[@]}" --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --jobs "${SCATTER_GPU_JOBS:-1}" \
+        --record results/scatter-gpu.jsonl || { stopped=$?; echo "scatter on the GPU: stopped or failed (exit $stopped)"; }
     if [ -n "$cpu_scatter" ]; then
         wait "$cpu_scatter" || echo "scatter on the CPU: failed (exit $?)"
         cat /tmp/scatter-cpu.log
     fi
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" "${gpu[@]}" \
-        --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl \
+    # the tables of both would run the GPU's missing draws again: only after a whole scatter
+    [ "$stopped" != 0 ] || python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" \
+        "${gpu[@]}" --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl \
         --also results/scatter-cpu.jsonl ${SCATTER_ALSO:-} || echo "scatter: the tables of both failed (exit $?)"
+    cp results/scatter-*.jsonl "${OUT:-results/benchmarks}/" 2> /dev/null || true   # every finished run's record
 fi
 
 # A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
@@ -151,6 +156,8 @@ for settings in .gpu/pour/*.pack.yaml; do
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
             >> "$out/$name.collapse.log" 2>&1 \
+        && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/collapse.nc" 2>&1 \
+            | grep "^|" >> "$out/$name.collapse.log" \
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
     grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 3 "$out/$name.collapse.log"
