@@ -219,10 +219,10 @@ class _Scs:
         A = sp.csc_matrix(A)[picked]
         b = b[picked]
         z = sum(_cone_dim(cones[i]) for i in order if kinds[i] == "ZeroConeT")
-        l = sum(_cone_dim(cones[i]) for i in order if kinds[i] == "NonnegativeConeT")
+        nonnegative = sum(_cone_dim(cones[i]) for i in order if kinds[i] == "NonnegativeConeT")
         q = [3] * sum(1 for kind in kinds if kind == "SecondOrderConeT")
         solver = scs.SCS({"P": sp.csc_matrix(P + sp.triu(P, 1).T), "A": A, "b": b, "c": c},
-                         {"z": z, "l": l, "q": q}, eps_abs=1e-6, eps_rel=1e-6, verbose=False,
+                         {"z": z, "l": nonnegative, "q": q}, eps_abs=1e-6, eps_rel=1e-6, verbose=False,
                          max_iters=100000)
         start = time.perf_counter()
         sol = solver.solve()
