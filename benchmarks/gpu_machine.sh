@@ -136,13 +136,21 @@ done
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
 # and the analysis come back in pour.tgz; the files stay in results/gpu-pour/NAME there (git-ignored:
 # kept on a warm machine between calls; a packing already there is not poured again).
+# With POUR_PROFILE=1 the pour and the collapse run under cProfile (slower, so not the target's
+# timing; a command stopped by its limit writes none): their statistics (NAME.pack.prof,
+# NAME.collapse.prof) and, in the logs, the 30 functions of most own time come back in pour.tgz:
+# where a GPU step's wall goes outside the kernels (the collapse's busy share at r0 = 6 was 28 %).
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
     mkdir -p "$out" "$work"
+    pack_profile=(); collapse_profile=()
+    if [ "${POUR_PROFILE:-0}" = 1 ]; then
+        pack_profile=(-m cProfile -o "$out/$name.pack.prof"); collapse_profile=(-m cProfile -o "$out/$name.collapse.prof")
+    fi
     start=$(date +%s)
     [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
-    busy timeout "${POUR_LIMIT:-300}" python3 -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
+    busy timeout "${POUR_LIMIT:-300}" python3 "${pack_profile[@]}" -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
@@ -151,7 +159,8 @@ for settings in .gpu/pour/*.pack.yaml; do
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
         --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
-    busy timeout "${REST_LIMIT:-240}" python3 -m colsim.cli collapse --settings ".gpu/pour/$name.collapse.yaml" \
+    busy timeout "${REST_LIMIT:-240}" python3 "${collapse_profile[@]}" -m colsim.cli collapse \
+        --settings ".gpu/pour/$name.collapse.yaml" \
         --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
@@ -160,6 +169,12 @@ for settings in .gpu/pour/*.pack.yaml; do
             | grep "^|" >> "$out/$name.collapse.log" \
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
+    for part in pack collapse; do   # the profiles' 30 functions of most own time, into the logs
+        if [ -e "$out/$name.$part.prof" ]; then
+            python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" \
+                "$out/$name.$part.prof" >> "$out/$name.$part.log" 2>&1 || true
+        fi
+    done
     grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 3 "$out/$name.collapse.log"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
