@@ -154,6 +154,8 @@ for settings in .gpu/pour/*.pack.yaml; do
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
+    [ -e "$work/packing.nc" ] && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/packing.nc" \
+        2>&1 | grep "^|" >> "$out/$name.pack.log" || true   # the pour's steps split by phase
     grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
