@@ -10,7 +10,9 @@ collapses with mu = 0.577, mu_r = 0.12 and dt = 0.02 by APGD on the device (`Apg
 `colsim.engine.stepper.run` with the swept pairs, the warm start's matching and the overlap check
 there too); after one step to start from, `--steps` more of the same run are counted. Each `cuda.to_device`, device
 array's `copy_to_host` and `copy_to_device` from a host array is counted with its bytes, by the
-colsim function that made it; on numba's simulator, so is each kernel's launch. The count of a step's copies depends on its attempts and on the
+colsim function that made it, and so is each device array made (`cuda.device_array`,
+`device_array_like`, `to_device`: an allocation on the device each); on numba's simulator, so is each
+kernel's launch. The count of a step's copies depends on its attempts and on the
 solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
 H200 whatever its size, docs/performance.md, "The third GPU sitting"); the bytes grow with it.
 
@@ -37,8 +39,8 @@ def _caller(helpers: tuple = ()) -> str:
     return f"{Path(frames[-1].filename).name}:{frames[-1].name}" if frames else "elsewhere"
 
 
-#: the modules of launches made for others (the operator's products, fills, prefix sums): a launch is
-#: counted for their caller
+#: the modules of launches made for others (the operator's products, fills, prefix sums): a launch or
+#: an allocation is counted for their caller
 LAUNCH_HELPERS = ("cuda_launch.py", "cuda_operator.py")
 
 
@@ -71,6 +73,32 @@ def counting_copies():
     cuda.to_device = counted_to_device
     device_array_type.copy_to_host = counted_to_host
     device_array_type.copy_to_device = counted_into_device
+    return counts, sizes
+
+
+def counting_allocations():
+    """Patch numba.cuda's ways of making a device array (device_array, device_array_like, to_device) to
+    count them; returns (counts, bytes), Counters by caller. An allocation on an H200 took 43-51 us
+    (docs/performance.md, "The third GPU sitting"), whatever its size, as a small copy did."""
+    from numba import cuda
+
+    counts, sizes = collections.Counter(), collections.Counter()
+    makers = {name: getattr(cuda, name) for name in ("device_array", "device_array_like", "to_device")}
+
+    def counted(name):
+        make = makers[name]
+
+        def made(*args, **kwargs):
+            array = make(*args, **kwargs)
+            if not (name == "to_device" and kwargs.get("to") is not None):   # into an array made before
+                key = _caller(LAUNCH_HELPERS)   # a fill or a copy made for another: counted for it
+                counts[key] += 1
+                sizes[key] += int(array.nbytes)
+            return array
+        return made
+
+    for name in makers:
+        setattr(cuda, name, counted(name))
     return counts, sizes
 
 
@@ -144,6 +172,7 @@ def main(argv=None):
         solver = ApgdSolver(tolerance=1e-8, kernel="cuda")
         step(state, settings, solver, 1)   # not counted: the kernels compiled, the radii's copy kept
         counts, sizes = counting_copies()
+        allocations, allocated = counting_allocations()
         launches = counting_launches()
         results = [step(state, settings, solver, 2)]
         args.steps = 1
@@ -153,6 +182,7 @@ def main(argv=None):
         steps = run(state, settings, 1 + args.steps, solver)
         next(steps)   # the first step, not counted: it made the second's first detection, as any step does
         counts, sizes = counting_copies()
+        allocations, allocated = counting_allocations()
         launches = counting_launches()
         results = list(steps)
     attempts = sum(r.diagnostics.redone + 1 for r in results)
@@ -166,6 +196,12 @@ def main(argv=None):
                   data={"direction": direction, "caller": caller, "copies": counts[key] / args.steps,
                         "bytes": sizes[key] / args.steps})
     table.row("both", "all", f"{sum(counts.values()) / args.steps:.1f}", f"{sum(sizes.values()) / args.steps:.0f}")
+    made = record.table(["made by", "device arrays made a step", "bytes a step"])
+    for caller in sorted(allocations, key=lambda c: -allocations[c]):
+        made.row(caller, f"{allocations[caller] / args.steps:.1f}", f"{allocated[caller] / args.steps:.0f}",
+                 data={"allocations by": caller, "allocations": allocations[caller] / args.steps,
+                       "bytes": allocated[caller] / args.steps})
+    made.row("all", f"{sum(allocations.values()) / args.steps:.1f}", f"{sum(allocated.values()) / args.steps:.0f}")
     if launches is not None:
         print(f"kernel launches a step, by where they are made ({iterations / args.steps:.0f} APGD iterations "
               "a step; counted on numba's simulator):")

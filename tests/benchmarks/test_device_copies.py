@@ -18,3 +18,23 @@ def test_the_redone_step_is_redone_once_beside_the_cube():
     assert state.n == 3 + 27
     assert result.diagnostics.redone == 1 and result.diagnostics.missed_contacts == 1
     assert result.contacts.m == 2 + 54
+
+
+def test_each_device_array_made_is_counted_with_its_bytes(monkeypatch):
+    """counting_allocations: device_array, device_array_like and to_device each count one array with
+    its bytes (by caller: here no colsim function, "elsewhere"); a copy into an array made before
+    (to_device's `to`) makes none."""
+    import numpy as np
+    import pytest
+
+    cuda = pytest.importorskip("numba.cuda")
+    from device_copies import counting_allocations
+
+    for name in ("device_array", "device_array_like", "to_device"):
+        monkeypatch.setattr(cuda, name, getattr(cuda, name))   # put back after the test
+    counts, sizes = counting_allocations()
+    made = cuda.device_array(5)
+    cuda.device_array_like(np.zeros((2, 3), dtype=np.int32))
+    cuda.to_device(np.zeros(4))
+    cuda.to_device(np.ones(5), to=made)
+    assert counts == {"elsewhere": 3} and sizes == {"elsewhere": 5 * 8 + 6 * 4 + 4 * 8}
