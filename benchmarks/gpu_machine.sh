@@ -154,9 +154,9 @@ for settings in .gpu/pour/*.pack.yaml; do
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
+    grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     [ -e "$work/packing.nc" ] && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/packing.nc" \
         2>&1 | grep "^|" >> "$out/$name.pack.log" || true   # the pour's steps split by phase
-    grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
@@ -171,13 +171,13 @@ for settings in .gpu/pour/*.pack.yaml; do
             | grep "^|" >> "$out/$name.collapse.log" \
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
+    grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 4 "$out/$name.collapse.log"   # h_inf, phases
     for part in pack collapse; do   # the profiles' 30 functions of most own time, into the logs
         if [ -e "$out/$name.$part.prof" ]; then
             python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" \
                 "$out/$name.$part.prof" >> "$out/$name.$part.log" 2>&1 || true
         fi
     done
-    grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 3 "$out/$name.collapse.log"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
 
