@@ -140,6 +140,11 @@ done
 # timing; a command stopped by its limit writes none): their statistics (NAME.pack.prof,
 # NAME.collapse.prof) and, in the logs, the 30 functions of most own time come back in pour.tgz:
 # where a GPU step's wall goes outside the kernels (the collapse's busy share at r0 = 6 was 28 %).
+profile_top() {   # profile_top BASE: BASE.prof's 30 functions of most own time, appended to BASE.log
+    [ -e "$1.prof" ] || return 0
+    python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" "$1.prof" \
+        >> "$1.log" 2>&1 || true
+}
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
@@ -157,6 +162,7 @@ for settings in .gpu/pour/*.pack.yaml; do
     grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     [ -e "$work/packing.nc" ] && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/packing.nc" \
         2>&1 | grep "^|" >> "$out/$name.pack.log" || true   # the pour's steps split by phase
+    profile_top "$out/$name.pack"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
@@ -172,12 +178,7 @@ for settings in .gpu/pour/*.pack.yaml; do
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
     grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 4 "$out/$name.collapse.log"   # h_inf, phases
-    for part in pack collapse; do   # the profiles' 30 functions of most own time, into the logs
-        if [ -e "$out/$name.$part.prof" ]; then
-            python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" \
-                "$out/$name.$part.prof" >> "$out/$name.$part.log" 2>&1 || true
-        fi
-    done
+    profile_top "$out/$name.collapse"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
 
