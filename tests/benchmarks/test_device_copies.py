@@ -3,6 +3,9 @@ contacts are the train's two pairs and the cube's touching neighbours."""
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from device_copies import redone_step  # noqa: E402
 
@@ -24,9 +27,6 @@ def test_each_device_array_made_is_counted_with_its_bytes(monkeypatch):
     """counting_allocations: device_array, device_array_like and to_device each count one array with
     its bytes (by caller: here no colsim function, "elsewhere"); a copy into an array made before
     (to_device's `to`) makes none."""
-    import numpy as np
-    import pytest
-
     cuda = pytest.importorskip("numba.cuda")
     from device_copies import counting_allocations
 
