@@ -107,6 +107,14 @@ fi
 # REST_COLUMNS (names without .nc, e.g. "r0_6_a5_seed1") picks some of them; a run that finds its
 # checkpoint in results/gpu-rest (git-ignored: kept on a warm machine between calls) goes on from it.
 # Each finished run's steps are split by phase (`benchmarks gpu --trajectories`) in its log.
+phases() {   # phases RUN LOG: RUN's steps (a collapse's or a pour's file) split by phase, appended to LOG
+    python3 -m benchmarks --results "$(dirname "$2")" gpu --spheres --trajectories "$1" 2>&1 | grep "^|" >> "$2"
+}
+profile_top() {   # profile_top BASE: BASE.prof's 30 functions of most own time, appended to BASE.log
+    [ -e "$1.prof" ] || return 0
+    python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" "$1.prof" \
+        >> "$1.log" 2>&1 || true
+}
 rm -rf /tmp/rest-out /tmp/pour-out
 for column in .gpu/rest/*.nc; do
     if [ -n "${REST_COLUMNS:-}" ] && [[ " $REST_COLUMNS " != *" $(basename "$column" .nc) "* ]]; then continue; fi
@@ -120,8 +128,7 @@ for column in .gpu/rest/*.nc; do
             --input "$column" --device cuda --threads "$(nproc)" --checkpoint-every 50 "${flags[@]}" \
             --output "results/gpu-rest/$name.nc" > "$out/$name.log" 2>&1 \
             && python3 -m colsim.cli analyse --input "results/gpu-rest/$name.nc" --output "$out/$name.analysis.nc" >> "$out/$name.log" 2>&1 \
-            && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "results/gpu-rest/$name.nc" 2>&1 \
-                | grep "^|" >> "$out/$name.log" \
+            && phases "results/gpu-rest/$name.nc" "$out/$name.log" \
             || echo "$name: stopped or failed (exit $?); see rest.tgz"
         echo "$name: $(( $(date +%s) - start )) s of wall"; grep "^GPU busy" "$out/$name.log" || true
         tail -n 3 "$out/$name.log"
@@ -140,11 +147,6 @@ done
 # timing; a command stopped by its limit writes none): their statistics (NAME.pack.prof,
 # NAME.collapse.prof) and, in the logs, the 30 functions of most own time come back in pour.tgz:
 # where a GPU step's wall goes outside the kernels (the collapse's busy share at r0 = 6 was 28 %).
-profile_top() {   # profile_top BASE: BASE.prof's 30 functions of most own time, appended to BASE.log
-    [ -e "$1.prof" ] || return 0
-    python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" "$1.prof" \
-        >> "$1.log" 2>&1 || true
-}
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
@@ -160,8 +162,7 @@ for settings in .gpu/pour/*.pack.yaml; do
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
     grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
-    [ -e "$work/packing.nc" ] && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/packing.nc" \
-        2>&1 | grep "^|" >> "$out/$name.pack.log" || true   # the pour's steps split by phase
+    [ -e "$work/packing.nc" ] && phases "$work/packing.nc" "$out/$name.pack.log" || true
     profile_top "$out/$name.pack"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
@@ -173,8 +174,7 @@ for settings in .gpu/pour/*.pack.yaml; do
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
         && python3 -m colsim.cli analyse --input "$work/collapse.nc" --output "$out/$name.analysis.nc" \
             >> "$out/$name.collapse.log" 2>&1 \
-        && python3 -m benchmarks --results "$out" gpu --spheres --trajectories "$work/collapse.nc" 2>&1 \
-            | grep "^|" >> "$out/$name.collapse.log" \
+        && phases "$work/collapse.nc" "$out/$name.collapse.log" \
         || echo "$name: the collapse stopped or failed (exit $?); see pour.tgz"
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
     grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 4 "$out/$name.collapse.log"   # h_inf, phases

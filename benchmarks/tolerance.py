@@ -29,15 +29,11 @@ from pathlib import Path
 import numpy as np
 
 import record
+from scatter import standard_deviation
 from colsim import io
 from colsim.stages.analyse import measure_deposit
 from colsim.stages.collapse import CollapseSettings, collapse
 from colsim.solvers import make_solver
-
-
-def _sd(values) -> float:
-    """The sample standard deviation, NaN for fewer than two values."""
-    return float(np.std(values, ddof=1)) if len(values) > 1 else np.nan
 
 
 def run_one(column: Path, solver_name: str, tolerance: float | None, steps: int,
@@ -93,7 +89,8 @@ def report(records: list[dict]) -> None:
         for name in sorted({label(r) for r in records if r["aspect_ratio"] == a}):
             runs = [r for r in records if r["aspect_ratio"] == a and label(r) == name]
             h, out = ([r[q] for r in runs] for q in ("h_inf_over_r0", "runout_over_r0"))
-            table.row(f"{a:g}", name, len(runs), f"{np.mean(h):.3f} ({_sd(h):.3f})", f"{np.mean(out):.3f} ({_sd(out):.3f})",
+            table.row(f"{a:g}", name, len(runs), f"{np.mean(h):.3f} ({standard_deviation(h):.3f})",
+                      f"{np.mean(out):.3f} ({standard_deviation(out):.3f})",
                       f"{np.mean([r['cpu_s'] for r in runs]):.0f}",
                       f"{np.mean([r['mean_iterations'] for r in runs]):.0f}")
 
