@@ -33,7 +33,7 @@ import record   # noqa: E402
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
          "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
-         "device_copies", "ptx", "host_work", "scatter")
+         "device_copies", "ptx", "host_work", "scatter", "kernel_trace")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -65,6 +65,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "ptx": _card_compiler([]),
             "host_work": [*c, "--repeat", "1"],
             "scatter": None,
+            "kernel_trace": None,
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -79,6 +80,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "ptx": _card_compiler([]),
         "host_work": c,
         "scatter": None,
+        "kernel_trace": None,
     }[name]
 
 
@@ -138,7 +140,8 @@ def run_all(quick: bool) -> int:
                        "cuda_operator": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
                        "gpu": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
                        "device_copies": "no GPU; NUMBA_ENABLE_CUDASIM=1 runs it on numba's simulator",
-                       "scatter": "a study of collapses on a given column and run settings, not a timing"}[name]
+                       "scatter": "a study of collapses on a given column and run settings, not a timing",
+                       "kernel_trace": "a trace of a command on a GPU (benchmarks/gpu_machine.sh's POUR_PROFILE)"}[name]
                 print(f"\n## {name}: skipped ({why})", flush=True)
                 continue
             print(f"\n## {name} {' '.join(argv)}", flush=True)

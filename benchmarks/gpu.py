@@ -26,7 +26,9 @@ diameter (one step of each first, to compile the kernels), and where the GPU's s
 (detection, assembly, the warm start's matching, the solver's set-up, the overlap check), and the
 share of the GPU's steps in which a kernel ran (NVML's utilisation, sampled: the issue's "kernels at
 least 80 % of a step"; :func:`kernels_busy`); with --profile
-FOLDER, cProfile's statistics of each column's steps on each device.
+FOLDER, cProfile's statistics of each column's steps on each device; with --kernel-trace FOLDER, the
+first --trace-steps steps on the GPU again with every kernel traced (benchmarks/kernel_trace.py: the
+card's busy share read from its own record, its idle gaps by length, the kernels of most GPU time).
 
 The column is cuda_operator.py's synthetic lattice (about 3 contacts a sphere, aspect ratio 5), its
 spheres of unit mass and inertia, loaded by gravity over one step (dt 1e-3): c = S (B u_free + gap),
@@ -58,6 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
+import kernel_trace
 import record
 from cuda_operator import DIAMETER, lattice_contacts, lattice_positions
 from colsim.engine.cones import scales_of_diagonal
@@ -131,6 +134,48 @@ def start_of(spheres: int) -> tuple[_Iteration, ContactOperator, np.ndarray, np.
     mu_s, mu_r_s = contacts.mu * s[:, 0] / s[:, 1], contacts.mu_r * s[:, 0] / s[:, 3]
     start = _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, np.zeros(5 * contacts.m), s, 0.9, operator=operator)
     return start, operator, contacts.mu, contacts.mu_r
+
+
+#: the launch bounds (threads a block, blocks an SM at least) that --register-variants compiles APGD's
+#: projection kernel with, besides none: ptxas for sm_90 (CUDA 13.0, here) gives it 112 registers a
+#: thread without bounds (two blocks of 256 an SM: a quarter of the threads an SM can hold), 80 with
+#: (256, 3) and 64 with (256, 4), spilling 184 and 308 bytes a thread
+REGISTER_VARIANTS = ((256, 3), (256, 4))
+
+
+def projection_variant(bounds: tuple[int, int]):
+    """APGD's projection kernel (colsim.solvers.apgd_cuda._project_kernel, the largest of a trial step)
+    compiled anew with launch bounds `bounds`, which cap its registers: the same arithmetic, so the
+    same iterate; on numba's simulator, which has no launch bounds, compiled without."""
+    from numba import cuda
+    from numba.core import config as numba_config
+
+    from colsim.solvers import apgd_cuda
+
+    function = apgd_cuda._project_kernel.py_func
+    return cuda.jit(function) if numba_config.ENABLE_CUDASIM else cuda.jit(launch_bounds=bounds)(function)
+
+
+@contextlib.contextmanager
+def projection_kernel(kernel):
+    """The block's CUDA iterations made (their trial steps prepared) with `kernel` as the projection's."""
+    from colsim.solvers import apgd_cuda
+
+    before, apgd_cuda._project_kernel = apgd_cuda._project_kernel, kernel
+    try:
+        yield
+    finally:
+        apgd_cuda._project_kernel = before
+
+
+def registers_of(kernel) -> str:
+    """The registers a thread of `kernel` uses on this GPU, as numba-cuda reports them ("-": unknown,
+    e.g. on the simulator)."""
+    try:
+        found = kernel.get_regs_per_thread()
+    except Exception:   # the simulator, or a numba-cuda without it
+        return "-"
+    return str(next(iter(found.values()))) if isinstance(found, dict) and found else str(found)
 
 
 def timed(run, iterations: int, mu, mu_r, synchronise=lambda: None) -> float:
@@ -307,13 +352,15 @@ def kernels_busy(interval: float = 0.05):
             found.update(busy=float(np.mean(readings)) / 100.0, samples=len(readings))
 
 
-def collapse_steps(column: str, steps: int, device: str, profile: str | None = None) -> dict:
+def collapse_steps(column: str, steps: int, device: str, profile: str | None = None,
+                   trace: str | None = None) -> dict:
     """The first `steps` steps of `column`'s collapse with APGD on `device`: wall seconds a step, the
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
     and bookkeeping, the collapse's frames and checkpoints between steps; the part of it in redone
     steps, and their count, apart), iterations a step, the end positions, and on a GPU the share of
     the wall time its kernels ran (:func:`kernels_busy`); profile: a file for cProfile's statistics
-    of the steps (None: none)."""
+    of the steps (None: none); trace: a file for the steps' kernel trace (benchmarks/kernel_trace.py:
+    the card's busy share, idle gaps and kernels; None: none)."""
     from colsim import io
     from colsim.solvers import make_solver
     from colsim.stages.collapse import collapse
@@ -325,10 +372,13 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
                          apgd={"kernel": "cuda"} if device == "cuda" else {})
     busy = contextlib.nullcontext({"busy": math.nan, "samples": 0}) if device == "cpu" else kernels_busy()
     start = time.perf_counter()
-    with _profiled(profile), busy as kernels:
+    with _profiled(profile), busy as kernels, _traced(trace) as traced:
         run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
                        stop_after=steps)
     wall = time.perf_counter() - start
+    if trace is not None:
+        kernel_trace.write_summary(traced["found"], traced["why"], f"kernel trace of the first {steps} steps of "
+                                   f"{column} on {device} ({wall:.1f} s with the trace)", trace)
     d = run.diagnostics
     shares = {name: sum(getattr(x, f"{name}_time") for x in d) / wall for name in PHASES}
     redone = [x for x in d if x.redone]   # their rest: mostly the attempts they threw away
@@ -363,6 +413,11 @@ def step_times(trajectory: str) -> dict:
             "s_a_step_by_third": thirds}
 
 
+def _traced(path: str | None):
+    """The block's kernels traced (benchmarks/kernel_trace.py), or nothing when path is None."""
+    return contextlib.nullcontext({}) if path is None else kernel_trace.kernels_traced()
+
+
 @contextlib.contextmanager
 def _profiled(path: str | None):
     """cProfile the block into `path` (pstats), or nothing when None."""
@@ -392,10 +447,18 @@ def main(argv=None):
                         "files) whose steps' wall time to split by phase, as the rest stage's runs on a GPU")
     parser.add_argument("--profile", default=None, help="a folder for cProfile's statistics of each column's "
                         "collapse steps on each device (COLUMN-DEVICE.pstats)")
+    parser.add_argument("--kernel-trace", default=None, metavar="FOLDER", help="after each column's timed GPU "
+                        "steps, its first --trace-steps steps again with their kernels traced (slower; "
+                        "benchmarks/kernel_trace.py), the tables in FOLDER/COLUMN.kernels")
+    parser.add_argument("--trace-steps", type=int, default=20, help="the steps traced (default 20)")
+    parser.add_argument("--register-variants", action="store_true", help="also time the iterations on each "
+                        "--spheres lattice with APGD's projection kernel compiled with each of REGISTER_VARIANTS' "
+                        "launch bounds (fewer registers, more threads an SM), and say whether the iterate is the same")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
 
+    from colsim.solvers import apgd_cuda
     from colsim.solvers.apgd_cuda import CudaIteration
 
     device = ("simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name if cuda.is_available()
@@ -444,6 +507,30 @@ def main(argv=None):
                         "simulator": bool(numba_config.ENABLE_CUDASIM), "iterations": args.iterations,
                         "relative_difference": difference, "bytes_an_iteration": moved,
                         "over_copy_bound": over[0], "over_nominal_bound": over[1]})
+    if args.spheres and args.register_variants:
+        variants = record.table(["spheres", "projection kernel's launch bounds", "registers a thread",
+                                 f"GPU ms an iteration ({device})", "same iterate as without bounds"],
+                                title="the projection kernel's registers")
+    for spheres in args.spheres if args.register_variants else ():
+        cpu, operator, mu, mu_r = start_of(spheres)
+        reference = None
+        for bounds in (None, *REGISTER_VARIANTS):
+            try:
+                kernel = apgd_cuda._project_kernel if bounds is None else projection_variant(bounds)
+                with projection_kernel(kernel):
+                    timed(CudaIteration.like(cpu, operator, mu, mu_r), 1, mu, mu_r, cuda.synchronize)   # compiles it
+                    run = CudaIteration.like(cpu, operator, mu, mu_r)
+                    seconds = timed(run, args.iterations, mu, mu_r, cuda.synchronize)
+            except Exception as error:   # a numba-cuda without launch bounds, say: the others still run
+                variants.row(operator.n, bounds, "-", f"failed: {type(error).__name__}: {str(error)[:120]}", "-")
+                continue
+            reference = run if bounds is None else reference
+            same = reference is not None and bool(np.array_equal(run.host_x(), reference.host_x()))
+            variants.row(operator.n, "none" if bounds is None else f"{bounds[0]} threads, {bounds[1]} blocks an SM",
+                         registers_of(kernel), f"{1e3 * seconds / args.iterations:.3f}", "yes" if same else "NO",
+                         data={"spheres": operator.n, "contacts": operator.m, "launch_bounds": bounds,
+                               "registers": registers_of(kernel), "gpu_ms": 1e3 * seconds / args.iterations,
+                               "same_iterate": same, "device": device, "iterations": args.iterations})
     if args.spheres:
         found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",
                               "GPU vs CPU", "same pairs"], title="the swept pairs of contact detection")
@@ -499,6 +586,10 @@ def collapse_table(args, device: str) -> None:
         cpu, gpu = (collapse_steps(column, runs[where], where, args.profile and str(
             Path(args.profile) / f"{Path(column).stem}-{where}.pstats")) if runs[where] else None
             for where in ("cpu", "cuda"))
+        if args.kernel_trace and args.steps:
+            Path(args.kernel_trace).mkdir(parents=True, exist_ok=True)
+            collapse_steps(column, min(args.trace_steps, args.steps), "cuda",
+                           trace=str(Path(args.kernel_trace) / f"{Path(column).stem}.kernels"))
         shares = gpu["shares"]
         rest = 1.0 - sum(shares.values())
         if cpu is None:

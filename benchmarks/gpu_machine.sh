@@ -110,7 +110,9 @@ fi
 phases() {   # phases RUN LOG: RUN's steps (a collapse's or a pour's file) split by phase, appended to LOG
     python3 -m benchmarks --results "$(dirname "$2")" gpu --spheres --trajectories "$1" 2>&1 | grep "^|" >> "$2"
 }
-profile_top() {   # profile_top BASE: BASE.prof's 30 functions of most own time, appended to BASE.log
+profile_top() {   # profile_top BASE: BASE.prof's 30 functions of most own time and BASE.kernels (the
+                  # kernel trace's tables), appended to BASE.log
+    [ -e "$1.kernels" ] && cat "$1.kernels" >> "$1.log"
     [ -e "$1.prof" ] || return 0
     python3 -c "import pstats, sys; pstats.Stats(sys.argv[1]).sort_stats('tottime').print_stats(30)" "$1.prof" \
         >> "$1.log" 2>&1 || true
@@ -143,21 +145,26 @@ done
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
 # and the analysis come back in pour.tgz; the files stay in results/gpu-pour/NAME there (git-ignored:
 # kept on a warm machine between calls; a packing already there is not poured again).
-# With POUR_PROFILE=1 the pour and the collapse run under cProfile (slower, so not the target's
-# timing; a command stopped by its limit writes none): their statistics (NAME.pack.prof,
-# NAME.collapse.prof) and, in the logs, the 30 functions of most own time come back in pour.tgz:
-# where a GPU step's wall goes outside the kernels (the collapse's busy share at r0 = 6 was 28 %).
+# With POUR_PROFILE=1 the pour and the collapse run under cProfile and PyTorch's CUDA profiler
+# (`benchmarks kernel_trace`: slower, so not the target's timing; a command stopped by its limit
+# still writes both): their statistics (NAME.pack.prof, NAME.collapse.prof) and, in the logs, the 30
+# functions of most own time, the card's busy share between its first and last kernel, its idle gaps
+# by length and the kernels of most GPU time come back in pour.tgz: where a GPU step's wall goes
+# outside the kernels, and which kernels take it (the collapse's busy share at r0 = 6 was 28 %).
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
     mkdir -p "$out" "$work"
-    pack_profile=(); collapse_profile=()
+    pack_run=(-m colsim.cli); collapse_run=(-m colsim.cli)
     if [ "${POUR_PROFILE:-0}" = 1 ]; then
-        pack_profile=(-m cProfile -o "$out/$name.pack.prof"); collapse_profile=(-m cProfile -o "$out/$name.collapse.prof")
+        pack_run=(-m benchmarks --results "$out" kernel_trace --cprofile "$out/$name.pack.prof"
+                  --summary "$out/$name.pack.kernels" colsim.cli)
+        collapse_run=(-m benchmarks --results "$out" kernel_trace --cprofile "$out/$name.collapse.prof"
+                      --summary "$out/$name.collapse.kernels" colsim.cli)
     fi
     start=$(date +%s)
     [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
-    busy timeout "${POUR_LIMIT:-300}" python3 "${pack_profile[@]}" -m colsim.cli pack --settings "$settings" --max-spheres 1000000 \
+    busy timeout "${POUR_LIMIT:-300}" python3 "${pack_run[@]}" pack --settings "$settings" --max-spheres 1000000 \
         --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
         || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
     poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
@@ -168,7 +175,7 @@ for settings in .gpu/pour/*.pack.yaml; do
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
         --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
-    busy timeout "${REST_LIMIT:-240}" python3 "${collapse_profile[@]}" -m colsim.cli collapse \
+    busy timeout "${REST_LIMIT:-240}" python3 "${collapse_run[@]}" collapse \
         --settings ".gpu/pour/$name.collapse.yaml" \
         --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \
         --output "$work/collapse.nc" >> "$out/$name.collapse.log" 2>&1 \
@@ -184,12 +191,16 @@ done
 
 # The r0 = 13 steps (issue 46's "at most 1 s a step over the first 100 steps"): no 700,000-sphere
 # pour fits one call, so the column is tiled from the r0 = 6 one; the GPU's steps only (the host's 16
-# threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres).
+# threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres). BIG_TRACE=K
+# then runs its first K steps again with their kernels traced (`benchmarks gpu --kernel-trace`): the
+# tables come back as COLUMN.kernels (which kernels take APGD's three quarters of a step).
 if [[ "$stages" == *" big "* ]]; then
     tiled_from=.gpu/rest/r0_6_a5_seed1.nc
     [ -e "$tiled_from" ] || tiled_from=results/gpu-pour/r0_6_seed1/column.nc
     echo "big: tiled from ${BIG_SOURCE:-$tiled_from}"
     python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu --spheres \
         --columns "${BIG_SOURCE:-$tiled_from}" --tile "${BIG_R0:-13}" \
-        --steps "${BIG_STEPS:-100}" --cpu-steps 0 || echo "benchmarks gpu (big): failed (exit $?)"
+        --steps "${BIG_STEPS:-100}" --cpu-steps 0 \
+        ${BIG_TRACE:+--kernel-trace "${OUT:-results/benchmarks}" --trace-steps "$BIG_TRACE"} \
+        || echo "benchmarks gpu (big): failed (exit $?)"
 fi

@@ -12,9 +12,12 @@ with the simulator off, each kernel is compiled with each of its argument types 
 `numba.cuda.compile_ptx` (libNVVM; no driver, no card), once by default and once with libNVVM's
 `-fma=0` (benchmarks/unfused.py). The table: each kernel, its signatures, its PTX's
 double-precision instructions, and how many of them are fused multiply-adds (fma.rn.f64), by default
-and unfused. It needs numba-cuda, the compiler a card's run uses (`pip install -e .[gpu]`; numba's
-own deprecated numba.cuda fails to type some of the kernels, e.g. `max` in a device function, which
-numba-cuda compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda).
+and unfused; where CUDA's ptxas is at hand (CUDA_HOME/bin, or PATH), also the registers a thread and
+the bytes spilled that ptxas gives the default PTX for the card, and for sm_90 how many threads an SM
+then holds in blocks of 256 (of 2,048: the registers are what limits a large kernel's occupancy).
+It needs numba-cuda, the compiler a card's run uses (`pip install -e .[gpu]`; numba's own deprecated
+numba.cuda fails to type some of the kernels, e.g. `max` in a device function, which numba-cuda
+compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda).
 Exit 1 if a kernel does not compile or an unfused one still holds an FMA.
 """
 from __future__ import annotations
@@ -24,6 +27,8 @@ import importlib
 import json
 import os
 import pickle
+import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -80,13 +85,65 @@ def record_launches(folder: Path) -> dict[tuple[str, str], set]:
     return launches
 
 
-def f64_instructions(function, signature, cc: tuple[int, int], **options) -> list[str]:
-    """The double-precision instructions (e.g. "fma.rn.f64") of `function` compiled to PTX for `cc` with
-    argument types `signature` (numba-cuda's compile_ptx: libNVVM, no driver, no card)."""
+def ptx_of(function, signature, cc: tuple[int, int], **options) -> str:
+    """`function` compiled to PTX for `cc` with argument types `signature` (numba-cuda's compile_ptx:
+    libNVVM, no driver, no card)."""
     from numba import cuda
 
-    ptx, _ = cuda.compile_ptx(function, signature, cc=cc, **options)
+    return cuda.compile_ptx(function, signature, cc=cc, **options)[0]
+
+
+def f64_instructions(function, signature, cc: tuple[int, int], **options) -> list[str]:
+    """The double-precision instructions (e.g. "fma.rn.f64") of `function` compiled to PTX for `cc` with
+    argument types `signature`."""
+    ptx = ptx_of(function, signature, cc, **options)
     return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+
+
+#: an SM of compute capability 9.0 (H100, H200): its registers, the most warps it holds, and a warp's
+#: registers are allotted in units of this many (CUDA's occupancy calculator)
+SM_REGISTERS, SM_WARPS, REGISTER_UNIT = 65_536, 64, 256
+
+
+def ptxas() -> str | None:
+    """CUDA's PTX assembler: CUDA_HOME's, else the one on PATH, else None."""
+    home = os.environ.get("CUDA_HOME") or os.environ.get("CUDA_PATH") or "/usr/local/cuda"
+    found = Path(home) / "bin" / "ptxas"
+    return str(found) if found.exists() else shutil.which("ptxas")
+
+
+def resources(ptx: str, cc: tuple[int, int]) -> dict | None:
+    """What ptxas makes of a kernel's PTX for sm_<cc>: {registers (a thread), spill_stores,
+    spill_loads (bytes a thread)}; None without ptxas. A PTX newer than this ptxas (libNVVM's wheel
+    can be) is assembled with its .version line set to the newest this ptxas names (numba's kernels
+    use nothing newer)."""
+    assembler = ptxas()
+    if assembler is None:
+        return None
+    with tempfile.TemporaryDirectory(prefix="ptxas-") as scratch:
+        path = Path(scratch) / "kernel.ptx"
+        for _ in range(2):
+            path.write_text(ptx)
+            done = subprocess.run([assembler, f"-arch=sm_{cc[0]}{cc[1]}", "-v", str(path), "-o", os.devnull],
+                                  capture_output=True, text=True)
+            newest = re.search(r"Unsupported \.version \S+; current version is '([\d.]+)'", done.stderr)
+            if done.returncode == 0 or newest is None:
+                break
+            ptx = re.sub(r"^\.version \S+", f".version {newest.group(1)}", ptx, count=1, flags=re.M)
+    registers = re.search(r"Used (\d+) registers", done.stderr)
+    spills = re.search(r"(\d+) bytes spill stores, (\d+) bytes spill loads", done.stderr)
+    if done.returncode or registers is None:
+        raise RuntimeError(f"ptxas: {done.stderr.strip()[-300:]}")
+    return {"registers": int(registers.group(1)), "spill_stores": int(spills.group(1)) if spills else 0,
+            "spill_loads": int(spills.group(2)) if spills else 0}
+
+
+def threads_an_sm(registers: int, block: int = 256) -> int:
+    """The threads an SM of compute capability 9.0 holds of a kernel with `registers` a thread in blocks
+    of `block` threads, as its registers allow (whole blocks; shared memory not counted)."""
+    per_warp = -(-registers * 32 // REGISTER_UNIT) * REGISTER_UNIT
+    warps = min(SM_WARPS, SM_REGISTERS // per_warp)
+    return (warps // (block // 32)) * block
 
 
 def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
@@ -105,11 +162,15 @@ def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
     rows = []
     for (module, name), signatures in sorted(launches.items()):
         row = {"module": module, "kernel": name, "signatures": len(signatures), "f64": 0, "fma": 0,
-               "fma_unfused": 0, "error": ""}
+               "fma_unfused": 0, "registers": None, "spill_stores": None, "spill_loads": None, "error": ""}
         try:
             function = getattr(importlib.import_module(module), name).py_func
             for signature in signatures:
-                fused = f64_instructions(function, signature, cc)
+                ptx = ptx_of(function, signature, cc)
+                fused = [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+                used = resources(ptx, cc)
+                for key, value in (used or {}).items():   # the most over the kernel's signatures
+                    row[key] = max(row[key] or 0, value)
                 with unfused.unfused_compilation():
                     separate = f64_instructions(function, signature, cc)
                 row["f64"] += len(fused)
@@ -173,11 +234,16 @@ def main(argv=None) -> int:
         child("record", folder, args.cc)
         child("compile", folder, args.cc)
         rows = json.loads((folder / "compiled.json").read_text())
-    table = record.table(["kernel", "signatures", "f64 instructions", "fma.rn.f64", "fma.rn.f64 unfused", "error"],
+    table = record.table(["kernel", "signatures", "f64 instructions", "fma.rn.f64", "fma.rn.f64 unfused",
+                          f"registers a thread (ptxas, sm_{cc[0]}{cc[1]})", "spilled bytes stored, loaded",
+                          "threads an SM by registers (blocks of 256)", "error"],
                          title=f"colsim's CUDA kernels compiled to PTX for sm_{cc[0]}{cc[1]}")
     for row in rows:
+        known = row.get("registers") is not None
         table.row(f"{row['module'].rsplit('.', 1)[-1]}.{row['kernel']}", row["signatures"], row["f64"], row["fma"],
-                  row["fma_unfused"], row["error"], data=row)
+                  row["fma_unfused"], row["registers"] if known else "-",
+                  f"{row['spill_stores']}, {row['spill_loads']}" if known else "-",
+                  threads_an_sm(row["registers"]) if known and cc == (9, 0) else "-", row["error"], data=row)
     failed = [row["kernel"] for row in rows if row["error"] or row["fma_unfused"]]
     print(f"{len(rows)} kernels, {sum(row['signatures'] for row in rows)} signatures; "
           f"{sum(row['fma'] for row in rows)} FMAs by default, {sum(row['fma_unfused'] for row in rows)} unfused")

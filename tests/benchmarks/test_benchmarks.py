@@ -21,7 +21,8 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 import record   # noqa: E402
 
 NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "host_work",
-         "packings", "ptx", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory")
+         "packings", "ptx", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory",
+         "kernel_trace")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 
@@ -383,3 +384,42 @@ def test_every_cuda_kernel_a_collapse_launches_compiles_for_a_card(tmp_path):
             "colsim.engine.cuda_warm_start", "colsim.solvers.apgd_cuda"} <= modules
     assert all(row["error"] == "" and row["fma_unfused"] == 0 for row in rows), [r for r in rows if r["error"]]
     assert sum(row["fma"] for row in rows) > 0
+
+
+ADD_ONE_PTX = """.version 99.9
+.target sm_90
+.address_size 64
+
+.visible .entry add_one(.param .u64 p)
+{
+	.reg .b64 	%rd<3>;
+	.reg .f64 	%fd<3>;
+	ld.param.u64 	%rd1, [p];
+	cvta.to.global.u64 	%rd2, %rd1;
+	ld.global.f64 	%fd1, [%rd2];
+	add.f64 	%fd2, %fd1, 0d3FF0000000000000;
+	st.global.f64 	[%rd2], %fd2;
+	ret;
+}
+"""
+
+
+def test_an_sm_holds_the_threads_its_registers_allow():
+    """benchmarks/ptx.py's occupancy by registers on compute capability 9.0 (64 K registers and 64 warps
+    an SM, a warp's registers in units of 256), blocks of 256 threads: APGD's projection kernel's 112
+    registers a thread allow two blocks (18 warps' worth), 80 three, 64 four, 32 the whole 2,048."""
+    import ptx
+
+    assert [ptx.threads_an_sm(r) for r in (112, 80, 64, 32, 255)] == [512, 768, 1024, 2048, 256]
+
+
+def test_ptxas_reports_a_kernel_s_registers_even_from_newer_ptx():
+    """ptx.resources: ptxas assembles a hand-written kernel (x += 1 in double) for sm_90 and reports
+    its registers and no spills; a .version newer than ptxas knows is set to the one it names. Needs
+    CUDA's ptxas (CUDA_HOME/bin or PATH), else skipped."""
+    import ptx
+
+    if ptx.ptxas() is None:
+        pytest.skip("no ptxas here (a CUDA toolkit: CUDA_HOME)")
+    used = ptx.resources(ADD_ONE_PTX, (9, 0))
+    assert 0 < used["registers"] <= 16 and used["spill_stores"] == used["spill_loads"] == 0
