@@ -9,7 +9,8 @@
 # Records go to $OUT (the device tool's folder that comes back), else results/benchmarks.
 # STAGES (default "bench rest pour") picks what runs, in that order: the benchmark, "scatter" (not by
 # default: the same-answer runs on both devices at once), the collapses of .gpu/rest/ to rest, the
-# pours of .gpu/pour/ with their collapses; "big" (not by default, last)
+# pours of .gpu/pour/ with their collapses; "pool" (not by default: a step's allocations, below); "big"
+# (not by default, last)
 # adds the first BIG_STEPS (100) steps of an r0 = BIG_R0 (13) column on the GPU, tiled from
 # BIG_SOURCE (benchmarks/tiling.py: about 657,000 spheres from r0 = 6, a timing, not a pour): by
 # default .gpu/rest/r0_6_a5_seed1.nc, else the column of a pour of r0 = 6 made on this machine
@@ -188,6 +189,20 @@ for settings in .gpu/pour/*.pack.yaml; do
     profile_top "$out/$name.collapse"
     tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
 done
+
+# What a step's device allocations cost ("pool", not by default): the first POOL_STEPS (100) steps of
+# POOL_COLUMN (default the pour stage's r0 = 6 column) on the GPU twice, with numba-cuda's own
+# allocator and with benchmarks/memory_pool.py's pool (NUMBA_CUDA_MEMORY_MANAGER): the same steps and
+# iterations, so the difference in seconds a step (and in the card's busy share) is the allocations'.
+if [[ "$stages" == *" pool "* ]]; then
+    column=${POOL_COLUMN:-results/gpu-pour/r0_6_seed1/column.nc}
+    for manager in default benchmarks.memory_pool; do
+        echo "pool: $column, device memory from $manager"
+        NUMBA_CUDA_MEMORY_MANAGER=$manager python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu \
+            --spheres --columns "$column" --steps "${POOL_STEPS:-100}" --cpu-steps 0 \
+            || echo "benchmarks gpu (pool, $manager): failed (exit $?)"
+    done
+fi
 
 # The r0 = 13 steps (issue 46's "at most 1 s a step over the first 100 steps"): no 700,000-sphere
 # pour fits one call, so the column is tiled from the r0 = 6 one; the GPU's steps only (the host's 16
