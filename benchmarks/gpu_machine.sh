@@ -152,6 +152,7 @@ done
 # functions of most own time, the card's busy share between its first and last kernel, its idle gaps
 # by length and the kernels of most GPU time come back in pour.tgz: where a GPU step's wall goes
 # outside the kernels, and which kernels take it (the collapse's busy share at r0 = 6 was 28 %).
+# POUR_PROFILE=collapse: the collapse alone so (the pour at its own speed).
 for settings in .gpu/pour/*.pack.yaml; do
     [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
@@ -160,6 +161,8 @@ for settings in .gpu/pour/*.pack.yaml; do
     if [ "${POUR_PROFILE:-0}" = 1 ]; then
         pack_run=(-m benchmarks --results "$out" kernel_trace --cprofile "$out/$name.pack.prof"
                   --summary "$out/$name.pack.kernels" colsim.cli)
+    fi
+    if [ "${POUR_PROFILE:-0}" = 1 ] || [ "${POUR_PROFILE:-0}" = collapse ]; then
         collapse_run=(-m benchmarks --results "$out" kernel_trace --cprofile "$out/$name.collapse.prof"
                       --summary "$out/$name.collapse.kernels" colsim.cli)
     fi
