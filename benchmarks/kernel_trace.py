@@ -177,17 +177,23 @@ def kernels_traced():
     result = {"found": None, "why": ""}
     profiler, result["why"] = _profiler()
     if profiler is not None:
-        profiler.start()
+        try:
+            profiler.start()
+        except Exception as error:   # CUPTI refused, say: the block still runs, untraced
+            profiler, result["why"] = None, f"the profiler did not start ({type(error).__name__}: {error})"
     try:
         yield result
     finally:
         if profiler is not None:
-            profiler.stop()
-            with tempfile.TemporaryDirectory() as scratch:
-                path = os.path.join(scratch, "trace.json")
-                profiler.export_chrome_trace(path)
-                result["found"] = read_chrome_trace(path)
-            if not (result["found"][0] or result["found"][1]):
+            try:
+                profiler.stop()
+                with tempfile.TemporaryDirectory() as scratch:
+                    path = os.path.join(scratch, "trace.json")
+                    profiler.export_chrome_trace(path)
+                    result["found"] = read_chrome_trace(path)
+            except Exception as error:   # the block's own outcome stands; the trace is lost
+                result["found"], result["why"] = None, f"the trace failed ({type(error).__name__}: {error})"
+            if result["found"] is not None and not (result["found"][0] or result["found"][1]):
                 result["found"], result["why"] = None, "the trace holds no kernel (CUPTI saw none)"
 
 

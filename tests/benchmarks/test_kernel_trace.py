@@ -77,3 +77,29 @@ def test_a_command_runs_as_python_m_and_keeps_its_exit_status(tmp_path, monkeypa
     assert marker.read_text() == "ran"
     assert "no kernel trace: no GPU in this test" in summary.read_text()
     assert profile.stat().st_size > 0
+
+
+def test_a_profiler_that_fails_leaves_the_block_to_run_untraced(monkeypatch):
+    """A profiler whose start raises (CUPTI refused, say): the block runs and the result says why;
+    one whose export raises: the block's work stands and the trace is reported lost."""
+    class Refusing:
+        def start(self):
+            raise RuntimeError("CUPTI_ERROR_NOT_INITIALIZED")
+
+    class Losing:
+        def start(self):
+            pass
+
+        def stop(self):
+            pass
+
+        def export_chrome_trace(self, path):
+            raise OSError("disk full")
+
+    ran = []
+    for profiler, why in ((Refusing(), "did not start"), (Losing(), "the trace failed")):
+        monkeypatch.setattr(kernel_trace, "_profiler", lambda p=profiler: (p, ""))
+        with kernel_trace.kernels_traced() as trace:
+            ran.append(True)
+        assert trace["found"] is None and why in trace["why"]
+    assert ran == [True, True]
