@@ -39,6 +39,9 @@ import record
 
 #: the idle gaps' classes (upper bounds, us): launch latency, a launch's marshalling, host work, waits
 GAP_BOUNDS_US = (10.0, 100.0, 1_000.0, 10_000.0, 100_000.0, float("inf"))
+#: a gap at least this long (us) is not a step's own wait but a kernel's compilation, a file written,
+#: a frame: the "steady" busy share leaves such gaps out of the window
+LONG_GAP_US = 100_000.0
 
 
 def union_us(intervals: np.ndarray) -> float:
@@ -64,7 +67,8 @@ def idle_gaps_us(intervals: np.ndarray) -> np.ndarray:
 def summarise(kernels: list, copies: list, top: int = 25) -> dict:
     """The card's busy shares, idle gaps and top kernels from the kernels' and copies' (name, start
     us, duration us) lists: window_us (first start to last end of either), kernel_busy and copy_busy
-    (shares of the window), gaps (per class of :data:`GAP_BOUNDS_US`: count, total us), and by_kernel
+    (shares of the window), kernel_busy_steady (the share of the window less its gaps of at least
+    :data:`LONG_GAP_US`), gaps (per class of :data:`GAP_BOUNDS_US`: count, total us), and by_kernel
     (name, launches, total us), the `top` largest totals first."""
     everything = kernels + copies
     if not everything:
@@ -86,8 +90,11 @@ def summarise(kernels: list, copies: list, top: int = 25) -> dict:
         launches, total = totals.get(name, (0, 0.0))
         totals[name] = (launches + 1, total + duration)
     by_kernel = sorted(((name, n, total) for name, (n, total) in totals.items()), key=lambda row: -row[2])
+    long_gaps = float(gaps[gaps >= LONG_GAP_US].sum())
+    steady = window - long_gaps
     return {"window_us": window, "kernels": len(kernels), "copies": len(copies),
             "kernel_busy": union_us(intervals(kernels)) / window if window else float("nan"),
+            "kernel_busy_steady": union_us(intervals(kernels)) / steady if steady else float("nan"),
             "copy_busy": union_us(intervals(copies)) / window if window else float("nan"),
             "any_busy": union_us(both) / window if window else float("nan"),
             "gaps": classes, "by_kernel": by_kernel[:top], "kernel_names": len(totals)}
@@ -230,9 +237,11 @@ def print_summary(summary: dict) -> None:
     """The summary's three tables (record.table: printed and kept)."""
     window_ms = summary["window_us"] / 1e3
     busy = record.table(["window (first kernel to last) s", "kernels", "copies", "card busy with kernels",
-                         "with copies", "with either", "kernel names"], "the card over the command's window")
+                         "the same without gaps of 0.1 s or more", "with copies", "with either", "kernel names"],
+                        "the card over the command's window")
     busy.row(f"{window_ms / 1e3:.2f}", summary["kernels"], summary["copies"], f"{summary['kernel_busy']:.1%}",
-             f"{summary['copy_busy']:.1%}", f"{summary['any_busy']:.1%}", summary["kernel_names"],
+             f"{summary['kernel_busy_steady']:.1%}", f"{summary['copy_busy']:.1%}", f"{summary['any_busy']:.1%}",
+             summary["kernel_names"],
              data={k: v for k, v in summary.items() if k not in ("gaps", "by_kernel")})
     gaps = record.table(["idle gap", "gaps", "total ms", "share of the window"], "the card's idle gaps")
     for gap in summary["gaps"]:

@@ -36,6 +36,17 @@ def test_the_summary_splits_the_window_into_kernels_copies_and_gaps():
     assert counts[(0.0, 10.0)] == (1, 5.0) and counts[(10.0, 100.0)] == (1, 40.0)
     assert sum(c for c, _ in counts.values()) == 2
     assert summary["by_kernel"] == [("b", 1, 30.0), ("a", 2, 20.0)]
+    assert summary["kernel_busy_steady"] == summary["kernel_busy"]   # no gap of 0.1 s
+
+
+def test_the_steady_share_leaves_out_gaps_of_a_tenth_of_a_second():
+    """Three kernels of 1 ms, the second after a 0.5 s gap (a compilation), the third 1 ms after it:
+    busy 3 ms of a 504 ms window, and 3 ms of the 4 ms left without the long gap (75 %)."""
+    kernels = [("a", 0.0, 1_000.0), ("b", 501_000.0, 1_000.0), ("c", 503_000.0, 1_000.0)]
+    summary = summarise(kernels, [])
+    assert summary["kernel_busy"] == pytest.approx(3 / 504)
+    assert summary["kernel_busy_steady"] == pytest.approx(0.75)
+    assert [g["count"] for g in summary["gaps"]] == [0, 0, 0, 1, 0, 1]
 
 
 def test_a_chrome_trace_gives_its_kernels_and_copies(tmp_path):
