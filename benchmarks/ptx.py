@@ -96,7 +96,11 @@ def ptx_of(function, signature, cc: tuple[int, int], **options) -> str:
 def f64_instructions(function, signature, cc: tuple[int, int], **options) -> list[str]:
     """The double-precision instructions (e.g. "fma.rn.f64") of `function` compiled to PTX for `cc` with
     argument types `signature`."""
-    ptx = ptx_of(function, signature, cc, **options)
+    return f64_of(ptx_of(function, signature, cc, **options))
+
+
+def f64_of(ptx: str) -> list[str]:
+    """The double-precision instructions of a PTX text, in order."""
     return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
 
 
@@ -167,7 +171,7 @@ def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
             function = getattr(importlib.import_module(module), name).py_func
             for signature in signatures:
                 ptx = ptx_of(function, signature, cc)
-                fused = [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
+                fused = f64_of(ptx)
                 used = resources(ptx, cc)
                 for key, value in (used or {}).items():   # the most over the kernel's signatures
                     row[key] = max(row[key] or 0, value)
