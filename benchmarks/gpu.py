@@ -526,10 +526,11 @@ def main(argv=None):
                 continue
             reference = run if bounds is None else reference
             same = reference is not None and bool(np.array_equal(run.host_x(), reference.host_x()))
+            registers = registers_of(kernel)
             variants.row(operator.n, "none" if bounds is None else f"{bounds[0]} threads, {bounds[1]} blocks an SM",
-                         registers_of(kernel), f"{1e3 * seconds / args.iterations:.3f}", "yes" if same else "NO",
+                         registers, f"{1e3 * seconds / args.iterations:.3f}", "yes" if same else "NO",
                          data={"spheres": operator.n, "contacts": operator.m, "launch_bounds": bounds,
-                               "registers": registers_of(kernel), "gpu_ms": 1e3 * seconds / args.iterations,
+                               "registers": registers, "gpu_ms": 1e3 * seconds / args.iterations,
                                "same_iterate": same, "device": device, "iterations": args.iterations})
     if args.spheres:
         found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",

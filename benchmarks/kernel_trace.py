@@ -90,11 +90,11 @@ def summarise(kernels: list, copies: list, top: int = 25) -> dict:
         launches, total = totals.get(name, (0, 0.0))
         totals[name] = (launches + 1, total + duration)
     by_kernel = sorted(((name, n, total) for name, (n, total) in totals.items()), key=lambda row: -row[2])
-    long_gaps = float(gaps[gaps >= LONG_GAP_US].sum())
-    steady = window - long_gaps
+    steady = window - float(gaps[gaps >= LONG_GAP_US].sum())
+    kernel_time = union_us(intervals(kernels))
     return {"window_us": window, "kernels": len(kernels), "copies": len(copies),
-            "kernel_busy": union_us(intervals(kernels)) / window if window else float("nan"),
-            "kernel_busy_steady": union_us(intervals(kernels)) / steady if steady else float("nan"),
+            "kernel_busy": kernel_time / window if window else float("nan"),
+            "kernel_busy_steady": kernel_time / steady if steady else float("nan"),
             "copy_busy": union_us(intervals(copies)) / window if window else float("nan"),
             "any_busy": union_us(both) / window if window else float("nan"),
             "gaps": classes, "by_kernel": by_kernel[:top], "kernel_names": len(totals)}
