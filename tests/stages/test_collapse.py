@@ -116,3 +116,33 @@ def test_collapse_runs_on_to_rest_and_stops_there(packing):
         CollapseSettings(duration=4.0, max_duration=2.0)
 
 
+
+
+def test_the_rest_test_measures_only_the_frames_it_reads(packing, monkeypatch):
+    """The rest test measures a frame's deposit only once the energy is low and the frame lies in
+    the rest window, each frame once (DepositHistory), and comes to the same verdict at every frame
+    as the test on every frame measured (deposit_at_rest): the run stops at the same step."""
+    from colsim.stages import collapse as stage
+
+    h0 = 0.5 * R0
+    column = trim(packing.state, h0)
+    settings = CollapseSettings(n_steps=20, duration=2.0, frame_every=5, max_duration=12.0,
+                                rest_window=1.0, rest_tolerance=0.1)
+    measured = []
+    measure = stage.measure_deposit
+    monkeypatch.setattr(stage, "measure_deposit", lambda state: measured.append(state.time) or measure(state))
+    run = collapse(column, h0, settings, CLARABEL)
+    assert run.at_rest and len(measured) == len(set(measured)) < len(run.frames)
+    time_scale = np.sqrt(h0 / settings.gravity)
+    times = np.array([state.time for _, state in run.frames]) / time_scale
+    deposits = [measure(state) for _, state in run.frames]
+    energy = np.array([d.kinetic_energy + d.rotational_energy for d in run.diagnostics])
+    tolerance = settings.rest_tolerance * 2.0 * float(column.radius.mean())
+
+    def at_rest(n):   # the rest test at the n-th frame, every frame's deposit measured
+        k = run.frames[n - 1][0]
+        return (k >= settings.n_steps and energy[k - 1] <= settings.rest_energy * energy[:k].max()
+                and stage.deposit_at_rest(times[:n], [d.h_inf for d in deposits[:n]],
+                                          [d.r_inf for d in deposits[:n]], settings.rest_window, tolerance))
+    verdicts = [at_rest(n) for n in range(1, len(run.frames) + 1)]
+    assert verdicts[-1] and not any(verdicts[:-1])

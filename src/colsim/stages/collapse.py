@@ -60,18 +60,45 @@ NOT_IN_FINGERPRINT = ("checkpoint_every", "max_duration")
 
 def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> bool:
     """True when the history (frame times, h_inf, r_inf; lengths in any one unit) covers `window`
-    back from its last frame and neither quantity moved more than `tolerance` within it."""
+    back from its last frame and neither quantity moved more than `tolerance` within it (only the
+    frames :func:`in_rest_window` are read)."""
     times, heights, fronts = (np.asarray(v, dtype=float) for v in (times, heights, fronts))
     if len(times) == 0 or times[-1] - times[0] < window * (1 - 1e-9):
         return False
-    recent = times >= times[-1] - window * (1 + 1e-9)
+    recent = in_rest_window(times, window)
     return bool(np.ptp(heights[recent]) < tolerance and np.ptp(fronts[recent]) < tolerance)
 
 
-def _deposit(state: ParticleState, time_scale: float) -> tuple[float, float, float]:
-    """(t / sqrt(h0/g), h_inf, r_inf) of a frame."""
-    deposit = measure_deposit(state)
-    return state.time / time_scale, deposit.h_inf, deposit.r_inf
+def in_rest_window(times, window: float) -> np.ndarray:
+    """(frames,) bool: the frames within `window` back from the last one (times in the window's unit)."""
+    times = np.asarray(times, dtype=float)
+    return times >= times[-1] - window * (1 + 1e-9)
+
+
+class DepositHistory:
+    """h_inf and r_inf of a run's frames, measured when the rest test reads them and kept: only the
+    frames inside the rest window once the kinetic energy is low, not every frame (the measure finds
+    the contact graph's main mass: 0.08 s at 56,000 spheres, 0.9 s at 600,000 on one core, which every
+    frame of an r0 = 13 collapse would add up to a minute of)."""
+
+    def __init__(self):
+        self._measured: dict[int, tuple[float, float]] = {}
+
+    def at_rest(self, frames, time_scale: float, window: float, tolerance: float) -> bool:
+        """:func:`deposit_at_rest` of `frames` ([(step, state)]; times over `time_scale`)."""
+        times = np.array([state.time for _, state in frames]) / time_scale
+        if times[-1] - times[0] < window * (1 - 1e-9):
+            return False
+        heights, fronts = np.full(len(frames), np.nan), np.full(len(frames), np.nan)
+        for n in np.flatnonzero(in_rest_window(times, window)):
+            heights[n], fronts[n] = self._deposit(*frames[n])
+        return deposit_at_rest(times, heights, fronts, window, tolerance)
+
+    def _deposit(self, step: int, state: ParticleState) -> tuple[float, float]:
+        if step not in self._measured:
+            deposit = measure_deposit(state)
+            self._measured[step] = deposit.h_inf, deposit.r_inf
+        return self._measured[step]
 
 
 def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, solver: Solver,
@@ -109,7 +136,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     resumed_from = len(diagnostics)
     rest_check = settings.max_duration is not None
     time_scale = np.sqrt(h0 / settings.gravity)
-    history = [_deposit(s, time_scale) for _, s in frames] if rest_check else []
+    history = DepositHistory()
     at_rest = None
     last = settings.max_steps
     for result in run(state, step_settings, last - resumed_from, solver, resumed_from, carry):
@@ -121,8 +148,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
         if progress is not None:
             progress(result.diagnostics)
         if rest_check and is_frame:
-            history.append(_deposit(state, time_scale))
-            at_rest = k >= settings.n_steps and _at_rest(history, diagnostics, column, settings)
+            at_rest = k >= settings.n_steps and _at_rest(history, frames, time_scale, diagnostics, column, settings)
             if at_rest:
                 break
         if checkpoint is not None and k < last and clock.checkpoint_due(k % settings.checkpoint_every == 0):
@@ -134,10 +160,10 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
                        tuple(sittings_commits(earlier)))
 
 
-def _at_rest(history, diagnostics, column, settings) -> bool:
+def _at_rest(history: DepositHistory, frames, time_scale, diagnostics, column, settings) -> bool:
+    """The module docstring's rest test: the energy first (no deposit measured while it is high)."""
     energy = np.array([d.kinetic_energy + d.rotational_energy for d in diagnostics])
     if energy[-1] > settings.rest_energy * energy.max():
         return False
-    times, heights, fronts = np.array(history).T
-    return deposit_at_rest(times, heights, fronts, settings.rest_window,
+    return history.at_rest(frames, time_scale, settings.rest_window,
                            settings.rest_tolerance * 2.0 * float(column.radius.mean()))
