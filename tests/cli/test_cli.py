@@ -51,7 +51,7 @@ def test_all_stages_through_the_cli(tmp_path):
                  ["export-vtk", "--input", "collapse.nc", "--output-dir", "vtk"]):
         done = _run_cli(*args, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
-    assert not list(tmp_path.glob("*.checkpoint"))      # each stage removes its checkpoint once its output is written
+    assert not list(tmp_path.glob("*.checkpoint*"))     # each stage removes its checkpoint (and frames) once its output is written
     result = io.open_dataset(tmp_path / "analysis.nc", io.ANALYSIS_KIND)
     for name, kind in (("pack.nc", io.STATE_KIND), ("column.nc", io.STATE_KIND),
                        ("collapse.nc", io.TRAJECTORY_KIND), ("analysis.nc", io.ANALYSIS_KIND)):
@@ -139,6 +139,7 @@ def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):
     killed = _signalled_at_first_checkpoint("SIGKILL", *common, "--output", "killed.nc", cwd=tmp_path)
     assert killed.returncode == -signal.SIGKILL
     assert (tmp_path / "killed.nc.checkpoint").exists() and not (tmp_path / "killed.nc").exists()
+    assert (tmp_path / "killed.nc.checkpoint.frames").exists()
     done = _run_cli(*common, "--output", "killed.nc", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "resuming from the checkpoint" in done.stderr
@@ -146,6 +147,7 @@ def test_killed_collapse_leaves_no_result_and_resumes(tmp_path):
     resumed = io.open_dataset(tmp_path / "killed.nc", io.TRAJECTORY_KIND)
     assert int(resumed.attrs["resumed_from_step"]) == 5
     np.testing.assert_allclose(resumed["position"].values, whole["position"].values, rtol=0, atol=1e-12)
+    assert not list(tmp_path.glob("killed.nc.checkpoint*"))
 
 
 def test_ctrl_c_keeps_the_checkpoint_and_says_how_to_resume(tmp_path):

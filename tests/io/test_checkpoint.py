@@ -11,8 +11,9 @@ import pytest
 from colsim.engine.records import Carry, StepDiagnostics
 from colsim.engine.state import ParticleState
 from colsim.engine.warm_start import WarmStart
-from colsim.io.checkpoint import (CheckpointError, check_checkpoint_path, checkpoint_summary, load_checkpoint,
-                                  load_packing_checkpoint, save_checkpoint, save_packing_checkpoint)
+from colsim.io.checkpoint import (FRAMES_HEADER, CheckpointError, check_checkpoint_path, checkpoint_summary,
+                                  frames_path, load_checkpoint, load_packing_checkpoint, remove_checkpoint,
+                                  save_checkpoint, save_packing_checkpoint)
 from colsim.io.provenance import source_commit
 
 
@@ -170,3 +171,92 @@ def test_a_checkpoints_summary_names_its_stage_last_step_and_cost(tmp_path):
     found = checkpoint_summary(tmp_path / "p")
     assert found["stage"] == "packing" and found["step"] == -1 and np.isnan(found["kinetic_energy"])
     assert (found["spheres"], found["elapsed"], found["cpu"]) == (4, 3.0, 4.0)
+
+
+def _later(state: ParticleState, dt: float) -> ParticleState:
+    return ParticleState(state.position + dt * state.velocity, state.velocity, state.angular_velocity, state.radius,
+                         state.density, state.time + dt)
+
+
+def test_each_frame_is_written_once_beside_the_checkpoint(tmp_path):
+    """A collapse's frames go to <checkpoint>.frames, each appended by the first checkpoint after it:
+    a later checkpoint writes only its new frames (the records already there keep their bytes) and
+    the archive lists them; all come back exactly."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "c.checkpoint"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    first = frames_path(path).read_bytes()
+    record = (len(first) - FRAMES_HEADER) // 2
+    assert record == 8 * (2 + 9 * state.n)
+    more = frames + [(20, _later(state, 0.01)), (30, _later(state, 0.02))]
+    save_checkpoint(path, "abc", more[-1][1], more, diagnostics, carry, 2.0)
+    second = frames_path(path).read_bytes()
+    assert len(second) == FRAMES_HEADER + 4 * record and second.startswith(first)
+    with np.load(path) as archive:
+        assert "frame_position" not in archive.files and list(archive["frame_step"]) == [0, 10, 20, 30]
+    saved = load_checkpoint(path, "abc")
+    assert [k for k, _ in saved["frames"]] == [0, 10, 20, 30]
+    for (_, got), (_, put) in zip(saved["frames"], more):
+        assert got.time == put.time
+        for name in ("position", "velocity", "angular_velocity", "radius"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(put, name))
+    remove_checkpoint(path)
+    assert not path.exists() and not frames_path(path).exists()
+
+
+def test_frames_past_the_checkpoint_are_cut_and_a_fresh_run_starts_them_over(tmp_path):
+    """A run killed while appending frames (or after appending, before its archive was renamed in)
+    leaves records the checkpoint does not list: loading the checkpoint cuts them off, and the next
+    checkpoint appends after the listed ones. With no checkpoint, the frames file is removed: the run
+    starts over."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "c.checkpoint"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    listed = frames_path(path).read_bytes()
+    with open(frames_path(path), "ab") as handle:
+        handle.write(np.arange(8 * (2 + 9 * state.n) + 13, dtype="<f8").tobytes())   # a record and a part
+    assert len(load_checkpoint(path, "abc")["frames"]) == 2
+    assert frames_path(path).read_bytes() == listed
+    path.unlink()
+    assert load_checkpoint(path, "abc") is None and not frames_path(path).exists()
+
+
+def test_missing_or_foreign_frames_are_refused(tmp_path):
+    """Issue 45.2 for the frames file: a checkpoint whose frames file is gone, short or another run's
+    is refused (remove it to start over); a file that is not colsim's at the frames path is neither
+    read nor replaced."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "c.checkpoint"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    whole = frames_path(path).read_bytes()
+    frames_path(path).write_bytes(whole[:-8])
+    with pytest.raises(CheckpointError, match="frames file .* short of its 2 frames"):
+        load_checkpoint(path, "abc")
+    frames_path(path).unlink()
+    with pytest.raises(CheckpointError, match="frames file .* missing"):
+        load_checkpoint(path, "abc")
+    frames_path(path).write_text("my notes\n")
+    with pytest.raises(CheckpointError, match="not a colsim frames file"):
+        check_checkpoint_path(path)
+    with pytest.raises(CheckpointError, match="not a colsim frames file"):
+        load_checkpoint(path, "abc")
+    assert frames_path(path).read_text() == "my notes\n"
+
+
+def test_a_checkpoint_with_its_frames_inside_still_resumes(tmp_path):
+    """A checkpoint written before the frames file (the frames as arrays in the archive) resumes with
+    its frames, and its next checkpoint writes them all to the frames file."""
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "old.checkpoint"
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
+    with np.load(path) as archive:
+        arrays = dict(archive)
+    for name in ("position", "velocity", "angular_velocity"):
+        arrays[f"frame_{name}"] = np.stack([getattr(f, name) for _, f in frames])
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays)
+    frames_path(path).unlink()
+    saved = load_checkpoint(path, "abc")
+    np.testing.assert_array_equal(saved["frames"][1][1].velocity, frames[1][1].velocity)
+    save_checkpoint(path, "abc", state, saved["frames"], diagnostics, carry, 2.0)
+    assert len(load_checkpoint(path, "abc")["frames"]) == 2

@@ -76,8 +76,8 @@ rule trim:
         "colsim trim --input {input:q} --aspect-ratio {params.a} --output {output:q} > {log:q} 2>&1"
 
 
-# `colsim collapse` keeps OUTPUT.checkpoint while it runs and deletes it on success; a job that was
-# killed resumes from it when rerun (snakemake --rerun-incomplete). It is not a declared output.
+# `colsim collapse` keeps OUTPUT.checkpoint (and its .frames) while it runs and deletes them on success;
+# a job that was killed resumes from them when rerun (snakemake --rerun-incomplete). Not declared outputs.
 # Taller columns start first (their cost grows like a^2): the longest jobs do not end up last, alone.
 rule collapse:
     input:

@@ -13,7 +13,7 @@ from ..stages import analyse as analysis
 from .. import io
 from ..engine.state import FRICTION_LAWS
 from ..engine.threads import threading_layer, use_threads
-from ..io.checkpoint import check_checkpoint_path
+from ..io.checkpoint import check_checkpoint_path, remove_checkpoint
 from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
@@ -152,7 +152,7 @@ def pack(args):
                   "colsim_commits": "; ".join(result.commits)})
     io.write_state(args.output, result.state, attrs,
                    {**io.contact_force_variables(result.contact_forces), **step_variables(result.diagnostics)})
-    checkpoint.unlink(missing_ok=True)
+    remove_checkpoint(checkpoint)
     log.info("packed %d spheres to height %.3f (solid fraction %.3f) in %d steps, %.1f s (CPU %.1f s)",
              result.state.n, result.height, result.solid_fraction, result.steps, result.wall_time,
              result.cpu_time)
@@ -209,7 +209,7 @@ def collapse(args):
                   "n_particles": column.n, "resumed_from_step": run.resumed_from, "threading_layer": threading_layer(),
                   "colsim_commits": "; ".join(run.commits)})
     io.write_dataset(trajectory_dataset(run, h0, r0, settings, attrs), args.output)
-    checkpoint.unlink(missing_ok=True)
+    remove_checkpoint(checkpoint)
     backends = Counter(d.solver_backend for d in run.diagnostics)
     log.info("collapse done: %d steps in %.1f s (CPU %.1f s; %s)", len(run.diagnostics), run.wall_time,
              run.cpu_time,
