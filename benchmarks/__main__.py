@@ -33,7 +33,7 @@ import record   # noqa: E402
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
          "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
-         "device_copies", "ptx", "host_work", "scatter", "kernel_trace")
+         "device_copies", "ptx", "host_work", "scatter", "kernel_trace", "checkpoints")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
 COLUMN = {"quick": (1.0, 2.0, 1, "auto", 0.02), "full": (2.0, 5.0, 1, "auto", 0.02)}
@@ -66,6 +66,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "host_work": [*c, "--repeat", "1"],
             "scatter": None,
             "kernel_trace": None,
+            "checkpoints": [*c, "--steps", "100", "--every", "50"],
         }[name]
     r0, a = COLUMN["full"][:2]
     return {
@@ -81,6 +82,7 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "host_work": c,
         "scatter": None,
         "kernel_trace": None,
+        "checkpoints": c,
     }[name]
 
 

@@ -22,7 +22,7 @@ import record   # noqa: E402
 
 NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "host_work",
          "packings", "ptx", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory",
-         "kernel_trace")
+         "kernel_trace", "checkpoints")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
 
 
