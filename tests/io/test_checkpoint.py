@@ -241,6 +241,9 @@ def test_missing_or_foreign_frames_are_refused(tmp_path):
     with pytest.raises(CheckpointError, match="not a colsim frames file"):
         load_checkpoint(path, "abc")
     assert frames_path(path).read_text() == "my notes\n"
+    path.unlink()
+    frames_path(path).write_bytes(b"")    # a run killed as it began the file: replaced, nothing lost
+    assert load_checkpoint(path, "abc") is None and not frames_path(path).exists()
 
 
 def test_a_checkpoint_with_its_frames_inside_still_resumes(tmp_path):

@@ -11,8 +11,8 @@ stepper's tolerance). Each checkpoint lists the commits of the code of every sit
 A collapse's holds the state, the steps' diagnostics, and the warm start and margin carried to the
 next step, and lists the frames so far, which lie beside it in `<checkpoint>.frames` (:func:`frames_path`):
 each frame is appended there once, by the first checkpoint after it, so a checkpoint costs the same at
-the end of a run as at its start (with every frame in the archive, the 20th checkpoint of an r0 = 13
-collapse wrote 20 frames, 0.86 GB in 5.1 s). The archive is the authority: loading it truncates the
+the end of a run as at its start (with every frame in the archive, a checkpoint of an r0 = 13
+collapse with 20 frames wrote 0.86 GB in 5.1 s). The archive is the authority: loading it truncates the
 frames file to the frames it lists (a killed run may have appended more), and a run that starts
 without a checkpoint starts that file over. A packing's holds the state, the steps' diagnostics and
 what its filling loop carries (:func:`save_packing_checkpoint`). :func:`remove_checkpoint` removes both
@@ -273,14 +273,15 @@ def _record_size(n: int) -> int:
 
 
 def _check_frames_path(path: Path) -> None:
-    """CheckpointError unless `path` is absent or a regular file that starts as a colsim frames file."""
+    """CheckpointError unless `path` is absent or a regular file that starts as a colsim frames file
+    (or as the start of one: a run killed while it wrote the header)."""
     if not path.exists() and not path.is_symlink():
         return
     if path.is_symlink() or not path.is_file():
         raise CheckpointError(f"{path} exists and is not a regular file: colsim will not replace it;"
                               " give --checkpoint a new path")
     with open(path, "rb") as handle:
-        if handle.read(len(FRAMES_MAGIC)) != FRAMES_MAGIC:
+        if not FRAMES_MAGIC.startswith(handle.read(len(FRAMES_MAGIC))):
             raise CheckpointError(f"{path} exists and is not a colsim frames file: colsim will not read or replace"
                                   " it; give --checkpoint a new path, or remove the file")
 
@@ -327,7 +328,6 @@ def _read_frames(path, fingerprint: str, state: ParticleState, steps, times) -> 
         raise ValueError(f"its frames file {target} holds other frames than it lists")
     with open(target, "r+b") as handle:
         handle.truncate(FRAMES_HEADER + count * size)
-    motion = records[:, 2:].reshape(count, 3, n, 3)
-    return [(int(step), ParticleState(motion[k, 0].copy(), motion[k, 1].copy(), motion[k, 2].copy(), state.radius,
-                                      state.density, float(time)))
+    motion = records[:, 2:].reshape(count, 3, n, 3)   # each frame's three (n, 3) arrays are contiguous views
+    return [(int(step), ParticleState(*motion[k], state.radius, state.density, float(time)))
             for k, (step, time) in enumerate(zip(steps, times))]
