@@ -152,10 +152,13 @@ done
 # functions of most own time, the card's busy share between its first and last kernel, its idle gaps
 # by length and the kernels of most GPU time come back in pour.tgz: where a GPU step's wall goes
 # outside the kernels, and which kernels take it (the collapse's busy share at r0 = 6 was 28 %).
-# POUR_PROFILE=collapse: the collapse alone so (the pour at its own speed).
+# POUR_PROFILE=collapse: the collapse alone so (the pour at its own speed). POUR_NAMES picks the
+# pours (default "r0_6_seed1"; "r0_8_seed1" is issue 46's r0 = 8, a = 5 pour and collapse, about
+# 166,000 spheres: its pour may take one call and its collapse the next, on the same warm machine).
 for settings in .gpu/pour/*.pack.yaml; do
-    [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
+    [[ " ${POUR_NAMES:-r0_6_seed1} " == *" $name "* ]] || continue
+    [[ "$stages" == *" pour "* && -e "$settings" ]] || continue
     mkdir -p "$out" "$work"
     pack_run=(-m colsim.cli); collapse_run=(-m colsim.cli)
     if [ "${POUR_PROFILE:-0}" = 1 ]; then

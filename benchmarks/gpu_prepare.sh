@@ -11,7 +11,8 @@
 #   that run's CPU collapse and analysis (`snakemake`, the study's rules);
 # - .gpu/pour/r0_6_seed1 (.pack.yaml, .collapse.yaml): the settings of an r0 = 6, a = 5 pour and its
 #   collapse (`STAGES=pour`), which the GPU makes itself; `STAGES=big` tiles the r0 = 13 column from
-#   that pour's column, on the same warm machine (BIG_SOURCE).
+#   that pour's column, on the same warm machine (BIG_SOURCE);
+# - .gpu/pour/r0_8_seed1: likewise for r0 = 8, a = 5 (about 166,000 spheres; `POUR_NAMES=r0_8_seed1`).
 #
 # A machine's earlier .gpu/ is kept where its files are already there. The columns are this commit's
 # pour: a CPU scatter to compare the GPU's collapses with is `python -m benchmarks scatter` on them.
@@ -52,4 +53,10 @@ snakemake -j 1 --configfile "$config" --until packing_settings run_settings > .g
     || { echo "the r0 = 6 settings failed: see .gpu/gpu-pour.log"; exit 1; }
 cp "$(planned "$config" "/pack_[^/]*/settings.yaml$")" .gpu/pour/r0_6_seed1.pack.yaml
 cp "$(planned "$config" "/run_[^/]*/settings.yaml$")" .gpu/pour/r0_6_seed1.collapse.yaml
+# r0 = 8, a = 5: likewise
+config=$(study gpu-pour-8 8 "5")
+snakemake -j 1 --configfile "$config" --until packing_settings run_settings > .gpu/gpu-pour-8.log 2>&1 \
+    || { echo "the r0 = 8 settings failed: see .gpu/gpu-pour-8.log"; exit 1; }
+cp "$(planned "$config" "/pack_[^/]*/settings.yaml$")" .gpu/pour/r0_8_seed1.pack.yaml
+cp "$(planned "$config" "/run_[^/]*/settings.yaml$")" .gpu/pour/r0_8_seed1.collapse.yaml
 du -sh .gpu
