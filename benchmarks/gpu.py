@@ -358,7 +358,9 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     shares of the wall time of each of :data:`PHASES` (the rest: redone attempts, the step's update
     and bookkeeping, the collapse's frames and checkpoints between steps; the part of it in redone
     steps, and their count, apart), iterations a step, the end positions, and on a GPU the share of
-    the wall time its kernels ran (:func:`kernels_busy`); profile: a file for cProfile's statistics
+    the wall time its kernels ran (:func:`kernels_busy`), and by step its seconds, iterations,
+    redone attempts, missed contacts, detection margin and contacts (which steps are redone, and
+    why: the fifth sitting's r0 = 13 steps redid 9 of 100); profile: a file for cProfile's statistics
     of the steps (None: none); trace: a file for the steps' kernel trace (benchmarks/kernel_trace.py:
     the card's busy share, idle gaps and kernels; None: none)."""
     from colsim import io
@@ -388,6 +390,9 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     return {"spheres": state.n, "s_a_step": wall / len(d), "solve_share": shares["solve"], "shares": shares,
             "redone_steps": len(redone), "redone_rest_share": redone_rest, "kernels_busy": kernels["busy"],
             "busy_samples": kernels["samples"], "s_by_step": [x.wall_time for x in d],
+            "by_step": {"iterations": [x.solver_iterations for x in d], "redone": [x.redone for x in d],
+                        "missed_contacts": [x.missed_contacts for x in d],
+                        "margin": [x.detection_margin for x in d], "contacts": [x.n_contacts for x in d]},
             "iterations": float(np.mean([x.solver_iterations for x in d])), "end": last.position,
             "diameter": 2 * float(state.radius.mean())}
 
@@ -606,7 +611,7 @@ def collapse_table(args, device: str) -> None:
                   + f" ({gpu['redone_rest_share']:.0%} in {gpu['redone_steps']} redone)",
                   data={"column": column, "spheres": gpu["spheres"], "steps": args.steps, "cpu_steps": cpu_steps,
                         "device": device, "cpu_s_a_step": cpu["s_a_step"], "gpu_s_a_step": gpu["s_a_step"],
-                        "gpu_s_by_step": gpu["s_by_step"],
+                        "gpu_s_by_step": gpu["s_by_step"], "gpu_by_step": gpu["by_step"],
                         "cpu_solve_share": cpu["solve_share"], "gpu_solve_share": gpu["solve_share"],
                         "cpu_iterations": cpu["iterations"], "gpu_iterations": gpu["iterations"],
                         "apart_over_diameter": apart, "cpu_shares": cpu["shares"], "gpu_shares": shares,
