@@ -197,16 +197,22 @@ for settings in .gpu/pour/*.pack.yaml; do
 done
 
 # What a step's device allocations cost ("pool", not by default): the first POOL_STEPS (100) steps of
-# POOL_COLUMN (default the pour stage's r0 = 6 column) on the GPU twice, with numba-cuda's own
-# allocator and with benchmarks/memory_pool.py's pool (NUMBA_CUDA_MEMORY_MANAGER): the same steps and
-# iterations, so the difference in seconds a step (and in the card's busy share) is the allocations'.
+# POOL_COLUMN (default the pour stage's r0 = 6 column) on the GPU three times: with numba-cuda's own
+# allocator; with it and its frees held back (numba-cuda frees a device array's memory ten at a time,
+# cuMemFree waiting for the device each time: NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=1000000 leaves
+# them to its byte limit, a fifth of the card, so what remains is the allocations); and with
+# benchmarks/memory_pool.py's pool (NUMBA_CUDA_MEMORY_MANAGER: neither). The same steps and
+# iterations, so the differences in seconds a step (and in the card's busy share) are the frees' waits
+# and the allocations'.
 if [[ "$stages" == *" pool "* ]]; then
     column=${POOL_COLUMN:-results/gpu-pour/r0_6_seed1/column.nc}
-    for manager in default benchmarks.memory_pool; do
-        echo "pool: $column, device memory from $manager"
-        NUMBA_CUDA_MEMORY_MANAGER=$manager python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu \
+    for variant in default:10 default:1000000 benchmarks.memory_pool:10; do
+        manager=${variant%:*}; pending=${variant#*:}
+        echo "pool: $column, device memory from $manager, frees held back up to $pending"
+        NUMBA_CUDA_MEMORY_MANAGER=$manager NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=$pending \
+            python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu \
             --spheres --columns "$column" --steps "${POOL_STEPS:-100}" --cpu-steps 0 \
-            || echo "benchmarks gpu (pool, $manager): failed (exit $?)"
+            || echo "benchmarks gpu (pool, $variant): failed (exit $?)"
     done
 fi
 
