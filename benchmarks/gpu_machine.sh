@@ -199,7 +199,7 @@ done
 # What a step's device allocations cost ("pool", not by default): the first POOL_STEPS (100) steps of
 # POOL_COLUMN (default the pour stage's r0 = 6 column) on the GPU three times: with numba-cuda's own
 # allocator; with it and its frees held back (numba-cuda frees a device array's memory ten at a time,
-# cuMemFree waiting for the device each time: NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=1000000 leaves
+# cuMemFree may wait for the device each time: NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=1000000 leaves
 # them to its byte limit, a fifth of the card, so what remains is the allocations); and with
 # benchmarks/memory_pool.py's pool (NUMBA_CUDA_MEMORY_MANAGER: neither). The same steps and
 # iterations, so the differences in seconds a step (and in the card's busy share) are the frees' waits
