@@ -61,8 +61,8 @@ def test_jacobian_rows_are_the_relative_displacement(n_dir, radii, seed):
 
 def test_the_assembly_s_masses_and_free_forces_are_the_formulas_bit_for_bit():
     """assemble fills Mbar = diag(m, m, m, ..., I, I, I, ...)/dt^2 and fbar = [m v/dt + m g; I w/dt]
-    a component at a time: the same operations as the formulas written out, so the same bits (and
-    the program shares the contacts' gaps and coefficients, not copies)."""
+    in one compiled pass over the bodies: the same operations as the formulas written out, so the
+    same bits (and the program shares the contacts' gaps and coefficients, not copies)."""
     from colsim.engine.program import assemble
     from colsim.engine.state import ParticleState
 
