@@ -214,7 +214,7 @@ def test_frames_past_the_checkpoint_are_cut_and_a_fresh_run_starts_them_over(tmp
     save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0)
     listed = frames_path(path).read_bytes()
     with open(frames_path(path), "ab") as handle:
-        handle.write(np.arange(8 * (2 + 9 * state.n) + 13, dtype="<f8").tobytes())   # a record and a part
+        handle.write(np.arange(2 + 9 * state.n + 13, dtype="<f8").tobytes())   # a record and a part of one
     assert len(load_checkpoint(path, "abc")["frames"]) == 2
     assert frames_path(path).read_bytes() == listed
     path.unlink()
@@ -235,6 +235,11 @@ def test_missing_or_foreign_frames_are_refused(tmp_path):
     frames_path(path).unlink()
     with pytest.raises(CheckpointError, match="frames file .* missing"):
         load_checkpoint(path, "abc")
+    save_checkpoint(tmp_path / "other.checkpoint", "another run", state, frames, diagnostics, carry, 1.0)
+    frames_path(tmp_path / "other.checkpoint").rename(frames_path(path))
+    with pytest.raises(CheckpointError, match="frames file .* another run's"):
+        load_checkpoint(path, "abc")
+    frames_path(path).unlink()
     frames_path(path).write_text("my notes\n")
     with pytest.raises(CheckpointError, match="not a colsim frames file"):
         check_checkpoint_path(path)

@@ -321,8 +321,13 @@ def _read_frames(path, fingerprint: str, state: ParticleState, steps, times) -> 
     target, n = frames_path(path), state.n
     header, size = _frames_header(fingerprint, n), _record_size(n)
     count = len(steps)
+    if not target.is_file():
+        raise ValueError(f"its frames file {target} is missing")
+    with open(target, "rb") as handle:
+        if handle.read(FRAMES_HEADER) != header:
+            raise ValueError(f"its frames file {target} is another run's")
     if _frames_held(target, header, n) < count:
-        raise ValueError(f"its frames file {target} is missing, another run's or short of its {count} frames")
+        raise ValueError(f"its frames file {target} is short of its {count} frames")
     records = np.fromfile(target, dtype="<f8", count=count * size // 8, offset=FRAMES_HEADER).reshape(count, -1)
     if not (np.array_equal(records[:, 0], steps) and np.array_equal(records[:, 1], times)):
         raise ValueError(f"its frames file {target} holds other frames than it lists")
