@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import record
+import tiling
 
 
 def main(argv=None):
@@ -36,13 +37,7 @@ def main(argv=None):
     from colsim.stages.analyse import measure_deposit
 
     with tempfile.TemporaryDirectory() as scratch:
-        column = args.column
-        if args.tile:
-            import tiling
-
-            column = str(Path(scratch) / "tiled.nc")
-            tiling.tiled_column(args.column, args.tile, column)
-        state, dataset = io.read_state(column)
+        state, dataset = io.read_state(tiling.column_or_tiled(args.column, args.tile, scratch))
         carry = Carry(io.contact_forces_of(dataset), 0.1)
         begin = time.perf_counter()
         measure_deposit(state)

@@ -27,11 +27,11 @@ import argparse
 import dataclasses
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
 import record
+import tiling
 
 
 #: a redo's given pairs (the stepper's missed ones: 325-606 a step in r0 = 6's pour)
@@ -63,14 +63,8 @@ def main(argv=None):
     from colsim.engine.stepper import advance, predicted_displacement
     from colsim.engine.warm_start import WarmStart
 
-    column = args.column
     with tempfile.TemporaryDirectory() as scratch:
-        if args.tile:
-            import tiling
-
-            column = str(Path(scratch) / "tiled.nc")
-            tiling.tiled_column(args.column, args.tile, column)
-        state, _ = io.read_state(column)
+        state, _ = io.read_state(tiling.column_or_tiled(args.column, args.tile, scratch))
     state.velocity[:] = np.random.default_rng(1).normal(scale=0.01, size=state.velocity.shape)
     settings = StepSettings(dt=0.001, law=ContactLaw.uniform(0.577, 0.12), walls=Walls(floor=True))
     predicted = predicted_displacement(state, settings)
@@ -118,7 +112,7 @@ def main(argv=None):
         found.__dict__.pop("keys", None)
         return found.keys
 
-    print(f"{column if not args.tile else f'r0 = {args.tile:g} tiled from {args.column}'}: "
+    print(f"{args.column if not args.tile else f'r0 = {args.tile:g} tiled from {args.column}'}: "
           f"{state.n} spheres, {found.m} contacts")
     table = record.table(["phase (host)", "ms", "on the GPU's step"])
     rows = [

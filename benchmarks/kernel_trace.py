@@ -45,13 +45,10 @@ LONG_GAP_US = 100_000.0
 
 
 def union_us(intervals: np.ndarray) -> float:
-    """Total length (us) of the union of intervals (k, 2) = (start, end)."""
+    """Total length (us) of the union of intervals (k, 2) = (start, end): their span less the idle gaps."""
     if len(intervals) == 0:
         return 0.0
-    order = np.argsort(intervals[:, 0], kind="stable")
-    start, end = intervals[order, 0], np.maximum.accumulate(intervals[order, 1])
-    gaps = np.maximum(start[1:] - end[:-1], 0.0)   # idle between what ran before and the next start
-    return float(end[-1] - start[0] - gaps.sum())
+    return float(intervals[:, 1].max() - intervals[:, 0].min() - idle_gaps_us(intervals).sum())
 
 
 def idle_gaps_us(intervals: np.ndarray) -> np.ndarray:

@@ -18,6 +18,17 @@ import math
 import numpy as np
 
 
+def column_or_tiled(column: str, r0: float | None, folder) -> str:
+    """`column`, or (r0 given) a column of radius r0 tiled from it, written in `folder`."""
+    if r0 is None:
+        return column
+    from pathlib import Path
+
+    tiled = str(Path(folder) / "tiled.nc")
+    tiled_column(column, r0, tiled)
+    return tiled
+
+
 def tiled_column(source: str, r0: float, output: str) -> int:
     """Write a column of radius r0 (length), tiled from the column file `source` (`colsim trim`), to
     `output`; returns its number of spheres."""

@@ -63,10 +63,15 @@ def deposit_at_rest(times, heights, fronts, window: float, tolerance: float) -> 
     back from its last frame and neither quantity moved more than `tolerance` within it (only the
     frames :func:`in_rest_window` are read)."""
     times, heights, fronts = (np.asarray(v, dtype=float) for v in (times, heights, fronts))
-    if len(times) == 0 or times[-1] - times[0] < window * (1 - 1e-9):
+    if not covers_rest_window(times, window):
         return False
     recent = in_rest_window(times, window)
     return bool(np.ptp(heights[recent]) < tolerance and np.ptp(fronts[recent]) < tolerance)
+
+
+def covers_rest_window(times, window: float) -> bool:
+    """Whether frames at `times` reach `window` back from the last one."""
+    return len(times) > 0 and times[-1] - times[0] >= window * (1 - 1e-9)
 
 
 def in_rest_window(times, window: float) -> np.ndarray:
@@ -87,7 +92,7 @@ class DepositHistory:
     def at_rest(self, frames, time_scale: float, window: float, tolerance: float) -> bool:
         """:func:`deposit_at_rest` of `frames` ([(step, state)]; times over `time_scale`)."""
         times = np.array([state.time for _, state in frames]) / time_scale
-        if times[-1] - times[0] < window * (1 - 1e-9):
+        if not covers_rest_window(times, window):   # nothing to measure yet
             return False
         heights, fronts = np.full(len(frames), np.nan), np.full(len(frames), np.nan)
         for n in np.flatnonzero(in_rest_window(times, window)):
