@@ -29,6 +29,7 @@ import numpy as np
 
 from .contacts import Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
 from .state import PARTICLE, pair_key
+from .cuda_launch import launch
 from .cuda_state import midpoints_on_device, particle_array_on_device
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
@@ -95,13 +96,14 @@ class DeviceContacts(Contacts):
             return super().overlapping_pairs(state, tolerance)
         position, radius = self.particles
         flag = cuda.device_array(pairs, dtype=np.int64)
-        _overlap_flags_kernel[blocks_for(pairs), THREADS](position, radius, self.rows.bodies, float(tolerance), flag)
+        launch(_overlap_flags_kernel, blocks_for(pairs), THREADS, position, radius, self.rows.bodies,
+               float(tolerance), flag)
         start = prefix_sums_on_device(flag)
         count = int(start[pairs:].copy_to_host()[0])
         listed = np.zeros((2, 0), dtype=np.int64)
         if count:
             on_device = cuda.device_array((2, count), dtype=np.int64)
-            _flagged_pairs_kernel[blocks_for(pairs), THREADS](self.rows.bodies, start, on_device)
+            launch(_flagged_pairs_kernel, blocks_for(pairs), THREADS, self.rows.bodies, start, on_device)
             listed = on_device.copy_to_host()
         pi, pj = listed
         _, overlapping = pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
@@ -159,8 +161,8 @@ class ContactRows:
         """Rows first to end's (None: the last) rolling levers and pair keys, from their radii and bodies."""
         end = self.count if end is None else end
         if end > first:
-            _lever_and_key_kernel[blocks_for(end - first), THREADS](
-                self.numbers, self.bodies, 2.0 if rolling_lever == "paper" else 1.0, self.keys, first, end)
+            launch(_lever_and_key_kernel, blocks_for(end - first), THREADS, self.numbers, self.bodies,
+                   2.0 if rolling_lever == "paper" else 1.0, self.keys, first, end)
 
 
 def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
@@ -192,12 +194,11 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     rows.upload(others, m)
     blocks = blocks_for(state.n)
     largest = cuda.device_array(blocks, dtype=np.float64)   # each block's largest pair overlap
-    _frames_kernel[blocks, THREADS](found.position, found.radius, found.offsets, found.partners,
-                                    float(most_recovered), rows.frames[0], rows.numbers[GAP], rows.frames[1],
-                                    rows.frames[2], largest)
+    launch(_frames_kernel, blocks, THREADS, found.position, found.radius, found.offsets, found.partners,
+           float(most_recovered), rows.frames[0], rows.numbers[GAP], rows.frames[1], rows.frames[2], largest)
     mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
-    _pair_rows_kernel[blocks, THREADS](found.offsets, found.partners, found.radius, mu, mu_r, rows.bodies,
-                                       rows.numbers)
+    launch(_pair_rows_kernel, blocks, THREADS, found.offsets, found.partners, found.radius, mu, mu_r, rows.bodies,
+           rows.numbers)
     rows.levers_and_keys(law.rolling_lever)
     return DeviceContacts(rows, m, float(largest.copy_to_host().max()), (found.position, found.radius))
 
@@ -219,14 +220,13 @@ def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: 
     pairs = found.pair_count
     keep = cuda.device_array(max(pairs, 1), dtype=np.int64)[:pairs]
     if pairs:
-        _kept_pairs_kernel[blocks_for(pairs), THREADS](found.rows.bodies, n, cuda.to_device(wanted), keep)
+        launch(_kept_pairs_kernel, blocks_for(pairs), THREADS, found.rows.bodies, n, cuda.to_device(wanted), keep)
     start = prefix_sums_on_device(keep)
     kept = int(start[pairs:].copy_to_host()[0])
     rows = ContactRows(found.m - pairs + kept + len(wanted))
     old = found.rows
-    _move_rows_kernel[blocks_for(old.count), THREADS](old.frames, old.numbers, old.bodies, old.keys, pairs, start,
-                                                      len(wanted), rows.frames, rows.numbers, rows.bodies,
-                                                      rows.keys)
+    launch(_move_rows_kernel, blocks_for(old.count), THREADS, old.frames, old.numbers, old.bodies, old.keys, pairs,
+           start, len(wanted), rows.frames, rows.numbers, rows.bodies, rows.keys)
     rows.upload(given, kept)
     rows.levers_and_keys(rolling_lever, kept, kept + len(wanted))
     return DeviceContacts(rows, kept + len(wanted), None)
@@ -350,11 +350,11 @@ class _SweptPairs:
         args = (self.position, d_predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
         counts = full_on_device(n, 0, np.int64)
-        _pairs_kernel[blocks_for(n), THREADS](*args, counts, counts, counts, False)
+        launch(_pairs_kernel, blocks_for(n), THREADS, *args, counts, counts, counts, False)
         self.offsets = prefix_sums_on_device(counts)
         self.m = int(self.offsets[n:].copy_to_host()[0])
         self.partners = full_on_device(max(self.m, 1), 0, np.int64)
-        _pairs_kernel[blocks_for(n), THREADS](*args, counts, self.offsets, self.partners, True)
+        launch(_pairs_kernel, blocks_for(n), THREADS, *args, counts, self.offsets, self.partners, True)
 
 
 @cuda.jit
@@ -422,11 +422,11 @@ def _cell_lists(midpoint, lower, dims, width, cells: int):
     n = midpoint.shape[0]
     cell = cuda.device_array(n, dtype=np.int64)
     count = full_on_device(cells, 0, np.int64)
-    _cell_kernel[blocks_for(n), THREADS](midpoint, lower, dims, width, cell, count)
+    launch(_cell_kernel, blocks_for(n), THREADS, midpoint, lower, dims, width, cell, count)
     d_start = prefix_sums_on_device(count)   # on the device: no round trip of the counts
     filled = full_on_device(cells, 0, np.int64)
     listed = cuda.device_array(n, dtype=np.int64)
-    _list_kernel[blocks_for(n), THREADS](cell, d_start, filled, listed)
+    launch(_list_kernel, blocks_for(n), THREADS, cell, d_start, filled, listed)
     return d_start, listed
 
 

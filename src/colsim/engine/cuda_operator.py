@@ -254,7 +254,7 @@ def full_on_device(shape, value, dtype=np.float64):
     700,000 spheres)."""
     out = cuda.device_array(shape, dtype=dtype)
     if out.size:
-        _fill_kernel[blocks_for(out.size), THREADS](out.reshape(out.size), value)
+        launch(_fill_kernel, blocks_for(out.size), THREADS, out.reshape(out.size), value)
     return out
 
 
@@ -454,9 +454,9 @@ def prefix_sums_on_device(count):
     start = full_on_device(n + 1, 0, np.int64)
     if n:
         offsets = cuda.device_array(blocks_for(n), dtype=np.int64)
-        _block_totals_kernel[blocks_for(n), THREADS](count, offsets)
-        _exclusive_scan_kernel[1, THREADS](offsets)
-        _starts_kernel[blocks_for(n), THREADS](count, offsets, start)
+        launch(_block_totals_kernel, blocks_for(n), THREADS, count, offsets)
+        launch(_exclusive_scan_kernel, 1, THREADS, offsets)
+        launch(_starts_kernel, blocks_for(n), THREADS, count, offsets, start)
     return start
 
 
@@ -473,11 +473,11 @@ def body_contacts_on_device(i, j, n: int, entries: int):
     if m == 0 or n == 0:
         return full_on_device(n + 1, 0, np.int64), entry
     count = full_on_device(n, 0, np.int64)
-    _count_entries_kernel[blocks_for(m), THREADS](i, j, count)
+    launch(_count_entries_kernel, blocks_for(m), THREADS, i, j, count)
     start = prefix_sums_on_device(count)
     filled = full_on_device(n, 0, np.int64)
-    _place_entries_kernel[blocks_for(m), THREADS](i, j, start, filled, entry)
-    _sort_bodies_kernel[blocks_for(n), THREADS](start, entry)
+    launch(_place_entries_kernel, blocks_for(m), THREADS, i, j, start, filled, entry)
+    launch(_sort_bodies_kernel, blocks_for(n), THREADS, start, entry)
     return start, entry
 
 
@@ -560,5 +560,5 @@ class CudaContactOperator:
         """(max(m, 1), 5) device array: the diagonal of B Mbar^-1 B' (inv_mass: (6n,) on the device)."""
         out = cuda.device_array((max(self.m, 1), 5), dtype=np.float64)
         if self.m:
-            _diagonal_kernel[blocks_for(self.m), THREADS](inv_mass, *self._frames(), out)
+            launch(_diagonal_kernel, blocks_for(self.m), THREADS, inv_mass, *self._frames(), out)
         return out

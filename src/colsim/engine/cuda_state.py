@@ -31,6 +31,7 @@ import weakref
 
 import numpy as np
 
+from .cuda_launch import launch
 from .cuda_operator import THREADS, blocks_for, cuda, device_copy_of, keep_device_copy, kept_device_copy
 
 #: the particles' masses, inertias and weights on the device, by the identity of their radii's host
@@ -67,7 +68,7 @@ def masses_on_device(state, gravity) -> tuple:
         mass, inertia = state.mass_and_inertia()
         both = cuda.to_device(np.stack([mass, inertia]))
         weight = cuda.device_array((state.n, 3), dtype=np.float64)
-        _weight_kernel[blocks_for(state.n), THREADS](both[0], *key[1], weight)
+        launch(_weight_kernel, blocks_for(state.n), THREADS, both[0], *key[1], weight)
         by_setting[key] = (both[0], both[1], weight)
     return by_setting[key]
 
@@ -82,8 +83,8 @@ def program_on_device(state, mass: np.ndarray, fbar: np.ndarray, dt: float, grav
     particle_mass, inertia, weight = masses_on_device(state, gravity)
     velocity, angular = particle_array_on_device(state.velocity), particle_array_on_device(state.angular_velocity)
     made = cuda.device_array((2, 6 * n), dtype=np.float64)
-    _program_kernel[blocks_for(n), THREADS](particle_mass, inertia, weight, velocity, angular, float(dt),
-                                            float(dt) ** 2, made[0], made[1])
+    launch(_program_kernel, blocks_for(n), THREADS, particle_mass, inertia, weight, velocity, angular, float(dt),
+           float(dt) ** 2, made[0], made[1])
     frozen(mass, made[0])
     frozen(fbar, made[1])
 
@@ -92,7 +93,7 @@ def increments_on_device(fbar: np.ndarray, hx, mass: np.ndarray) -> np.ndarray:
     """(6n,) u = (fbar + hx) / mass, made on the device from hx = B' lam there and the program's
     fbar and mass (their device copies): the host's copy, which keeps the device's as its own."""
     u = cuda.device_array(len(mass), dtype=np.float64)
-    _increments_kernel[blocks_for(len(mass)), THREADS](device_copy_of(fbar), hx, device_copy_of(mass), u)
+    launch(_increments_kernel, blocks_for(len(mass)), THREADS, device_copy_of(fbar), hx, device_copy_of(mass), u)
     host = u.copy_to_host()
     frozen(host, u)
     return host
@@ -101,7 +102,7 @@ def increments_on_device(fbar: np.ndarray, hx, mass: np.ndarray) -> np.ndarray:
 def inverses_on_device(mass):
     """1 / mass on the device, from the device array `mass` (a division: the host's bits)."""
     made = cuda.device_array(mass.shape[0], dtype=np.float64)
-    _inverse_kernel[blocks_for(mass.shape[0]), THREADS](mass, made)
+    launch(_inverse_kernel, blocks_for(mass.shape[0]), THREADS, mass, made)
     return made
 
 
@@ -113,8 +114,8 @@ def advance_on_device(state, new_state, u: np.ndarray, dt: float) -> None:
     if increments is None or state.n == 0:
         return
     made = cuda.device_array((3, state.n, 3), dtype=np.float64)
-    _advance_kernel[blocks_for(state.n), THREADS](particle_array_on_device(state.position), increments, float(dt),
-                                                  made[0], made[1], made[2])
+    launch(_advance_kernel, blocks_for(state.n), THREADS, particle_array_on_device(state.position), increments,
+           float(dt), made[0], made[1], made[2])
     for name, index in (("position", 0), ("velocity", 1), ("angular_velocity", 2)):
         frozen(getattr(new_state, name), made[index])
 
@@ -126,9 +127,10 @@ def predicted_on_device(state, predicted: np.ndarray, dt: float, gravity) -> Non
         return
     made = cuda.device_array((state.n, 3), dtype=np.float64)
     blocks = blocks_for(state.n)
-    _scaled_kernel[blocks, THREADS](particle_array_on_device(state.velocity), float(dt), made)   # v dt, rounded: stored
+    # v dt, rounded: stored
+    launch(_scaled_kernel, blocks, THREADS, particle_array_on_device(state.velocity), float(dt), made)
     drop = np.asarray(gravity, dtype=float) * dt**2
-    _shifted_kernel[blocks, THREADS](made, float(drop[0]), float(drop[1]), float(drop[2]))
+    launch(_shifted_kernel, blocks, THREADS, made, float(drop[0]), float(drop[1]), float(drop[2]))
     frozen(predicted, made)
 
 
@@ -136,7 +138,7 @@ def midpoints_on_device(position, predicted):
     """(n, 3) x + u/2 on the device from the device arrays `position` and `predicted` (u/2 is exact,
     so a fused multiply-add rounds it as the host does)."""
     made = cuda.device_array(position.shape, dtype=np.float64)
-    _midpoint_kernel[blocks_for(position.shape[0]), THREADS](position, predicted, made)
+    launch(_midpoint_kernel, blocks_for(position.shape[0]), THREADS, position, predicted, made)
     return made
 
 

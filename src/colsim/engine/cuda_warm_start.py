@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cuda_launch import launch
 from .cuda_operator import (SHARED_FRAMES, THREADS, blocks_for, contact_arrays_on_device, cuda, device_copy_of,
                             full_on_device, project_point_on_device)
 from .operator import global_force_row
@@ -74,7 +75,7 @@ def carried_on_device(contacts, forces) -> DeviceWarmStart:
     on_device = cuda.device_array((2, m, 3), dtype=np.float64)
     if not hasattr(forces, "copy_to_host"):
         forces = device_copy_of(np.ascontiguousarray(forces, dtype=float))
-    _global_forces_kernel[blocks_for(m), THREADS](forces, *frames, on_device[0], on_device[1])
+    launch(_global_forces_kernel, blocks_for(m), THREADS, forces, *frames, on_device[0], on_device[1])
     return DeviceWarmStart(contacts, on_device)
 
 
@@ -97,10 +98,10 @@ def match_on_device(warm: WarmStart, contacts):
     size = 1 << int(2 * warm.m - 1).bit_length()       # a power of two >= 2 m
     table_key = full_on_device(size, EMPTY, np.int64)
     table_row = cuda.device_array(size, dtype=np.int64)   # read only where a key was stored
-    _insert_kernel[blocks_for(warm.m), THREADS](stored, table_key, table_row)
+    launch(_insert_kernel, blocks_for(warm.m), THREADS, stored, table_key, table_row)
     frames = [contact_arrays_on_device(contacts, (name,))[0] for name in SHARED_FRAMES]
-    _match_kernel[blocks_for(contacts.m), THREADS](keys, table_key, table_row, forces[0], forces[1], *frames,
-                                                   mu, mu_r, out)
+    launch(_match_kernel, blocks_for(contacts.m), THREADS, keys, table_key, table_row, forces[0], forces[1], *frames,
+           mu, mu_r, out)
     return out
 
 

@@ -401,7 +401,7 @@ class CudaIteration:
         self.readout = cuda.device_array(CONTROL_SIZE + 4 * blocks_for(self.m), dtype=np.float64)
         self.control = self.readout[:CONTROL_SIZE]
         self.residual_parts = self.readout[CONTROL_SIZE:].reshape(4, blocks_for(self.m))
-        _start_control_kernel[1, 1](self.control, lip, float(lip_decay))   # made there: no copy
+        launch(_start_control_kernel, 1, 1, self.control, lip, float(lip_decay))   # made there: no copy
         self._read = np.zeros(CONTROL_SIZE)   # the control array as last read: the slots' roles, the iterations
         self._read[[LIP, THETA, BETA, LIP_DECAY]] = lip, 1.0, 0.0, float(lip_decay)
         self._stale = False          # launched trial steps since that read
@@ -430,16 +430,16 @@ class CudaIteration:
         diagonal = device.diagonal_on_device(d_inv_mass)
         s = cuda.device_array(5 * m, dtype=np.float64)
         mu_s, mu_r_s = cuda.device_array(m, dtype=np.float64), cuda.device_array(m, dtype=np.float64)
-        _scales_kernel[blocks_for(m), THREADS](diagonal, bool(precondition), mu, mu_r, s, mu_s, mu_r_s)
+        launch(_scales_kernel, blocks_for(m), THREADS, diagonal, bool(precondition), mu, mu_r, s, mu_s, mu_r_s)
         c = cuda.device_array(5 * m, dtype=np.float64)
         gradient_on_device(device.geometry(full_on_device(5 * m, 1.0)), fbar, d_inv_mass, full_on_device(5 * m, 0.0), c)
-        _offset_kernel[blocks_for(m), THREADS](c, gap, s)
+        launch(_offset_kernel, blocks_for(m), THREADS, c, gap, s)
         x = full_on_device(5 * m, 0.0)
         nonzero = full_on_device(1, 0, np.int64)
         if warm_start is not None and np.shape(warm_start) == (m, 5):
             kept = kept_device_copy(warm_start)   # a Coulomb fixed point's last forces, from the device
             warm = _to_device(warm_start if kept is None else kept)
-            _first_iterate_kernel[blocks_for(m), THREADS](warm, s, mu_s, mu_r_s, x, nonzero)
+            launch(_first_iterate_kernel, blocks_for(m), THREADS, warm, s, mu_s, mu_r_s, x, nonzero)
         return cls(c, mu_s, mu_r_s, d_inv_mass, x, s, lip_decay, device, mu, mu_r,
                    warm=bool(nonzero.copy_to_host()[0]))
 
@@ -587,7 +587,7 @@ class CudaIteration:
     def forces_on_device(self):
         """(m, 5) the contact forces S z of the iterate, a device array."""
         out = cuda.device_array(5 * self.m, dtype=np.float64)
-        _forces_kernel[blocks_for(5 * self.m), THREADS](self.geometry.s, self.x, out)
+        launch(_forces_kernel, blocks_for(5 * self.m), THREADS, self.geometry.s, self.x, out)
         return out.reshape(self.m, 5)
 
     def solution(self, program, iterations: int, setup_time: float, solve_time: float, info: dict) -> "DeviceSolution":
@@ -629,11 +629,11 @@ class DeviceSolution(ConeSolution):
         same count); only the count comes back."""
         m = self.on_device.shape[0]
         largest = cuda.device_array(blocks_for(m), dtype=np.float64)
-        _largest_normal_kernel[blocks_for(m), THREADS](self.on_device, largest)
+        launch(_largest_normal_kernel, blocks_for(m), THREADS, self.on_device, largest)
         threshold = cuda.device_array(1, dtype=np.float64)
-        _threshold_kernel[1, THREADS](largest, threshold)
+        launch(_threshold_kernel, 1, THREADS, largest, threshold)
         count = full_on_device(1, 0, np.int64)
-        _count_above_kernel[blocks_for(m), THREADS](self.on_device, threshold, count)
+        launch(_count_above_kernel, blocks_for(m), THREADS, self.on_device, threshold, count)
         return int(count.copy_to_host()[0])
 
 
