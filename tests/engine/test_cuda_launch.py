@@ -95,3 +95,19 @@ def test_every_launch_of_a_collapse_step_goes_through_launch():
     assert launches > 100   # two steps of detection, set-up and APGD's iterations
     assert through == launches
 
+
+def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():
+    """colsim's one-block launches would each print numba-cuda's warning once a grid size (207 of them
+    in the fifth sitting's r0 = 6 pour log); a user who sets the variable gets them."""
+    import os
+    import subprocess
+    import sys
+
+    read = ("import colsim.engine.cuda_operator; from numba.core import config; "
+            "print(config.CUDA_LOW_OCCUPANCY_WARNINGS)")
+    environment = {k: v for k, v in os.environ.items() if k != "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"}
+    for asked, expected in ((None, "0"), ("1", "1"), ("0", "0")):
+        if asked is not None:
+            environment["NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"] = asked
+        out = subprocess.run([sys.executable, "-c", read], env=environment, capture_output=True, text=True, check=True)
+        assert out.stdout.strip() == expected

@@ -18,6 +18,7 @@ which is how CI checks them against the CPU kernels. APGD's iterations on the GP
 from __future__ import annotations
 
 import math
+import os
 import weakref
 
 import numpy as np
@@ -35,6 +36,16 @@ from .operator import ContactGeometry
 
 if numba_config.ENABLE_CUDASIM:   # faster, and its shared arrays made under a lock
     cuda_simulator.use()
+
+#: numba-cuda warns of every grid under 128 blocks ("will likely result in GPU under-utilization"),
+#: once for each size. colsim's one-block launches (a decision, a scan) are small by design, and its
+#: small columns' contacts fill fewer blocks: the fifth sitting's r0 = 6 pour log held 207 of them (two
+#: lines each), its collapse's 35. Off unless the environment sets NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS
+#: (set here too, so that numba's reload of its configuration keeps it).
+LOW_OCCUPANCY_WARNINGS = "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"
+if LOW_OCCUPANCY_WARNINGS not in os.environ:
+    os.environ[LOW_OCCUPANCY_WARNINGS] = "0"
+    numba_config.CUDA_LOW_OCCUPANCY_WARNINGS = 0
 
 #: threads a block; a power of two (the dot product's tree halves it). 32 on numba's simulator, which
 #: runs each thread as a Python thread and polls a block's threads at every sync: the same kernels, 2.4x
