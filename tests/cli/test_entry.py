@@ -67,3 +67,31 @@ def test_version_names_the_commit_and_verbosity_goes_anywhere(capsys):
         main(["-v", "mu-r", "--polygon", "6", "-q"])
     assert "contradict" in capsys.readouterr().err
     assert parser._subparsers._group_actions[0].choices["pack"].description.startswith("fill a cylinder")
+
+
+@pytest.mark.parametrize("code, message, words", [
+    (2, "Call to cuMemAlloc results in CUDA_ERROR_OUT_OF_MEMORY", ["out of the GPU's memory", "--device cpu"]),
+    (700, "Call to cuMemcpyDtoH results in CUDA_ERROR_ILLEGAL_ADDRESS", ["on the GPU: CudaAPIError", "ILLEGAL"]),
+])
+def test_an_error_of_the_gpu_is_one_line_exit_1(code, message, words, monkeypatch, tmp_path, capsys):
+    """numba-cuda's driver errors (here its own CudaAPIError, raised where the command would run) end
+    a command with one line naming the GPU and exit 1; any other error is not taken for one."""
+    driver = pytest.importorskip("numba.cuda.cudadrv.driver", reason="numba.cuda is not importable")
+    from colsim.cli import commands, main
+
+    def fails(args):
+        raise driver.CudaAPIError(code, message)
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(commands, "collapse", fails)
+    assert main(COLLAPSE + ["-q"]) == 1
+    last = capsys.readouterr().err.strip().splitlines()
+    assert len(last) == 1 and last[0].startswith("colsim collapse: failed: ")
+    assert all(word in last[0] for word in words), last[0]
+
+    def other(args):
+        raise ZeroDivisionError("not the GPU's")
+
+    monkeypatch.setattr(commands, "collapse", other)
+    with pytest.raises(ZeroDivisionError):
+        main(COLLAPSE + ["-q"])

@@ -168,8 +168,7 @@ def main(argv=None) -> int:
     from ..engine.stepper import OverlapError
 
     try:
-        commands.check_outputs(args)
-        getattr(commands, args.command.replace("-", "_"))(args)
+        _run(commands, args)
     except KeyboardInterrupt:
         print(f"colsim {args.command}: interrupted; {_interrupted(args)}", file=sys.stderr)
         return 130
@@ -195,6 +194,39 @@ def main(argv=None) -> int:
         print(f"colsim {args.command}: failed: {error}", file=sys.stderr)
         return 1
     return 0
+
+
+class GpuFailure(RuntimeError):
+    """An error of the GPU's driver or its bindings, said in one line (:func:`_gpu_failure`)."""
+
+
+def _run(commands, args) -> None:
+    """Run the command; an error from the GPU becomes a GpuFailure."""
+    try:
+        commands.check_outputs(args)
+        getattr(commands, args.command.replace("-", "_"))(args)
+    except Exception as error:
+        if _from_the_gpu(error):
+            raise GpuFailure(_gpu_failure(error)) from error
+        raise
+
+
+#: the packages whose errors come from the GPU's driver or its bindings (numba-cuda's CudaAPIError,
+#: CudaSupportError, ...; cuda.core's CUDAError), named by module: nothing is imported to tell
+GPU_ERROR_MODULES = ("numba.cuda", "numba_cuda", "cuda.core", "cuda.bindings")
+
+
+def _from_the_gpu(error: BaseException) -> bool:
+    """Whether `error` was raised by the GPU's driver or its bindings."""
+    return type(error).__module__.startswith(GPU_ERROR_MODULES)
+
+
+def _gpu_failure(error: BaseException) -> str:
+    """What a GPU's error means for the run, in one line."""
+    if "OUT_OF_MEMORY" in str(error):
+        return (f"out of the GPU's memory ({error}): a column too large for this card; --device cpu runs "
+                "it on the CPU")
+    return f"on the GPU: {type(error).__name__}: {error}"
 
 
 def _interrupted(args) -> str:
