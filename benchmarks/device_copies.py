@@ -12,7 +12,7 @@ there too); after one step to start from, `--steps` more of the same run are cou
 array's `copy_to_host` and `copy_to_device` from a host array is counted with its bytes, by the
 colsim function that made it, and so is each device array made (`cuda.device_array`,
 `device_array_like`, `to_device`: an allocation on the device each); on numba's simulator, so is each
-kernel's launch. The count of a step's copies depends on its attempts and on the
+kernel's launch; on a GPU, the launches numba-cuda's dispatcher makes (not `launch()`), by kernel. The count of a step's copies depends on its attempts and on the
 solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
 H200 whatever its size, docs/performance.md, "The third GPU sitting"); the bytes grow with it.
 
@@ -130,6 +130,13 @@ def counting_launches():
     return launches
 
 
+def plain_counts_now():
+    """colsim.engine.cuda_launch.plain_counts: the plain launches so far, by kernel."""
+    from colsim.engine.cuda_launch import plain_counts
+
+    return plain_counts
+
+
 def stack():
     """(state, settings): 12 spheres at rest in 3 layers of 2 x 2 in a cylinder, the collapse's law."""
     from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
@@ -174,6 +181,7 @@ def main(argv=None):
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()
         launches = counting_launches()
+        plain_before = dict(plain_counts_now())
         results = [step(state, settings, solver, 2)]
         args.steps = 1
     else:
@@ -184,6 +192,7 @@ def main(argv=None):
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()
         launches = counting_launches()
+        plain_before = dict(plain_counts_now())
         results = list(steps)
     attempts = sum(r.diagnostics.redone + 1 for r in results)
     iterations = sum(r.diagnostics.solver_iterations for r in results)
@@ -212,6 +221,16 @@ def main(argv=None):
             launched.row(caller, *(f"{counts[c] / args.steps:.1f}" for c in columns),
                          data={"launches by": caller, **{c: counts[c] / args.steps for c in columns}})
         launched.row("all", *(f"{sum(counts[c] for counts in launches.values()) / args.steps:.1f}" for c in columns))
+    else:   # a GPU: the launches launch() could not make its way (a kernel with several overloads)
+        from colsim.engine.cuda_launch import plain_counts
+
+        plain = {name: n - plain_before.get(name, 0) for name, n in plain_counts.items()
+                 if n > plain_before.get(name, 0)}
+        print("plain launches a step (numba-cuda's dispatcher; the others through launch()):")
+        table = record.table(["kernel", "plain launches a step"])
+        for name in sorted(plain, key=lambda name: -plain[name]):
+            table.row(name, f"{plain[name] / args.steps:.1f}", data={"kernel": name, "plain": plain[name] / args.steps})
+        table.row("all", f"{sum(plain.values()) / args.steps:.1f}")
 
 
 if __name__ == "__main__":

@@ -55,12 +55,11 @@ def test_a_prepared_launch_writes_what_the_plain_launch_writes():
         assert np.array_equal(ours.copy_to_host(), plain.copy_to_host())
 
 
-def _collapse_steps_launches(steps: int = 2) -> tuple[int, int]:
-    """(launches, of them through launch()) in `steps` GPU collapse steps of a 12-sphere stack, counted
-    on numba's simulator after one step to start from (the kernels then compiled)."""
+def _collapse_steps_launches(steps: int = 2) -> tuple[int, int, dict]:
+    """(launches, of them through launch(), plain launches by kernel) in `steps` GPU collapse steps of a
+    12-sphere stack, after one step to start from (the kernels then compiled). The first two are
+    counted on numba's simulator only (0 on a GPU), the third from cuda_launch.plain_counts."""
     import traceback
-
-    from numba.cuda.simulator import kernel
 
     from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
     from colsim.engine.stepper import run
@@ -71,29 +70,49 @@ def _collapse_steps_launches(steps: int = 2) -> tuple[int, int]:
     results = run(ParticleState.at_rest(grid, np.full(len(grid), 0.25)), settings, 1 + steps, ApgdSolver(kernel="cuda"))
     next(results)
     counts = {"all": 0, "through launch()": 0}
-    plain_call = kernel.FakeCUDAKernel.__call__
-
-    def counted(self, *args):
-        if not self._device:   # a kernel's launch, not a device function's call
-            counts["all"] += 1
-            counts["through launch()"] += any(f.filename.endswith("cuda_launch.py") for f in traceback.extract_stack())
-        return plain_call(self, *args)
-
-    kernel.FakeCUDAKernel.__call__ = counted
-    try:
+    plain_before = dict(cuda_launch.plain_counts)
+    if not numba_config.ENABLE_CUDASIM:
         list(results)
-    finally:
-        kernel.FakeCUDAKernel.__call__ = plain_call
-    return counts["all"], counts["through launch()"]
+    else:
+        from numba.cuda.simulator import kernel
+
+        plain_call = kernel.FakeCUDAKernel.__call__
+
+        def counted(self, *args):
+            if not self._device:   # a kernel's launch, not a device function's call
+                counts["all"] += 1
+                counts["through launch()"] += any(f.filename.endswith("cuda_launch.py")
+                                                  for f in traceback.extract_stack())
+            return plain_call(self, *args)
+
+        kernel.FakeCUDAKernel.__call__ = counted
+        try:
+            list(results)
+        finally:
+            kernel.FakeCUDAKernel.__call__ = plain_call
+    plain = {name: n - plain_before.get(name, 0) for name, n in cuda_launch.plain_counts.items()
+             if n > plain_before.get(name, 0)}
+    return counts["all"], counts["through launch()"], plain
 
 
-@pytest.mark.skipif(not numba_config.ENABLE_CUDASIM, reason="counts the simulator's launches")
 def test_every_launch_of_a_collapse_step_goes_through_launch():
     """A plain launch marshals each array anew (about 9 us an array on an H200, 29.5 us an empty
-    launch against 10): a GPU step's detection, assembly, solve and update launch through launch()."""
-    launches, through = _collapse_steps_launches()
-    assert launches > 100   # two steps of detection, set-up and APGD's iterations
-    assert through == launches
+    launch against 10): a GPU step's detection, assembly, solve and update launch through launch(),
+    and on a GPU the launcher takes each of them but a kernel with several overloads (its first
+    launch of each compiles)."""
+    launches, through, plain = _collapse_steps_launches()
+    if numba_config.ENABLE_CUDASIM:
+        assert launches > 100   # two steps of detection, set-up and APGD's iterations
+        assert through == launches
+        assert sum(plain.values()) == launches   # the simulator: the plain way only
+    else:
+        from colsim.engine import cuda_contacts, cuda_state, cuda_warm_start
+        from colsim.solvers import apgd_cuda
+
+        modules = (cuda_operator, cuda_contacts, cuda_state, cuda_warm_start, apgd_cuda)
+        kernels = {name: getattr(m, name) for m in modules for name in plain if hasattr(m, name)}
+        assert set(kernels) == set(plain), plain
+        assert all(len(kernels[name].overloads) > 1 for name in plain), plain
 
 
 def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():

@@ -22,11 +22,17 @@ was removed. docs/performance.md, "The third GPU sitting".)
 """
 from __future__ import annotations
 
+import collections
 import contextlib
 import weakref
 
 #: False: every launch the plain way (:func:`plain_launches`)
 enabled = True
+
+#: launches made the plain way, by kernel name, since the process started: a kernel's first (it
+#: compiles), and every one of a kernel with several overloads or an argument the launcher cannot
+#: take (on numba's simulator, all of them); the card's tests read it
+plain_counts: collections.Counter = collections.Counter()
 
 #: dispatcher -> its _Launcher, or False where the plain way is the only way
 _launchers: dict = {}
@@ -120,6 +126,7 @@ def launch(kernel, griddim: int, blockdim: int, *args) -> None:
     module's docstring); griddim and blockdim: one-dimensional."""
     launcher = _launcher(kernel) if enabled else None
     if launcher is None or not launcher(griddim, blockdim, args):
+        plain_counts[getattr(getattr(kernel, "py_func", kernel), "__name__", "?")] += 1
         kernel[griddim, blockdim](*args)
 
 
