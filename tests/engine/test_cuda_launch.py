@@ -25,10 +25,12 @@ def test_a_launch_writes_what_the_plain_launch_writes():
     ours, plain = cuda.device_array(300), cuda.device_array(300)
     with cuda_launch.plain_launches():
         _axpy_kernel[3, 128](0.5, x, y, 300, plain)   # compiles: the launcher takes the one overload
-    for a in (0.5, 2.0, 3):   # a scalar anew at each launch, an int too (the kernel's float64)
-        cuda_launch.launch(_axpy_kernel, 3, 128, a, x, y, 300, ours)
+    # a scalar anew at each launch: an int where the kernel took a float64, and an integral float where
+    # it took an int64 (ctypes' int64 takes no float: the launcher gives it the int)
+    for a, count in ((0.5, 300), (2.0, 300), (3, 300.0)):
+        cuda_launch.launch(_axpy_kernel, 3, 128, a, x, y, count, ours)
         with cuda_launch.plain_launches():
-            cuda_launch.launch(_axpy_kernel, 3, 128, a, x, y, 300, plain)
+            cuda_launch.launch(_axpy_kernel, 3, 128, a, x, y, count, plain)
         assert np.array_equal(ours.copy_to_host(), plain.copy_to_host())
         np.testing.assert_allclose(ours.copy_to_host(), a * x.copy_to_host() + y.copy_to_host(), rtol=1e-15)
     host_out = np.zeros(300)   # a host array: the plain way, which copies it back
@@ -130,3 +132,37 @@ def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():
             environment["NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"] = asked
         out = subprocess.run([sys.executable, "-c", read], env=environment, capture_output=True, text=True, check=True)
         assert out.stdout.strip() == expected
+
+
+def test_the_launcher_gives_an_integer_parameter_an_int():
+    """The launcher marshals a scalar with numba-cuda's own code (`_Kernel._prepare_args`), whose int64
+    is a ctypes c_int64, which refuses a float, even 3.0: an integral float goes as the int, any other
+    value for an integer parameter to the plain way (which compiles a float overload). Checked on
+    numba's real marshalling without a GPU: a subprocess with the simulator off."""
+    import os
+    import subprocess
+    import sys
+
+    script = """
+import weakref
+from numba.core import types
+from numba.cuda.dispatcher import _Kernel
+from colsim.engine.cuda_launch import _Launcher
+
+class Kernel:
+    extensions = []
+    def _prepare_args(self, *args):
+        return _Kernel._prepare_args(self, *args)
+
+launcher = object.__new__(_Launcher)
+launcher._kernel, launcher._types = Kernel(), (types.float64, types.int64)
+launcher._arrays, launcher._integers = (False, False), (False, True)
+launcher._device_array, launcher._words = type(None), weakref.WeakKeyDictionary()
+print([w.value for w in launcher.words((3, 3.0))], launcher.words((0.5, 2.5)))
+"""
+    environment = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True)
+    if done.returncode and "cannot import name" in done.stderr:
+        pytest.skip(f"this numba.cuda has no _Kernel._prepare_args: {done.stderr.strip().splitlines()[-1]}")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["[3.0,", "3]", "None"]

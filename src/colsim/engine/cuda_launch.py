@@ -96,8 +96,10 @@ class _Launcher:
                     self._words[value] = kept
                 words.extend(kept)
             else:
-                if is_integer and value != int(value):
-                    return None
+                if is_integer:   # ctypes' integers take no float, not even 3.0
+                    if value != int(value):
+                        return None
+                    value = int(value)
                 self._kernel._prepare_args(kind, value, 0, [], words)
         return words
 
