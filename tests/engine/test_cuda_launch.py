@@ -134,11 +134,12 @@ def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():
         assert out.stdout.strip() == expected
 
 
-def test_the_launcher_gives_an_integer_parameter_an_int():
+def test_the_launcher_gives_a_scalar_what_its_parameter_takes():
     """The launcher marshals a scalar with numba-cuda's own code (`_Kernel._prepare_args`), whose int64
     is a ctypes c_int64, which refuses a float, even 3.0: an integral float goes as the int, any other
-    value for an integer parameter to the plain way (which compiles a float overload). Checked on
-    numba's real marshalling without a GPU: a subprocess with the simulator off."""
+    value for an integer parameter the plain way (which compiles a float overload); a boolean or a
+    tuple whose value types otherwise than the parameter goes the plain way too. Checked on numba's
+    real marshalling without a GPU: a subprocess with the simulator off."""
     import os
     import subprocess
     import sys
@@ -146,6 +147,7 @@ def test_the_launcher_gives_an_integer_parameter_an_int():
     script = """
 import weakref
 from numba.core import types
+from numba.core.typing.typeof import Purpose, typeof
 from numba.cuda.dispatcher import _Kernel
 from colsim.engine.cuda_launch import _Launcher
 
@@ -155,14 +157,19 @@ class Kernel:
         return _Kernel._prepare_args(self, *args)
 
 launcher = object.__new__(_Launcher)
-launcher._kernel, launcher._types = Kernel(), (types.float64, types.int64)
-launcher._arrays, launcher._integers = (False, False), (False, True)
+launcher._kernel, launcher._types = Kernel(), (types.float64, types.int64, types.boolean, types.UniTuple(types.int64, 2))
+launcher._arrays, launcher._integers = (False,) * 4, (False, True, False, False)
+launcher._exact = (False, False, True, True)
 launcher._device_array, launcher._words = type(None), weakref.WeakKeyDictionary()
-print([w.value for w in launcher.words((3, 3.0))], launcher.words((0.5, 2.5)))
+launcher._typeof = lambda value: typeof(value, Purpose.argument)
+values = [getattr(w, "value", w) for w in launcher.words((3, 3.0, True, (4, 5)))]
+print(values == [3.0, 3, True, 4, 5], [type(v).__name__ for v in values[:2]])
+print(launcher.words((0.5, 2.5, True, (4, 5))), launcher.words((0.5, 2, 1, (4, 5))),
+      launcher.words((0.5, 2, False, (4.0, 5.0))))
 """
     environment = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
     done = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True)
     if done.returncode and "cannot import name" in done.stderr:
         pytest.skip(f"this numba.cuda has no _Kernel._prepare_args: {done.stderr.strip().splitlines()[-1]}")
     assert done.returncode == 0, done.stderr[-2000:]
-    assert done.stdout.split() == ["[3.0,", "3]", "None"]
+    assert done.stdout.splitlines() == ["True ['float', 'int']", "None None None"]

@@ -57,6 +57,9 @@ class _Launcher:
         self._types = tuple(kernel.argument_types)
         self._arrays = tuple(isinstance(t, types.Array) for t in self._types)
         self._integers = tuple(isinstance(t, types.Integer) for t in self._types)
+        # a boolean or a tuple goes as given (cuda.core would pass an int for a bool at another width, and
+        # ctypes takes no float for a tuple's integer): its value must type as the kernel's, else the plain way
+        self._exact = tuple(isinstance(t, (types.Boolean, types.BaseTuple)) for t in self._types)
         self._stream = driver._to_core_stream(0)
         self._core_launch = core_launch
         self._device_array = DeviceNDArray
@@ -85,7 +88,8 @@ class _Launcher:
         if len(args) != len(self._types):
             return None
         words = []
-        for value, kind, is_array, is_integer in zip(args, self._types, self._arrays, self._integers):
+        for value, kind, is_array, is_integer, exact in zip(args, self._types, self._arrays, self._integers,
+                                                            self._exact):
             if is_array:
                 kept = self._words.get(value) if isinstance(value, self._device_array) else None
                 if kept is None:
@@ -100,6 +104,8 @@ class _Launcher:
                     if value != int(value):
                         return None
                     value = int(value)
+                elif exact and self._typeof(value) != kind:
+                    return None
                 self._kernel._prepare_args(kind, value, 0, [], words)
         return words
 
