@@ -63,13 +63,12 @@ def _collapse_steps_launches(steps: int = 2) -> tuple[int, int, dict]:
     counted on numba's simulator only (0 on a GPU), the third from cuda_launch.plain_counts."""
     import traceback
 
-    from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
     from colsim.engine.stepper import run
     from colsim.solvers.apgd import ApgdSolver
 
-    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
-    settings = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12), walls=Walls(floor=True, cylinder_radius=0.65))
-    results = run(ParticleState.at_rest(grid, np.full(len(grid), 0.25)), settings, 1 + steps, ApgdSolver(kernel="cuda"))
+    from helpers import stack_of_twelve
+
+    results = run(*stack_of_twelve(), 1 + steps, ApgdSolver(kernel="cuda"))
     next(results)
     counts = {"all": 0, "through launch()": 0}
     plain_before = dict(cuda_launch.plain_counts)
