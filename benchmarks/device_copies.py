@@ -12,8 +12,9 @@ there too); after one step to start from, `--steps` more of the same run are cou
 array's `copy_to_host` and `copy_to_device` from a host array is counted with its bytes, by the
 colsim function that made it, and so is each device array made (`cuda.device_array`,
 `device_array_like`, `to_device`: an allocation on the device each); on numba's simulator, so is each
-kernel's launch; on a GPU, the launches numba-cuda's dispatcher makes (not `launch()`), by kernel. The count of a step's copies depends on its attempts and on the
-solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
+kernel's launch, and on a GPU each launch made the plain way (numba-cuda's dispatcher, not
+`colsim.engine.cuda_launch.launch`), by kernel. The count of a step's copies depends on its attempts
+and on the solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
 H200 whatever its size, docs/performance.md, "The third GPU sitting"); the bytes grow with it.
 
 `--redo SIDE`: one step that is redone instead (:func:`redone_step`), counted after the same step
@@ -130,13 +131,6 @@ def counting_launches():
     return launches
 
 
-def plain_counts_now():
-    """colsim.engine.cuda_launch.plain_counts: the plain launches so far, by kernel."""
-    from colsim.engine.cuda_launch import plain_counts
-
-    return plain_counts
-
-
 def stack():
     """(state, settings): 12 spheres at rest in 3 layers of 2 x 2 in a cylinder, the collapse's law."""
     from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
@@ -171,6 +165,7 @@ def main(argv=None):
     parser.add_argument("--redo", type=int, metavar="SIDE", help="count one redone step instead, beside a cube "
                         "of SIDE^3 spheres at rest")
     args = parser.parse_args(argv)
+    from colsim.engine.cuda_launch import plain_counts
     from colsim.engine.stepper import run, step
     from colsim.solvers.apgd import ApgdSolver
 
@@ -181,7 +176,7 @@ def main(argv=None):
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()
         launches = counting_launches()
-        plain_before = dict(plain_counts_now())
+        plain_before = dict(plain_counts)
         results = [step(state, settings, solver, 2)]
         args.steps = 1
     else:
@@ -192,7 +187,7 @@ def main(argv=None):
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()
         launches = counting_launches()
-        plain_before = dict(plain_counts_now())
+        plain_before = dict(plain_counts)
         results = list(steps)
     attempts = sum(r.diagnostics.redone + 1 for r in results)
     iterations = sum(r.diagnostics.solver_iterations for r in results)
@@ -222,8 +217,6 @@ def main(argv=None):
                          data={"launches by": caller, **{c: counts[c] / args.steps for c in columns}})
         launched.row("all", *(f"{sum(counts[c] for counts in launches.values()) / args.steps:.1f}" for c in columns))
     else:   # a GPU: the launches launch() could not make its way (a kernel with several overloads)
-        from colsim.engine.cuda_launch import plain_counts
-
         plain = {name: n - plain_before.get(name, 0) for name, n in plain_counts.items()
                  if n > plain_before.get(name, 0)}
         print("plain launches a step (numba-cuda's dispatcher; the others through launch()):")
