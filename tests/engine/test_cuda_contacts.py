@@ -60,16 +60,17 @@ def test_one_sphere_has_no_pairs():
 @pytest.mark.parametrize("redo", [False, True], ids=["first-attempt", "a-redo"])
 def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     """detect(device='cuda') (what the stepper asks for when APGD runs on the GPU) lists the same
-    contacts, pairs, walls and all, in the same order; the pairs' normals, tangents and gaps are made
-    on the device, in the CPU's arithmetic: equal to 1e-14 (a GPU fuses multiply-adds, rounding once
-    where the CPU rounds twice: a few units in the last place of numbers of order 1). Some pairs
-    overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts; two
-    fixed spheres touch the lowest particles. A redo passes five pairs with given normals (the
+    contacts, pairs, walls and all, in the same order; the pairs' and the walls' normals, tangents and
+    gaps are made on the device, in the CPU's arithmetic: equal to 1e-14 (a GPU fuses multiply-adds,
+    rounding once where the CPU rounds twice: a few units in the last place of numbers of order 1; its
+    hypot is its own). Some pairs
+    overlap by more than the step's recovery (most_recovered = 0.002), so the relaxation counts, and so
+    does the outermost sphere the cylinder; two fixed spheres touch the lowest particles. A redo passes five pairs with given normals (the
     stepper's missed pairs): three among those found, whose rows they replace, and two not; the given
     pairs go after the found ones, and on the GPU they join there: nothing of the found contacts comes
     back to the host but the counts and the largest overlaps (8 B each, one per block)."""
     from colsim.engine.contacts import detect, overlaps
-    from colsim.engine.state import ContactLaw, FixedSpheres, Walls
+    from colsim.engine.state import CYLINDER, FLOOR, ContactLaw, FixedSpheres, Walls
 
     state = starting_cloud(60, 1.0, seed=3)
     state.position[:, 2] *= 0.45
@@ -77,7 +78,9 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     predicted = _moving(state, 0.02, seed=8)
     lowest = np.argsort(state.position[:, 2])[:2]   # two fixed spheres just under the two lowest
     below = state.position[lowest] - [[0.0, 0.0, 1e-3]] - 2.0 * state.radius[lowest, None] * [[0.0, 0.0, 1.0]]
-    walls = Walls(floor=True, cylinder_radius=1.0, fixed=FixedSpheres(below, state.radius[lowest]))
+    # the cylinder 0.004 inside the outermost sphere: it overlaps by more than the step's recovery
+    cylinder = float((np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius).max()) - 0.004
+    walls = Walls(floor=True, cylinder_radius=cylinder, fixed=FixedSpheres(below, state.radius[lowest]))
     law = ContactLaw.uniform(0.5, 0.1)
     renormal = None
     if redo:
@@ -96,8 +99,10 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cpu")
     # the contacts stay on the device, with no host array until one is read
     assert isinstance(gpu, DeviceContacts) and not set(DEVICE_ARRAYS) & set(vars(gpu))
-    assert read == [8, 8 * blocks_for(state.n)] + [8] * redo   # the counts and each block's largest overlap
+    # the pairs' and the walls' counts and each block's largest overlap
+    assert read == [8, 8, 8 * blocks_for(state.n)] + [8] * redo
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
+    assert np.count_nonzero(cpu.family == FLOOR) and np.count_nonzero(cpu.family == CYLINDER)   # both walls
     assert np.count_nonzero(cpu.j <= -2) == 2                                           # the fixed spheres
     pairs = cpu.j >= 0
     overlap = -(np.linalg.norm(state.position[cpu.j[pairs]] - state.position[cpu.i[pairs]], axis=1)

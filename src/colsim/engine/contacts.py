@@ -297,25 +297,40 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
     device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
     :func:`pair_frames`) or 'cuda' (a grid on the GPU: the same pairs, the same arithmetic). On the
-    GPU the contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`, the walls' and fixed
-    spheres' rows found on the host and joined there; a redo's given pairs made on the host and joined
+    GPU the contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`: the floor's and the
+    cylinder's rows made there too, unless a cylinder margin is given (a redo's, then on the host), the
+    fixed spheres' found on the host and joined there; a redo's given pairs made on the host and joined
     there by :func:`colsim.engine.cuda_contacts.join_given_pairs`), and their host arrays are copied only
     when read.
     """
-    speed = row_lengths(predicted)
-    others = _other_contacts(state, walls, law, margin + (1.0 + slack) * speed, cylinder_margin, most_recovered)
+    def others_of(walls_here):
+        """The contacts with walls_here's walls and fixed spheres, made on the host."""
+        fixed = walls_here.fixed is not None and walls_here.fixed.n > 0
+        if walls_here.floor or walls_here.cylinder_radius is not None or fixed:
+            reach = margin + (1.0 + slack) * row_lengths(predicted)
+        else:
+            reach = np.zeros(state.n)   # no wall: none asked
+        return _other_contacts(state, walls_here, law, reach, cylinder_margin, most_recovered)
+
     given = None if renormal is None else pair_rows(state, law, renormal[0], renormal[1], pair_frames(
         state, renormal[0], renormal[1], renormal[2], most_recovered))
     largest_pair_overlap = None   # the largest pair overlap: measured by the GPU's detection
     if device == "cuda":
         from .cuda_contacts import join_given_pairs, swept_contacts
 
-        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law)
+        # the floor and the cylinder on the device too, where no cylinder margin is asked for (a first
+        # attempt's); the fixed spheres on the host
+        has_walls = walls.floor or walls.cylinder_radius is not None
+        on_device = walls if has_walls and not np.any(cylinder_margin) else None
+        found = swept_contacts(state, predicted, margin, slack, most_recovered,
+                               others_of(Walls(floor=False, fixed=walls.fixed) if on_device else walls), law,
+                               on_device)
         if found is not None:
             if given is None or not len(given["i"]):
                 return found
             return join_given_pairs(found, given, state.n, law.rolling_lever)
         largest_pair_overlap = -np.inf   # fewer than two particles or no contacts: nothing to keep there
+    others = others_of(walls)
     pi, pj = swept_pairs(state, predicted, margin, slack)
     pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered))
     parts = [pairs, others]

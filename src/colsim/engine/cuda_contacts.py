@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from .contacts import Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
-from .state import PARTICLE, pair_key
+from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
+from .state import CYLINDER, FLOOR, PARTICLE, pair_key
 from .cuda_launch import launch
 from .cuda_state import midpoints_on_device, particle_array_on_device
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, full_on_device,
@@ -166,7 +166,7 @@ class ContactRows:
 
 
 def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
-                   others: dict, law) -> DeviceContacts | None:
+                   others: dict, law, walls=None) -> DeviceContacts | None:
     """The contacts of :func:`colsim.engine.contacts.detect`'s first attempt, made on the GPU
     (:class:`DeviceContacts`), or None for fewer than two particles or no contacts (detect then makes
     them on the host).
@@ -177,21 +177,28 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds), and its bodies, family,
     radii and coefficients (from `law`, a ContactLaw).
 
-    others: the other contacts' arrays by name (detect's walls and fixed spheres, made on the host);
-    their rows go to the device in one copy (:meth:`ContactRows.upload`) and follow the pairs'. Every
+    walls: a Walls whose floor and cylinder contacts are made on the device (:class:`_WallContacts`, the
+    arithmetic of :func:`colsim.engine.contacts._wall_contacts`, no cylinder margin), following the
+    pairs'; None: none there. others: the other contacts' arrays by name (detect's fixed spheres, and
+    its walls where `walls` is None, made on the host); their rows go to the device in one copy
+    (:meth:`ContactRows.upload`) and follow the pairs' and the walls'. Every
     contact's lever (the CPU's arithmetic) and pair key (:func:`colsim.engine.state.pair_key`) are made
     there. The pairs' largest overlap R_i + R_j - |x_j - x_i| (length; -inf: no pair) is
     :func:`colsim.engine.contacts.overlaps`' of these pairs, in its arithmetic, so that the stepper's
     check need not measure them on the host: each block's largest comes back, the one copy from the
-    device besides the pairs' count."""
+    device besides the pairs' count and the walls' count."""
     if state.n < 2:
         return None
     found = _SweptPairs(state, predicted, margin, slack)
-    m, total = found.m, found.m + len(others["i"])
+    on_walls = _WallContacts(found, margin, slack, most_recovered, walls) if walls is not None else None
+    m, made = found.m, on_walls.count if on_walls is not None else 0
+    total = m + made + len(others["i"])
     if total == 0:   # no zero-length arrays on the device
         return None
     rows = ContactRows(total)
-    rows.upload(others, m)
+    if made:
+        on_walls.fill(rows, m, law)
+    rows.upload(others, m + made)
     blocks = blocks_for(state.n)
     largest = cuda.device_array(blocks, dtype=np.float64)   # each block's largest pair overlap
     launch(_frames_kernel, blocks, THREADS, found.position, found.radius, found.offsets, found.partners,
@@ -344,6 +351,7 @@ class _SweptPairs:
         lower, dims = tuple(float(x) for x in lower), tuple(int(c) for c in dims)   # by value: no copies
         # a step's own, made on the device from the last step's (cuda_state), else copied once
         self.position, d_predicted = particle_array_on_device(position), particle_array_on_device(predicted)
+        self.predicted = d_predicted
         d_midpoint = midpoints_on_device(self.position, d_predicted)
         self.radius = particle_array_on_device(radius)   # the particles' radii never change: one copy a run
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
@@ -391,15 +399,115 @@ def _pair_frames(i, position, radius, offsets, partners, most_recovered, normal,
         g = n0 * d0 + n1 * d1 + n2 * d2 - radius[i] - radius[j]
         gap[k] = g + max(0.0, -(distance - radius[i] - radius[j]) - most_recovered)
         normal[k, 0], normal[k, 1], normal[k, 2] = n0, n1, n2
-        h0, h1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)   # the helper (h0, h1, 0)
-        a0, a1, a2 = h1 * n2 - 0.0 * n1, 0.0 * n0 - h0 * n2, h0 * n1 - h1 * n0   # helper x n, as np.cross
-        length = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
-        a0, a1, a2 = a0 / length, a1 / length, a2 / length
-        tangent1[k, 0], tangent1[k, 1], tangent1[k, 2] = a0, a1, a2
-        tangent2[k, 0] = n1 * a2 - n2 * a1
-        tangent2[k, 1] = n2 * a0 - n0 * a2
-        tangent2[k, 2] = n0 * a1 - n1 * a0
+        _put_tangents(k, n0, n1, n2, tangent1, tangent2)
     return largest
+
+
+@cuda.jit(device=True)
+def _put_tangents(k, n0, n1, n2, tangent1, tangent2):
+    """Row k of tangent1 and tangent2 (m, 3): :func:`colsim.engine.contacts.tangent_basis` of the unit
+    normal (n0, n1, n2), in its arithmetic (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
+    normalised; t2 = n x t1)."""
+    h0, h1 = (1.0, 0.0) if abs(n0) < 0.9 else (0.0, 1.0)   # the helper (h0, h1, 0)
+    a0, a1, a2 = h1 * n2 - 0.0 * n1, 0.0 * n0 - h0 * n2, h0 * n1 - h1 * n0   # helper x n, as np.cross
+    length = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+    a0, a1, a2 = a0 / length, a1 / length, a2 / length
+    tangent1[k, 0], tangent1[k, 1], tangent1[k, 2] = a0, a1, a2
+    tangent2[k, 0] = n1 * a2 - n2 * a1
+    tangent2[k, 1] = n2 * a0 - n0 * a2
+    tangent2[k, 2] = n0 * a1 - n1 * a0
+
+
+class _WallContacts:
+    """The floor's and the cylinder's contacts of the particles of `found` (a :class:`_SweptPairs`), made
+    on the device as :func:`colsim.engine.contacts._wall_contacts` makes them with no cylinder margin:
+    particle i touches the floor where z_i - R_i is below its reach margin + (1 + slack) |u_i| (u: the
+    predicted motion), and the cylinder where its gap R - rho_i - R_i, relaxed by
+    :func:`colsim.engine.contacts.recovery_relaxation`, is; the floor's contacts first, then the
+    cylinder's, each in the particles' order. `count` (the one number copied to the host) of them."""
+
+    def __init__(self, found: "_SweptPairs", margin: float, slack: float, most_recovered: float, walls):
+        n = found.radius.shape[0]
+        self.found, self.most_recovered = found, float(most_recovered)
+        self.cylinder_radius = math.nan if walls.cylinder_radius is None else float(walls.cylinder_radius)
+        flags = cuda.device_array(2 * n, dtype=np.int64)
+        launch(_wall_flags_kernel, blocks_for(n), THREADS, found.position, found.radius, found.predicted,
+               bool(walls.floor), self.cylinder_radius, float(margin), float(slack), self.most_recovered, flags)
+        self.start = prefix_sums_on_device(flags)
+        self.count = int(self.start[2 * n:].copy_to_host()[0])
+
+    def fill(self, rows: "ContactRows", first: int, law) -> None:
+        """Their rows of `rows`, from row `first` on (all but the levers and keys)."""
+        mu, mu_r = np.asarray(law.mu, dtype=float), np.asarray(law.mu_r, dtype=float)
+        found = self.found
+        launch(_wall_rows_kernel, blocks_for(found.radius.shape[0]), THREADS, found.position, found.radius,
+               self.start, self.cylinder_radius, self.most_recovered, first, float(mu[FLOOR]),
+               float(mu_r[FLOOR]), float(mu[CYLINDER]), float(mu_r[CYLINDER]), rows.frames[0], rows.frames[1],
+               rows.frames[2], rows.numbers, rows.bodies)
+
+
+@cuda.jit(device=True)
+def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered):
+    """(particle i's gap to the cylinder, relaxed as :func:`colsim.engine.contacts.recovery_relaxation`
+    relaxes it; its distance rho from the axis). rho = sqrt(x^2 + y^2), the host's np.hypot to a unit
+    in the last place (the card's own hypot is not glibc's either, and holds fused multiply-adds that
+    libNVVM's -fma=0 leaves: benchmarks/unfused.py)."""
+    rho = math.sqrt(position[i, 0] * position[i, 0] + position[i, 1] * position[i, 1])
+    true_gap = cylinder_radius - rho - radius[i]
+    return true_gap + max(0.0, -true_gap - most_recovered), rho
+
+
+@cuda.jit
+def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, margin, slack, most_recovered, flags):
+    """flags (2n,): 1 where particle i touches the floor (entry i) or the cylinder (entry n + i, none
+    for a cylinder_radius of nan), else 0 (:class:`_WallContacts`); one thread a particle."""
+    i = cuda.grid(1)
+    n = position.shape[0]
+    if i >= n:
+        return
+    square = predicted[i, 0] * predicted[i, 0]   # colsim.engine.contacts.row_lengths
+    square += predicted[i, 1] * predicted[i, 1]
+    square += predicted[i, 2] * predicted[i, 2]
+    reach = margin + (1.0 + slack) * math.sqrt(square)
+    flags[i] = 1 if floor and position[i, 2] - radius[i] < reach else 0
+    flags[n + i] = 0
+    if not math.isnan(cylinder_radius):
+        gap, _ = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered)
+        flags[n + i] = 1 if gap < reach else 0
+
+
+@cuda.jit
+def _wall_rows_kernel(position, radius, start, cylinder_radius, most_recovered, first, mu_floor, mu_r_floor,
+                      mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies):
+    """Particle i's floor and cylinder rows (one thread a particle), at first + start[i] and first +
+    start[n + i] where flagged (start: the flags' prefix sums): the normal out of the particle, the
+    tangents, the gap relaxed as on the host, the bodies (i, WALL), the family, the radii (R_i, 0)
+    and the wall's coefficients."""
+    i = cuda.grid(1)
+    n = position.shape[0]
+    if i >= n:
+        return
+    if start[i + 1] > start[i]:
+        k = first + start[i]
+        gap = position[i, 2] - radius[i]
+        _put_wall_row(k, i, FLOOR, 0.0, 0.0, -1.0, gap + max(0.0, -gap - most_recovered), radius[i], mu_floor,
+                      mu_r_floor, normal, tangent1, tangent2, numbers, bodies)
+    if start[n + i + 1] > start[n + i]:
+        k = first + start[n + i]
+        gap, rho = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered)
+        n0, n1 = (1.0, 0.0) if rho < 1e-12 else (position[i, 0] / rho, position[i, 1] / rho)
+        _put_wall_row(k, i, CYLINDER, n0, n1, 0.0, gap, radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1,
+                      tangent2, numbers, bodies)
+
+
+@cuda.jit(device=True)
+def _put_wall_row(k, i, family, n0, n1, n2, gap, radius_i, mu, mu_r, normal, tangent1, tangent2, numbers, bodies):
+    """Row k: particle i's contact with a wall of `family`, unit normal (n0, n1, n2), `gap`."""
+    normal[k, 0], normal[k, 1], normal[k, 2] = n0, n1, n2
+    _put_tangents(k, n0, n1, n2, tangent1, tangent2)
+    numbers[GAP, k], numbers[RADIUS_I, k], numbers[RADIUS_J, k] = gap, radius_i, 0.0
+    numbers[MU, k], numbers[MU_R, k] = mu, mu_r
+    bodies[BODY_I, k], bodies[BODY_J, k], bodies[FAMILY, k] = i, WALL, family
 
 
 def _grid(midpoint: np.ndarray, reach: float):
