@@ -1,5 +1,4 @@
-"""Helpers shared by the tests: the session pile's settings (conftest, engine/test_pile), the stack of
-12 spheres of the GPU step's tests (engine/test_cuda_state, engine/test_cuda_launch), and for the
+"""Helpers shared by the tests: the session pile's settings (conftest, engine/test_pile), and for the
 workflow tests (test_workflow, test_slurm) a copy of the workflow, a snakemake run in it, the jobs a
 dry run plans and the names of the tiny study's files."""
 from __future__ import annotations
@@ -17,13 +16,12 @@ import numpy as np
 
 from colsim import io
 from colsim.cli import main
-from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
+from colsim.engine.state import ContactLaw, ParticleState
 from colsim.study.collect import SUMMARY_VARIABLES
 from colsim.study.figure_names import FIGURES
 
 __all__ = ["CF_UNITS", "COLLAPSE_LAW", "DT", "FIGURES", "G", "PACKING_R0", "ROOT", "SUMMARY_VARIABLES", "TINY",
-           "assert_cf_units", "cf_check_failures", "copy_workflow", "main_in", "tiny_state_files", "max_speed", "planned_outputs", "snakemake",
-           "stack_of_twelve"]
+           "assert_cf_units", "cf_check_failures", "copy_workflow", "main_in", "tiny_state_files", "max_speed", "planned_outputs", "snakemake"]
 
 # the session pile (conftest.pile): gravity, time step, and the friction that locks it and collapses it
 G = 9.81
@@ -34,17 +32,6 @@ ROOT = Path(__file__).resolve().parents[1]
 WORKFLOW_FILES = ("Snakefile", "config.yaml", "config", "workflow", "profiles")
 #: where the tiny study (config/tiny.yaml, study: tiny) writes its summary, tables and figures
 TINY = "results/tiny"
-
-
-def stack_of_twelve(nudge_seed: int | None = None) -> tuple[ParticleState, StepSettings]:
-    """(state, settings): 12 spheres (diameter 0.5) stacked 2 x 2 x 3 on the floor in a cylinder of
-    radius 0.65 (benchmarks/device_copies.py's stack), at rest, or nudged sideways (speeds of about 0.2)
-    by draws of `nudge_seed`; the collapse's law, dt 0.02."""
-    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
-    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
-    if nudge_seed is not None:
-        state.velocity[:, :2] = np.random.default_rng(nudge_seed).normal(scale=0.2, size=(state.n, 2))
-    return state, StepSettings(dt=DT, law=COLLAPSE_LAW, walls=Walls(floor=True, cylinder_radius=0.65))
 
 
 def max_speed(state: ParticleState) -> float:

@@ -57,68 +57,6 @@ def test_a_prepared_launch_writes_what_the_plain_launch_writes():
         assert np.array_equal(ours.copy_to_host(), plain.copy_to_host())
 
 
-def _collapse_steps_launches(steps: int = 2) -> tuple[int, int, dict, set]:
-    """(launches, of them through launch(), plain launches by kernel, the kernels first launched among
-    them) in `steps` GPU collapse steps of a 12-sphere stack, after two steps to start from (the
-    kernels then compiled: the second is the first to match a warm start). The first two are counted
-    on numba's simulator only (0 on a GPU), the others from cuda_launch.plain_counts."""
-    import traceback
-
-    from colsim.engine.stepper import run
-    from colsim.solvers.apgd import ApgdSolver
-
-    from helpers import stack_of_twelve
-
-    results = run(*stack_of_twelve(), 2 + steps, ApgdSolver(kernel="cuda"))
-    next(results)
-    next(results)
-    counts = {"all": 0, "through launch()": 0}
-    plain_before = dict(cuda_launch.plain_counts)
-    if not numba_config.ENABLE_CUDASIM:
-        list(results)
-    else:
-        from numba.cuda.simulator import kernel
-
-        plain_call = kernel.FakeCUDAKernel.__call__
-
-        def counted(self, *args):
-            if not self._device:   # a kernel's launch, not a device function's call
-                counts["all"] += 1
-                counts["through launch()"] += any(f.filename.endswith("cuda_launch.py")
-                                                  for f in traceback.extract_stack())
-            return plain_call(self, *args)
-
-        kernel.FakeCUDAKernel.__call__ = counted
-        try:
-            list(results)
-        finally:
-            kernel.FakeCUDAKernel.__call__ = plain_call
-    plain = {name: n - plain_before.get(name, 0) for name, n in cuda_launch.plain_counts.items()
-             if n > plain_before.get(name, 0)}
-    return counts["all"], counts["through launch()"], plain, set(plain) - set(plain_before)
-
-
-def test_every_launch_of_a_collapse_step_goes_through_launch():
-    """A plain launch marshals each array anew (about 9 us an array on an H200, 29.5 us an empty
-    launch against 10): a GPU step's detection, assembly, solve and update launch through launch(),
-    and on a GPU the launcher takes each of them but a kernel with several overloads, and a kernel's
-    first launch, which compiles it."""
-    launches, through, plain, first_launched = _collapse_steps_launches()
-    if numba_config.ENABLE_CUDASIM:
-        assert launches > 100   # two steps of detection, set-up and APGD's iterations
-        assert through == launches
-        assert sum(plain.values()) == launches   # the simulator: the plain way only
-    else:
-        from colsim.engine import cuda_contacts, cuda_state, cuda_warm_start
-        from colsim.solvers import apgd_cuda
-
-        modules = (cuda_operator, cuda_contacts, cuda_state, cuda_warm_start, apgd_cuda)
-        kernels = {name: getattr(m, name) for m in modules for name in plain if hasattr(m, name)}
-        assert set(kernels) == set(plain), plain
-        assert all(len(kernels[name].overloads) > 1 or (name in first_launched and plain[name] == 1)
-                   for name in plain), plain
-
-
 def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():
     """colsim's one-block launches would each print numba-cuda's warning once a grid size (207 of them
     in the fifth sitting's r0 = 6 pour log); a user who sets the variable gets them."""

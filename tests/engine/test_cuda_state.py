@@ -12,7 +12,6 @@ from colsim.engine.program import assemble
 from colsim.engine.state import ContactLaw, StepSettings, Walls
 from colsim.engine.stepper import advance, predicted_displacement
 from colsim.stages.pack import starting_cloud
-from helpers import stack_of_twelve
 
 cuda_state = pytest.importorskip("colsim.engine.cuda_state", reason="numba.cuda is not importable")
 
@@ -28,8 +27,15 @@ def _moving_cloud(seed: int):
 
 
 def _nudged_stack():
-    """(state, settings): the 12-sphere stack nudged sideways (tests/helpers.py)."""
-    return stack_of_twelve(nudge_seed=12)
+    """(state, settings): 12 spheres (diameter 0.5) stacked 2 x 2 x 3 in a cylinder of radius 0.65
+    on the floor (benchmarks/device_copies.py's stack), nudged sideways; the collapse's law, dt 0.02."""
+    from colsim.engine.state import ParticleState
+
+    grid = np.array([[x, y, z] for x in (-0.26, 0.26) for y in (-0.26, 0.26) for z in (0.25, 0.76, 1.27)])
+    state = ParticleState.at_rest(grid, np.full(len(grid), 0.25))
+    state.velocity[:, :2] = np.random.default_rng(12).normal(scale=0.2, size=(state.n, 2))
+    return state, StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12),
+                               walls=Walls(floor=True, cylinder_radius=0.65))
 
 
 def _kept(array):

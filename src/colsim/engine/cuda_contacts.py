@@ -338,7 +338,7 @@ def _move_rows_kernel(frames, numbers, bodies, keys, pairs, start, given, to_fra
 class _SweptPairs:
     """The swept pairs of n >= 2 particles on the device: particle i's partners are
     partners[offsets[i]:offsets[i + 1]] (sorted), m pairs in all (the one number copied to the host);
-    position, radius: the particles' on the device."""
+    position, predicted, radius: the particles' on the device."""
 
     def __init__(self, state, predicted: np.ndarray, margin: float, slack: float):
         n = state.n
@@ -350,12 +350,11 @@ class _SweptPairs:
         cells = int(np.prod(dims))
         lower, dims = tuple(float(x) for x in lower), tuple(int(c) for c in dims)   # by value: no copies
         # a step's own, made on the device from the last step's (cuda_state), else copied once
-        self.position, d_predicted = particle_array_on_device(position), particle_array_on_device(predicted)
-        self.predicted = d_predicted
-        d_midpoint = midpoints_on_device(self.position, d_predicted)
+        self.position, self.predicted = particle_array_on_device(position), particle_array_on_device(predicted)
+        d_midpoint = midpoints_on_device(self.position, self.predicted)
         self.radius = particle_array_on_device(radius)   # the particles' radii never change: one copy a run
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
-        args = (self.position, d_predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
+        args = (self.position, self.predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
         counts = full_on_device(n, 0, np.int64)
         launch(_pairs_kernel, blocks_for(n), THREADS, *args, counts, counts, counts, False)
