@@ -2,11 +2,12 @@
 
     python -m benchmarks host_work COLUMN [--tile R0] [--repeat 5]
 
-A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host:
-- detection's fixed spheres (the pairs, the walls and every contact's arrays are made on the device);
-- the grid's bounds, the midpoints and the assembly;
-- the update, the overlap check's walls and the kinetic energy.
-(The increments, 1 / mass and a second predicted motion have left the host: timed as they were.)
+A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host: detection's fixed
+spheres (the pairs, the walls and every contact's arrays are made on the device) and the step's
+smallest and mean diameters from the radii. The rest has left the host, and is timed here as it was
+made there: the increments, 1 / mass, the predicted motion, the grid's bounds, the midpoints, the
+assembly, the update, the overlap check's walls and the kinetic energy (until 2026-11-29 the host
+made its own copy of the particles' arrays each step, beside the device's).
 
 Each is timed here, best of `--repeat`, on the column (`colsim trim`) or on a column of radius R0
 tiled from it (benchmarks/tiling.py). Velocities are drawn at 0.01, so that every particle moves.
@@ -113,6 +114,13 @@ def main(argv=None):
     forces = np.random.default_rng(2).uniform(size=(found.m, 5))
     measured = dataclasses.replace(found, largest_pair_overlap=0.0)   # as the GPU's detection measures it
 
+    def host_bounds(midpoint, reach):   # the grid's bounds as the host made them before 2026-11-29
+        return _grid(np.array([midpoint[:, d].min() for d in range(3)]),
+                     np.array([midpoint[:, d].max() for d in range(3)]), reach, state.n)
+
+    def step_radii():   # what a step still reads of the particles on the host
+        return 2.0 * float(np.min(state.radius)), 2.0 * float(np.mean(state.radius))
+
     def keys():
         found.__dict__.pop("keys", None)
         return found.keys
@@ -130,22 +138,25 @@ def main(argv=None):
         (f"a redo's join of {GIVEN} given pairs (every array joined on the host)",
          best_ms(r, detect_given_pairs, given), "before"),
         (f"a redo's {GIVEN} given pairs' rows (joined on the device)", best_ms(r, given_rows), "now"),
-        ("the grid's bounds", best_ms(r, _grid, midpoint, reach), "on the host"),
+        ("the grid's bounds", best_ms(r, host_bounds, midpoint, reach), "on the device (before 2026-11-29: host)"),
         ("midpoints", best_ms(r, detection.swept_midpoints, state, predicted, margin, settings.detection_slack),
-         "on the host"),
+         "on the device (before 2026-11-29: also host)"),
         ("predicted motion", best_ms(r, predicted_displacement, state, settings),
-         "on the host, once a step (twice before 047c585; also on the device since)"),
+         "on the device (before 2026-11-29: also host, once a step)"),
         ("the assembly", best_ms(r, assemble, state, found, settings.dt, settings.gravity),
-         "on the host (also on the device since 047c585)"),
+         "on the device (before 2026-11-29: also host)"),
+        ("the step's radii: its smallest and mean diameters", best_ms(r, step_radii), "on the host"),
         ("APGD's inverse masses 1 / mass", best_ms(r, lambda: 1.0 / program.mass), "on the device (before 3b1e40b: host)"),
         ("increments (fbar + B' lam) / mass", best_ms(r, lambda: (program.fbar + program.fbar) / program.mass),
          "on the device (before 047c585: host)"),
-        ("the update", best_ms(r, advance, state, 1e-9 * np.ones(6 * state.n), settings.dt), "on the host"),
+        ("the update", best_ms(r, advance, state, 1e-9 * np.ones(6 * state.n), settings.dt),
+         "on the device (before 2026-11-29: also host)"),
         ("the overlap check, pairs measured on the host",
          best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", found), "before"),
         ("the overlap check, pairs measured by detection",
-         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", measured), "now"),
-        ("the kinetic energy", best_ms(r, moved.kinetic_energy), "on the host"),
+         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", measured),
+         "before 2026-11-29 (now the walls' on the device too)"),
+        ("the kinetic energy", best_ms(r, moved.kinetic_energy), "on the device (before 2026-11-29: host)"),
         ("the warm start's global forces", best_ms(r, WarmStart.from_step, found, forces), "on the device"),
         ("the warm start's keys, stored and new",
          best_ms(r, lambda: (pair_keys(found.i, found.j, found.family), pair_keys(found.i, found.j, found.family))),

@@ -42,13 +42,33 @@ def test_a_sparse_cloud_gets_wider_cells_and_the_same_pairs():
     position = np.vstack([cluster.position, cluster.position + [0.0, 0.0, 500.0]])
     state = ParticleState.at_rest(position, np.concatenate([cluster.radius, cluster.radius]))
     predicted = _moving(state, 0.05, seed=6)
-    _, dims, _ = cuda_contacts._grid(state.position + 0.5 * predicted, 1.0)
+    midpoint = state.position + 0.5 * predicted
+    _, dims, _ = cuda_contacts._grid(midpoint.min(axis=0), midpoint.max(axis=0), 1.0, state.n)
     assert np.prod(dims) <= cuda_contacts.CELLS_PER_PARTICLE * state.n
     i, j = cuda_contacts.swept_pairs_on_device(state, predicted, 0.02, 0.5)
     cpu_i, cpu_j = swept_pairs(state, predicted, 0.02, 0.5)
     assert len(cpu_i) > 20 and np.all(j[i < 20] < 20)
     np.testing.assert_array_equal(i, cpu_i)
     np.testing.assert_array_equal(j, cpu_j)
+
+
+def test_the_grid_s_bounds_measured_on_the_device_are_the_host_s():
+    """The midpoints' box, measured on the device, is the host's to the bit (smallest and largest
+    coordinates); the reach is 2 max(R_i + (1 + slack) |u_i| / 2) + margin of
+    colsim.engine.contacts.swept_midpoints to 4 units in the last place (a GPU may fuse a multiply-add
+    in |u_i|; the simulator does not). 700 spheres: three blocks of the simulator's 256 threads."""
+    from numba import cuda
+
+    from colsim.engine.contacts import swept_midpoints
+
+    state = starting_cloud(700, 3.0, seed=7)
+    predicted = _moving(state, 0.1, seed=8)
+    midpoint, reach = swept_midpoints(state, predicted, 0.05, 0.5)
+    d_midpoint, d_predicted, d_radius = (cuda.to_device(a) for a in (midpoint, predicted, state.radius))
+    lower, upper, measured = cuda_contacts._bounds(d_midpoint, d_predicted, d_radius, 0.05, 0.5)
+    np.testing.assert_array_equal(lower, midpoint.min(axis=0))
+    np.testing.assert_array_equal(upper, midpoint.max(axis=0))
+    assert abs(measured - reach) <= 4 * np.spacing(reach)
 
 
 def test_one_sphere_has_no_pairs():
@@ -68,7 +88,8 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     does the outermost sphere the cylinder; two fixed spheres touch the lowest particles. A redo passes five pairs with given normals (the
     stepper's missed pairs): three among those found, whose rows they replace, and two not; the given
     pairs go after the found ones, and on the GPU they join there: nothing of the found contacts comes
-    back to the host but the counts and the largest overlaps (8 B each, one per block)."""
+    back to the host but the grid's bounds (7 numbers a block), the counts and the largest overlaps
+    (8 B each, one a block)."""
     from colsim.engine.contacts import detect, overlaps
     from colsim.engine.state import CYLINDER, FLOOR, ContactLaw, FixedSpheres, Walls
 
@@ -99,8 +120,8 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cpu")
     # the contacts stay on the device, with no host array until one is read
     assert isinstance(gpu, DeviceContacts) and not set(DEVICE_ARRAYS) & set(vars(gpu))
-    # the pairs' and the walls' counts and each block's largest overlap
-    assert read == [8, 8, 8 * blocks_for(state.n)] + [8] * redo
+    # the grid's bounds, the pairs' and the walls' counts and each block's largest overlap
+    assert read == [56 * blocks_for(state.n), 8, 8, 8 * blocks_for(state.n)] + [8] * redo
     assert np.count_nonzero(cpu.j == -1) >= 3 and np.count_nonzero(cpu.j >= 0) >= 50   # walls and pairs
     assert np.count_nonzero(cpu.family == FLOOR) and np.count_nonzero(cpu.family == CYLINDER)   # both walls
     assert np.count_nonzero(cpu.j <= -2) == 2                                           # the fixed spheres

@@ -73,31 +73,36 @@ def _copies_to_device(monkeypatch) -> list:
 def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
     """A step's chain on a moving, spinning cloud, with a time step and a gravity whose products
     round: the program's masses and free forces (assemble), the increments from a B' lam on the
-    device, the next state (advance) and its predicted motion, and the swept midpoints, each equal
-    to the host's to the bit and kept as the host array's device copy; the host arrays kept so are
-    read-only. The next step's program and motion are made from the first's with no copy from the
-    host (the particles' masses were copied once, for their radii)."""
+    device, the next state (advance) and its predicted motion, and the swept midpoints, each made on
+    the device alone (no host array until read), and each, once read, equal to the host's to the bit,
+    read-only and kept as the host array's device copy. The next step's program and motion are made
+    from the first's with no copy from the host (the particles' masses were copied once, for their
+    radii)."""
     from numba import cuda
 
     state = _moving_cloud(seed=8)
     settings = StepSettings(dt=0.0137, gravity=(0.31, -0.17, -9.81), walls=Walls(floor=True, cylinder_radius=1.0))
     predicted = predicted_displacement(state, settings, "cuda")
-    np.testing.assert_array_equal(_kept(predicted), state.velocity * settings.dt
+    assert isinstance(predicted, cuda_state.DeviceParticleArray)
+    np.testing.assert_array_equal(np.asarray(predicted), state.velocity * settings.dt
                                   + np.asarray(settings.gravity) * settings.dt**2)
+    np.testing.assert_array_equal(_kept(np.asarray(predicted)), np.asarray(predicted))
     contacts = detect(state, settings.walls, ContactLaw.uniform(0.5, 0.1), predicted, 0.05)
     program = assemble(state, contacts, settings.dt, settings.gravity, "cuda")
+    assert isinstance(program, cuda_state.DeviceProgram) and not {"mass", "fbar"} & set(vars(program))
     on_host = assemble(state, contacts, settings.dt, settings.gravity)
     for name in ("mass", "fbar"):
         np.testing.assert_array_equal(getattr(program, name), getattr(on_host, name))
         np.testing.assert_array_equal(_kept(getattr(program, name)), getattr(program, name), err_msg=name)
         assert not getattr(program, name).flags.writeable
     hx = np.random.default_rng(9).normal(scale=50.0, size=6 * state.n)
-    u = cuda_state.increments_on_device(program.fbar, cuda.to_device(hx), program.mass)
-    np.testing.assert_array_equal(u, (program.fbar + hx) / program.mass)
-    np.testing.assert_array_equal(_kept(u), u)
+    u = cuda_state.increments_on_device(program, cuda.to_device(hx))
+    np.testing.assert_array_equal(u.copy_to_host(), (program.fbar + hx) / program.mass)
     moved = advance(state, u, settings.dt, "cuda")
-    expected = advance(state, u, settings.dt)
-    for name in ("position", "velocity", "angular_velocity"):
+    expected = advance(state, u.copy_to_host(), settings.dt)
+    assert isinstance(moved, cuda_state.DeviceState) and not set(cuda_state.MOVING) & set(vars(moved))
+    assert moved.time == expected.time
+    for name in cuda_state.MOVING:
         np.testing.assert_array_equal(getattr(moved, name), getattr(expected, name))
         np.testing.assert_array_equal(_kept(getattr(moved, name)), getattr(moved, name), err_msg=name)
     with pytest.raises(ValueError, match="read-only"):
@@ -108,14 +113,54 @@ def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
     next_program = assemble(moved, contacts, settings.dt, settings.gravity, "cuda")
     monkeypatch.undo()
     assert [size for size, _ in copied] == []
-    np.testing.assert_array_equal(_kept(following), predicted_displacement(moved, settings))
-    np.testing.assert_array_equal(_kept(next_program.fbar), assemble(moved, contacts, settings.dt,
-                                                                      settings.gravity).fbar)
-    midpoint, _ = swept_midpoints(moved, following, 0.05, 0.5)
-    from colsim.engine.cuda_operator import kept_device_copy
-
-    made = cuda_state.midpoints_on_device(kept_device_copy(moved.position), kept_device_copy(following))
+    np.testing.assert_array_equal(np.asarray(following), predicted_displacement(moved, settings))
+    np.testing.assert_array_equal(next_program.fbar, assemble(moved, contacts, settings.dt, settings.gravity).fbar)
+    midpoint, _ = swept_midpoints(moved, np.asarray(following), 0.05, 0.5)
+    made = cuda_state.midpoints_on_device(cuda_state.state_array_on_device(moved, "position"), following.on_device)
     np.testing.assert_array_equal(made.copy_to_host(), midpoint)
+
+
+def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
+    """The kinetic energy, the floor's and the cylinder's largest overlaps (a DeviceState's) and the
+    stopping rule's lengths (a DeviceProgram's) are summed on the device in another order than
+    numpy's: equal to the host's within n units in the last place (a sum of n terms of one sign
+    reordered; the largest overlaps, a subtraction and a maximum, exactly, and the cylinder's to a unit
+    in the last place of rho); the overlaps then need no particle's on the host. 700 spheres, three
+    of the simulator's blocks, some pushed into the floor and the cylinder."""
+    from numba import cuda
+
+    from colsim.engine.cones import force_floor, length_scale, mean_diameter
+    from colsim.engine.contacts import overlaps
+
+    state = starting_cloud(700, 3.0, seed=11)
+    rng = np.random.default_rng(12)
+    state.velocity[:] = rng.normal(scale=0.3, size=(state.n, 3))
+    state.angular_velocity[:] = rng.normal(scale=2.0, size=(state.n, 3))
+    state.position[:5, 2] = state.radius[:5] - 0.003   # 0.003 into the floor
+    walls = Walls(floor=True, cylinder_radius=float((np.hypot(*state.position[:, :2].T) + state.radius).max()) - 0.004)
+    settings = StepSettings(dt=0.0137, walls=walls)
+    moved = advance(state, cuda.to_device(np.zeros(6 * state.n)), settings.dt, "cuda")   # on the device alone
+    on_host = advance(state, np.zeros(6 * state.n), settings.dt)
+    assert isinstance(moved, cuda_state.DeviceState)
+    # nothing moved: the velocities are zero; the last state's energy, measured on the device
+    assert moved.kinetic_energy() == (0.0, 0.0)
+    device_state = cuda_state.DeviceState.made_on_device(state, {name: cuda.to_device(getattr(state, name))
+                                                                 for name in cuda_state.MOVING}, state.time)
+    eps = state.n * np.finfo(float).eps
+    np.testing.assert_allclose(device_state.kinetic_energy(), state.kinetic_energy(), rtol=eps, atol=0)
+    for tolerance in (0.01, 0.001):   # within: measured on the device; beyond: on the host, each particle's
+        gpu, cpu = (overlaps(s, walls, tolerance, "cuda" if s is moved else "cpu") for s in (moved, on_host))
+        assert (gpu.cylinder is None) == (tolerance == 0.01)
+        assert gpu.largest_floor == cpu.largest_floor == pytest.approx(0.003, rel=1e-9)
+        assert cpu.largest == pytest.approx(0.004, rel=1e-9)   # the cylinder's
+        assert abs(gpu.largest - cpu.largest) <= 2 * np.spacing(walls.cylinder_radius)
+    assert set(cuda_state.MOVING) & set(vars(moved)) == {"position"}   # read by the check beyond the tolerance
+    program = assemble(device_state, None, settings.dt, settings.gravity, "cuda")
+    host_program = assemble(state, None, settings.dt, settings.gravity)
+    assert length_scale(program) == pytest.approx(length_scale(host_program), rel=eps, abs=0)
+    assert mean_diameter(program) == pytest.approx(mean_diameter(host_program), rel=eps, abs=0)
+    assert force_floor(program, 1.0) == pytest.approx(force_floor(host_program, 1.0), rel=eps, abs=0)
+    assert not {"mass", "fbar"} & set(vars(program))
 
 
 def test_the_inverse_masses_are_the_host_s():
@@ -131,9 +176,10 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     spheres stacked 2 x 2 x 3 in a cylinder, nudged sideways): nothing goes to the device (the
     particles' positions, motion, masses and free forces are made there from the step before, and
     the floor's and the cylinder's contacts there too; a copy made on purpose shows the count works),
-    and of the particles' arrays only the increments (48 bytes a particle, one copy an attempt) come
-    back; the end is the CPU's run of the same steps, to 1e-12 of the motion (the bound of the
-    stepper's GPU test)."""
+    and none of the particles' arrays, increments or forces comes back: the new state's arrays are on
+    the device alone until read (the kinetic energy and the walls' overlaps are measured there); the
+    end is the CPU's run of the same steps, to 1e-12 of the motion (the bound of the stepper's GPU
+    test)."""
     import traceback
 
     from numba import cuda
@@ -142,24 +188,26 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     from colsim.solvers.apgd import ApgdSolver
 
     state, settings = _nudged_stack()
-    n = state.n
     steps = run(state, settings, 2, ApgdSolver(tolerance=1e-4, kernel="cuda"))
     next(steps)
     copied = _copies_to_device(monkeypatch)
     device_array = type(cuda.device_array(1))
-    to_host, increments = device_array.copy_to_host, []
+    to_host, host_copies = device_array.copy_to_host, []
 
     def counted_to_host(self, *args, **kwargs):
-        if any(f.name == "increments_on_device" for f in traceback.extract_stack()):
-            increments.append(self.nbytes)
+        if any(f.name == "host_copy" for f in traceback.extract_stack()):
+            host_copies.append(self.nbytes)
         return to_host(self, *args, **kwargs)
 
     monkeypatch.setattr(device_array, "copy_to_host", counted_to_host)
     cuda.to_device(np.zeros(3))   # the one copy the count must see
+    cuda_state.host_copy(cuda.to_device(np.zeros(5)))   # and the one copy back
     later = list(steps)
     monkeypatch.undo()
-    assert [size for size, _ in copied] == [24], copied
-    assert increments == [48 * n] * sum(result.diagnostics.redone + 1 for result in later)
+    assert [size for size, _ in copied] == [24, 40], copied
+    assert host_copies == [40]
+    assert isinstance(later[-1].state, cuda_state.DeviceState)
+    assert not set(cuda_state.MOVING) & set(vars(later[-1].state))
     cpu = list(run(state, settings, 2, ApgdSolver(tolerance=1e-4)))
     moved = np.abs(cpu[-1].state.position - state.position).max()
     assert moved > 0.01

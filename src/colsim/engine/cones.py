@@ -158,28 +158,19 @@ def length_scale(program: ConeProgram, diameter: float | None = None) -> float:
     """L (length): the root-mean-square free-flight displacement (v dt + g dt^2) of the step, but at
     least 1e-6 of the mean radius; the length that makes the residuals dimensionless. diameter: the
     program's :func:`mean_diameter`, where the caller has it (None: made here)."""
-    n = program.n_unknowns // 6
-    mass = program.mass
-    trans = (program.fbar[:3 * n] / mass[:3 * n]).reshape(n, 3)
-    rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
     # the gravity part of the free flight cannot be told apart from v in fbar
-    return max(rms, 0.5e-6 * (mean_diameter(program) if diameter is None else diameter))
+    return max(program.free_flight_rms(), 0.5e-6 * (mean_diameter(program) if diameter is None else diameter))
 
 
 def mean_diameter(program: ConeProgram) -> float:
     """The mean sphere diameter (length), from Mbar's masses and moments of inertia (I = 2/5 m R^2);
     1 for a program without spheres."""
-    n = program.n_unknowns // 6
-    if n == 0:
-        return 1.0
-    mass = program.mass
-    return 2.0 * float(np.mean(np.sqrt(mass[3 * n::3] / (0.4 * mass[:3 * n:3]))))
+    return program.mean_diameter()
 
 
 def force_floor(program: ConeProgram, scale: float) -> float:
     """F0 = mean particle mass L / dt^2 (force): about the weight of a mean particle at rest."""
-    n = program.n_unknowns // 6
-    return float(np.mean(program.mass[:3 * n])) * scale if n else 1.0
+    return program.mean_mass() * scale if program.n_unknowns else 1.0
 
 
 def relative_residuals(y: np.ndarray, lam: np.ndarray, mu, mu_r, scale: float,

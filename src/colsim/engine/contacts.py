@@ -282,7 +282,8 @@ def pair_frames(state: ParticleState, i: np.ndarray, j: np.ndarray, normal: np.n
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
            most_recovered: float = np.inf, device: str = "cpu") -> Contacts:
-    """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
+    """Potential contacts of a step in which the particles are predicted to move predicted (n, 3)
+    (a host array, or on device 'cuda' one made there: :func:`colsim.engine.stepper.predicted_displacement`).
 
     margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
     particle's, for walls) predicted displacement added to it, for the velocity changes of the step.
@@ -307,7 +308,7 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
         """The contacts with walls_here's walls and fixed spheres, made on the host."""
         fixed = walls_here.fixed is not None and walls_here.fixed.n > 0
         if walls_here.floor or walls_here.cylinder_radius is not None or fixed:
-            reach = margin + (1.0 + slack) * row_lengths(predicted)
+            reach = margin + (1.0 + slack) * row_lengths(np.asarray(predicted))
         else:
             reach = np.zeros(state.n)   # no wall: none asked
         return _other_contacts(state, walls_here, law, reach, cylinder_margin, most_recovered)
@@ -331,6 +332,7 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
             return join_given_pairs(found, given, state.n, law.rolling_lever)
         largest_pair_overlap = -np.inf   # fewer than two particles or no contacts: nothing to keep there
     others = others_of(walls)
+    predicted = np.asarray(predicted)   # made on the device: its host copy
     pi, pj = swept_pairs(state, predicted, margin, slack)
     pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered))
     parts = [pairs, others]
@@ -389,19 +391,21 @@ class Overlaps:
     pairs: (i, j, normal (k, 3)) particle pairs that overlap by more than `tolerance`
     largest_pair, largest_floor, largest_fixed: largest particle-particle, particle-floor and
     particle-fixed sphere overlap
-    cylinder: (n,) overlap of each particle with the cylinder
+    cylinder: (n,) overlap of each particle with the cylinder, or None where only the largest was
+    measured (`largest_cylinder`: a state on the device whose overlaps are all within the tolerance)
     """
 
     pairs: tuple
     largest_pair: float
     largest_floor: float
-    cylinder: np.ndarray
+    cylinder: np.ndarray | None
     largest_fixed: float = 0.0
+    largest_cylinder: float | None = None
 
     @property
     def largest(self) -> float:
-        return max(self.largest_pair, self.largest_floor, self.largest_fixed,
-                   float(self.cylinder.max(initial=0.0)))
+        cylinder = float(self.cylinder.max(initial=0.0)) if self.cylinder is not None else self.largest_cylinder
+        return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder)
 
 
 def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu",
@@ -411,7 +415,10 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device:
     no margin: the same pairs, sorted by (i, j)). detected: a detection at `state`, whose swept pairs
     hold every pair that overlaps there (the stepper's check): its particle pairs are measured instead
     of searching, or not at all when it measured their largest overlap and that is within the
-    tolerance (the GPU's detection: :attr:`Contacts.largest_pair_overlap`; no pair to report then)."""
+    tolerance (the GPU's detection: :attr:`Contacts.largest_pair_overlap`; no pair to report then).
+    A state made on the device (:class:`colsim.engine.cuda_state.DeviceState`) has the floor's and the
+    cylinder's largest overlaps measured there; only where an overlap exceeds the tolerance (a redo,
+    which needs each particle's) are its positions copied to the host and measured here."""
     measured = None if detected is None else detected.largest_pair_overlap
     if measured is not None and measured <= tolerance:
         largest_pair, pairs = measured, (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
@@ -424,6 +431,16 @@ def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device:
         largest_pair, pairs = pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
     else:
         largest_pair, pairs = pair_overlaps(state, *particle_pairs(state, 0.0), tolerance)
+    if device == "cuda" and (walls.fixed is None or walls.fixed.n == 0):
+        from .cuda_state import measured_on_device
+
+        extents = measured_on_device(state)   # a state made on the device: the walls measured there
+        if extents is not None:
+            largest_floor = max(0.0, extents[2]) if walls.floor else 0.0
+            largest_cylinder = (max(0.0, extents[3] - walls.cylinder_radius) if walls.cylinder_radius is not None
+                                else 0.0)
+            if max(largest_pair, largest_floor, largest_cylinder) <= tolerance:   # no redo: no (n,) array
+                return Overlaps(pairs, max(0.0, largest_pair), largest_floor, None, 0.0, largest_cylinder)
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))

@@ -27,10 +27,10 @@ import math
 
 import numpy as np
 
-from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close, swept_midpoints
+from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close
 from .state import CYLINDER, FLOOR, PARTICLE, pair_key
 from .cuda_launch import launch
-from .cuda_state import midpoints_on_device, particle_array_on_device
+from .cuda_state import DeviceParticleArray, midpoints_on_device, particle_array_on_device, state_array_on_device
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
 
@@ -340,19 +340,18 @@ class _SweptPairs:
     partners[offsets[i]:offsets[i + 1]] (sorted), m pairs in all (the one number copied to the host);
     position, predicted, radius: the particles' on the device."""
 
-    def __init__(self, state, predicted: np.ndarray, margin: float, slack: float):
+    def __init__(self, state, predicted, margin: float, slack: float):
         n = state.n
-        position = np.ascontiguousarray(state.position, dtype=float)
-        predicted = np.ascontiguousarray(predicted, dtype=float)
-        radius = np.ascontiguousarray(state.radius, dtype=float)
-        midpoint, reach = swept_midpoints(state, predicted, margin, slack)
-        lower, dims, width = _grid(midpoint, reach)
+        # a step's own, made on the device from the last step's (cuda_state), else copied once
+        self.position = state_array_on_device(state, "position")
+        self.predicted = particle_array_on_device(predicted if isinstance(predicted, DeviceParticleArray)
+                                                  else np.ascontiguousarray(predicted, dtype=float))
+        self.radius = particle_array_on_device(state.radius)   # the particles' radii never change: one copy a run
+        d_midpoint = midpoints_on_device(self.position, self.predicted)
+        lower, upper, reach = _bounds(d_midpoint, self.predicted, self.radius, margin, slack)
+        lower, dims, width = _grid(lower, upper, reach, n)
         cells = int(np.prod(dims))
         lower, dims = tuple(float(x) for x in lower), tuple(int(c) for c in dims)   # by value: no copies
-        # a step's own, made on the device from the last step's (cuda_state), else copied once
-        self.position, self.predicted = particle_array_on_device(position), particle_array_on_device(predicted)
-        d_midpoint = midpoints_on_device(self.position, self.predicted)
-        self.radius = particle_array_on_device(radius)   # the particles' radii never change: one copy a run
         start, listed = _cell_lists(d_midpoint, lower, dims, width, cells)
         args = (self.position, self.predicted, self.radius, d_midpoint, start, listed, lower, dims, width,
                 reach * reach, float(margin), float(slack))
@@ -509,15 +508,53 @@ def _put_wall_row(k, i, family, n0, n1, n2, gap, radius_i, mu, mu_r, normal, tan
     bodies[BODY_I, k], bodies[BODY_J, k], bodies[FAMILY, k] = i, WALL, family
 
 
-def _grid(midpoint: np.ndarray, reach: float):
-    """(lower corner (3,), cells along x, y, z (3,) int64, cell width): cubes at least `reach`
-    wide over the midpoints, at most CELLS_PER_PARTICLE of them a particle."""
-    lower = np.array([midpoint[:, d].min() for d in range(3)])   # a column at a time: numpy's min along
-    extent = np.array([midpoint[:, d].max() for d in range(3)]) - lower   # axis 0 of (n, 3) is 20x slower
+def _bounds(midpoint, predicted, radius, margin: float, slack: float) -> tuple:
+    """(the midpoints' lower corner (3,), their upper corner (3,), reach) of
+    :func:`colsim.engine.contacts.swept_midpoints`, measured on the device (midpoint, predicted (n, 3),
+    radius (n,) there): each block's smallest and largest coordinates and largest R_i + (1 + slack)
+    |u_i| / 2, one copy to the host. The corners are the host's; the reach is 2 max(...) + margin, to
+    a unit in the last place of the host's (a fused multiply-add in |u_i|)."""
+    n = midpoint.shape[0]
+    parts = cuda.device_array((7, blocks_for(n)), dtype=np.float64)
+    launch(_bounds_kernel, blocks_for(n), THREADS, midpoint, predicted, radius, float(slack), parts)
+    parts = parts.copy_to_host()
+    return parts[:3].min(axis=1), parts[3:6].max(axis=1), 2.0 * float(parts[6].max()) + margin
+
+
+@cuda.jit
+def _bounds_kernel(midpoint, predicted, radius, slack, parts):
+    """parts (7, blocks): each block's smallest midpoint coordinates (rows 0-2, as their negatives'
+    largest, exact), largest (rows 3-5) and largest R_i + (1 + slack) |u_i| / 2 (row 6); one thread a
+    particle."""
+    cache = cuda.shared.array((7, THREADS), dtype=np.float64)
+    i = cuda.grid(1)
+    t = cuda.threadIdx.x
+    for row in range(7):
+        cache[row, t] = -math.inf
+    if i < midpoint.shape[0]:
+        for d in range(3):
+            cache[d, t] = -midpoint[i, d]
+            cache[3 + d, t] = midpoint[i, d]
+        square = predicted[i, 0] * predicted[i, 0]   # colsim.engine.contacts.row_lengths
+        square += predicted[i, 1] * predicted[i, 1]
+        square += predicted[i, 2] * predicted[i, 2]
+        cache[6, t] = radius[i] + 0.5 * math.sqrt(square) * (1.0 + slack)
+    for row in range(7):
+        block_reduce(cache[row], t, True)
+    if t == 0:
+        for row in range(7):
+            parts[row, cuda.blockIdx.x] = -cache[row, 0] if row < 3 else cache[row, 0]
+
+
+def _grid(lower: np.ndarray, upper: np.ndarray, reach: float, n: int):
+    """(lower corner (3,), cells along x, y, z (3,) int64, cell width): cubes at least `reach` wide
+    over the midpoints' box from `lower` to `upper` (3,), at most CELLS_PER_PARTICLE of them for each
+    of the n particles."""
+    extent = upper - lower
     width = max(reach, 1e-300)
     while True:
         dims = np.floor(extent / width).astype(np.int64) + 1
-        if np.prod(dims.astype(float)) <= CELLS_PER_PARTICLE * len(midpoint):
+        if np.prod(dims.astype(float)) <= CELLS_PER_PARTICLE * n:
             return lower, dims, width
         width *= 2.0
 

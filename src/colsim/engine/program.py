@@ -91,6 +91,27 @@ class ConeProgram:
             self._operator = ContactOperator(self.contacts, self.n_unknowns // 6)
         return self._operator
 
+    def free_flight_rms(self) -> float:
+        """The root-mean-square free-flight displacement v dt + g dt^2 of the particles (length): the
+        translational entries of Mbar^-1 fbar (0 without particles)."""
+        n = self.n_unknowns // 6
+        trans = (self.fbar[:3 * n] / self.mass[:3 * n]).reshape(n, 3)
+        return float(np.sqrt(np.mean(np.einsum("ij,ij->i", trans, trans)))) if n else 0.0
+
+    def mean_diameter(self) -> float:
+        """The mean sphere diameter (length), from Mbar's masses and moments of inertia (I = 2/5 m
+        R^2); 1 for a program without spheres."""
+        n = self.n_unknowns // 6
+        if n == 0:
+            return 1.0
+        return 2.0 * float(np.mean(np.sqrt(self.mass[3 * n::3] / (0.4 * self.mass[:3 * n:3]))))
+
+    def mean_mass(self) -> float:
+        """The mean of Mbar's translational entries, the particles' mean mass over dt^2 (mass/time^2;
+        1 without particles)."""
+        n = self.n_unknowns // 6
+        return float(np.mean(self.mass[:3 * n])) if n else 1.0
+
     def free_motion(self) -> np.ndarray:
         """(6n,) the increments without any contact force: Mbar^-1 fbar."""
         return self.fbar / self.mass
@@ -186,17 +207,17 @@ if HAVE_NUMBA:
 def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity, device: str = "cpu") -> ConeProgram:
     """The cone program of one step of length dt (time) from `state` with `contacts` (B is built
     when a back-end first asks for it: :attr:`ConeProgram.jacobian`). device 'cuda': the masses and
-    free forces are made on the GPU too, from the state's arrays there, and kept as their device
-    copies (:func:`colsim.engine.cuda_state.program_on_device`; the host's arrays are then read-only)."""
+    free forces are made on the GPU alone, from the state's arrays there, and copied to the host
+    when read there (:class:`colsim.engine.cuda_state.DeviceProgram`)."""
     n = state.n
+    if device == "cuda" and n:
+        from .cuda_state import program_on_device
+
+        return program_on_device(state, contacts, dt, gravity)
     m_i, inertia = state.mass_and_inertia()
     mass, fbar = np.empty(6 * n), np.empty(6 * n)
     gravity = np.asarray(gravity, dtype=float)
     _fill_program(m_i, inertia, state.velocity, state.angular_velocity, float(dt), float(dt)**2, gravity, mass, fbar)
-    if device == "cuda":
-        from .cuda_state import program_on_device
-
-        program_on_device(state, mass, fbar, dt, gravity)
     return ConeProgram(mass=mass, fbar=fbar, contacts=contacts)
 
 

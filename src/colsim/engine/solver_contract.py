@@ -36,6 +36,11 @@ class ConeSolution:
         solution whose forces stay on the GPU gives its device array to 'cuda')."""
         return self.forces
 
+    def increments_for(self, device: str):
+        """The increments (6n,) where `device` ('cpu' or 'cuda') reads them: here, the host's array (a
+        solution whose increments stay on the GPU gives its device array to 'cuda')."""
+        return self.increments
+
     def active_contacts(self) -> int:
         """Contacts carrying a normal force above ACTIVE_FRACTION of the largest one."""
         if len(self.forces) == 0:

@@ -72,15 +72,15 @@ class StepResult:
     carry: Carry | None = None
 
 
-def predicted_displacement(state: ParticleState, settings: StepSettings, device: str = "cpu") -> np.ndarray:
+def predicted_displacement(state: ParticleState, settings: StepSettings, device: str = "cpu"):
     """(n, 3) free-flight displacement v dt + g dt^2 of each particle over one step (length); on
-    device 'cuda' made there too, from the velocities there (:mod:`colsim.engine.cuda_state`)."""
-    predicted = state.velocity * settings.dt + np.asarray(settings.gravity) * settings.dt**2
-    if device == "cuda":
+    device 'cuda' made there alone, from the velocities there, and copied to the host when read
+    there (:class:`colsim.engine.cuda_state.DeviceParticleArray`: ``np.asarray`` gives the host's)."""
+    if device == "cuda" and state.n:
         from .cuda_state import predicted_on_device
 
-        predicted_on_device(state, predicted, settings.dt, settings.gravity)
-    return predicted
+        return predicted_on_device(state, settings.dt, settings.gravity)
+    return state.velocity * settings.dt + np.asarray(settings.gravity) * settings.dt**2
 
 
 def base_margin(state: ParticleState, settings: StepSettings) -> float:
@@ -152,7 +152,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         guess = None if start_from is None else start_from.match(found, solver.device)
         t3 = time.perf_counter()
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
-        new_state = advance(state, solution.increments, settings.dt, solver.device)
+        new_state = advance(state, solution.increments_for(solver.device), settings.dt, solver.device)
         t4 = time.perf_counter()
         following_margin = _next_margin(missed, margin, base)   # the next step's, if this attempt holds
         following_motion = predicted_displacement(new_state, settings, solver.device)
@@ -202,20 +202,20 @@ def _merge_pairs(old, new, n):
     return tuple(np.concatenate([a[keep], b]) for a, b in zip(old, new))
 
 
-def advance(state: ParticleState, u: np.ndarray, dt: float, device: str = "cpu") -> ParticleState:
+def advance(state: ParticleState, u, dt: float, device: str = "cpu") -> ParticleState:
     """The state after a step of dt (time) with increments u = [dx; dth] (6n,): x + dx, v = dx / dt,
-    w = dth / dt. device 'cuda': made on the GPU too, from u's copy there (a solve on the GPU's),
-    and kept as the new arrays' device copies (:func:`colsim.engine.cuda_state.advance_on_device`)."""
+    w = dth / dt. device 'cuda' with u a device array (a solve on the GPU's): made there alone
+    (:class:`colsim.engine.cuda_state.DeviceState`, copied to the host when read there); with u a
+    host array (a solve on the CPU's), on the host, whose arrays the next step on the GPU copies."""
     n = state.n
-    dx = u[:3 * n].reshape(n, 3)
-    dth = u[3 * n:].reshape(n, 3)
-    new_state = replace(state, position=state.position + dx, velocity=dx / dt,
-                        angular_velocity=dth / dt, time=state.time + dt)
-    if device == "cuda":
+    if device == "cuda" and n and not isinstance(u, np.ndarray):
         from .cuda_state import advance_on_device
 
-        advance_on_device(state, new_state, u, dt)
-    return new_state
+        return advance_on_device(state, u, dt)
+    dx = u[:3 * n].reshape(n, 3)
+    dth = u[3 * n:].reshape(n, 3)
+    return replace(state, position=state.position + dx, velocity=dx / dt,
+                   angular_velocity=dth / dt, time=state.time + dt)
 
 
 def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solver,

@@ -29,12 +29,12 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
-                                    device_copy_of, dot, full_on_device, gradient_on_device, gradient_row,
+                                    dot, full_on_device, gradient_on_device, gradient_row,
                                     gradient_values, keep_device_copy, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
-from ..engine.cuda_state import increments_on_device, inverses_on_device
+from ..engine.cuda_state import host_copy, increments_on_device, inverses_on_device, program_array_on_device
 from ..engine.solver_contract import ACTIVE_FRACTION, ConeSolution
 from .apgd import decide, lipschitz_estimate, power_start_drawn
 
@@ -424,7 +424,8 @@ class CudaIteration:
         m = program.m
         device = CudaContactOperator(program.contacts, program.n_unknowns // 6)   # no host operator
         # the masses and free forces: made on the device by a step there (cuda_state), else copied once
-        fbar, d_inv_mass = device_copy_of(program.fbar), inverses_on_device(device_copy_of(program.mass))
+        fbar = program_array_on_device(program, "fbar")
+        d_inv_mass = inverses_on_device(program_array_on_device(program, "mass"))
         shifted = program.gap_shift is not None   # a Coulomb fixed point's gaps are made on the host
         mu, mu_r, gap = contact_arrays_on_device(program if shifted else program.contacts, ("mu", "mu_r", "gap"))
         diagonal = device.diagonal_on_device(d_inv_mass)
@@ -573,11 +574,11 @@ class CudaIteration:
         """Does the first iterate hold a force (a warm start)? Asked before iterating."""
         return bool(np.any(self.host_x())) if self.warm is None else self.warm
 
-    def increments(self, program) -> np.ndarray:
-        """(6n,) u = Mbar^-1 (fbar + B' lam) at the iterate, made on the device from B' lam = B' S z,
-        the device's hx, so only u comes back, keeping the device's as its copy for the step's update
-        (:func:`colsim.engine.cuda_state.advance_on_device`)."""
-        return increments_on_device(program.fbar, self.hx, program.mass)
+    def increments(self, program):
+        """(6n,) device array u = Mbar^-1 (fbar + B' lam) at the iterate, made on the device from
+        B' lam = B' S z, the device's hx (the step's update takes it there:
+        :func:`colsim.engine.cuda_state.advance_on_device`)."""
+        return increments_on_device(program, self.hx)
 
     def forces(self) -> np.ndarray:
         """(m, 5) the contact forces S z of the iterate, on the host; their device copy is kept
@@ -597,21 +598,27 @@ class CudaIteration:
 
 
 class DeviceSolution(ConeSolution):
-    """A :class:`colsim.engine.solver_contract.ConeSolution` whose forces stay on the device
-    (`on_device`, (m, 5)) until read: the host's `forces` are copied from there when first read (a
-    file, a packing's rest test), and keep the device's as their copy. A step on the GPU reads none:
-    its warm start and a Coulomb fixed point's next solve take the device's (:meth:`forces_for`), and
-    its count of active contacts is made there (:meth:`active_contacts`). m > 0."""
+    """A :class:`colsim.engine.solver_contract.ConeSolution` whose increments (`increments_on_device`,
+    (6n,)) and forces (`on_device`, (m, 5)) stay on the device until read: the host's `increments`
+    and `forces` are copied from there when first read (a file, a packing's rest test, a solver on
+    the CPU), and keep the device's as their copy. A step on the GPU reads neither: its update takes
+    the device's increments (:meth:`increments_for`), its warm start and a Coulomb fixed point's next
+    solve the device's forces (:meth:`forces_for`), and its count of active contacts is made there
+    (:meth:`active_contacts`). m > 0."""
 
     def __init__(self, increments, on_device, status, iterations, setup_time, solve_time, info=None, backend=""):
-        self.increments, self.on_device, self.status, self.iterations = increments, on_device, status, iterations
-        self.setup_time, self.solve_time, self.info, self.backend = setup_time, solve_time, info or {}, backend
+        self.increments_on_device, self.on_device, self.status = increments, on_device, status
+        self.iterations, self.setup_time, self.solve_time = iterations, setup_time, solve_time
+        self.info, self.backend = info or {}, backend
 
-    def __getattr__(self, name):   # only for an attribute not set: the host's forces, not yet copied
-        if name != "forces":
-            raise AttributeError(name)
-        self.forces = self.host_copy(self.__dict__["on_device"])
-        return self.forces
+    def __getattr__(self, name):   # only for an attribute not set: a host copy not yet made
+        if name == "forces":
+            self.forces = self.host_copy(self.__dict__["on_device"])
+            return self.forces
+        if name == "increments":
+            self.increments = host_copy(self.__dict__["increments_on_device"])
+            return self.increments
+        raise AttributeError(name)
 
     @staticmethod
     def host_copy(on_device) -> np.ndarray:
@@ -622,6 +629,9 @@ class DeviceSolution(ConeSolution):
 
     def forces_for(self, device: str):
         return self.on_device if device == "cuda" else self.forces
+
+    def increments_for(self, device: str):
+        return self.increments_on_device if device == "cuda" else self.increments
 
     def active_contacts(self) -> int:
         """:meth:`colsim.engine.solver_contract.ConeSolution.active_contacts`, counted on the device
