@@ -88,14 +88,16 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     + beta (hx - hx_prev) is made there), i, j and c (7m), and with its wrench s, the frame and the
     three lengths, writing 9 a contact (26m); the bodies' sums read their starts, entries and the
     wrenches and write h_new (7n + 1 + entries + 9m); the same thread's part of the descent test
-    reads hx, hx_prev and inv_mass (18n). A residual check: a gradient at x (12n + 29m) and the
-    residual kernel (g, x, s, mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed
+    reads hx, hx_prev and inv_mass (18n). A residual check, one kernel: the gradient at x in registers
+    (hx and inv_mass of its bodies, i, j, c, s, the frame and the three lengths: 12n + 24m), x, mu
+    and mu_r (7m); until 2026-11-29 a kernel of its own stored the gradient (12n + 29m) and the
+    residual kernel read it back (g, x, s, mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed
     by a kernel that took the gradient at the new y and wrote it, for the next projection to read
     (18n + 29m an iteration, and 5m more a trial step); until 2026-11-27 the kernels also read back
     x_new and h_new (5m + 6n a trial step), stored hy (18n an iteration) and copied x_new and h_new
     into their slots; the bound counted the first two."""
     trial = 17 * m + 18 * n + 7 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
-    check = 12 * n + 29 * m + 17 * m
+    check = 12 * n + 24 * m + 7 * m
     return WORD * (trial_steps * trial + checks * check)
 
 

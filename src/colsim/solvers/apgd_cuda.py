@@ -29,7 +29,7 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
-                                    dot, full_on_device, gradient_on_device, gradient_row,
+                                    dot, full_on_device, gradient_on_device,
                                     gradient_values, keep_device_copy, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
@@ -205,21 +205,13 @@ def _decide_kernel_few(parts, control):
 
 
 @cuda.jit
-def _gradient_at_x_kernel(control, h_0, h_1, h_2, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g):
-    """g (5m,) = S B Mbar^-1 hx + c at the iterate x, one contact a thread, hx the slot of h that the
-    control names now (:func:`colsim.engine.cuda_operator.gradient_row`, not extrapolated)."""
-    k = cuda.grid(1)
-    if k >= ci.shape[0]:
-        return
-    hx = _slot(h_0, h_1, h_2, control, X)
-    gradient_row(k, hx, hx, 0.0, False, inv_mass, geo_s, ci, cj, nrm, t1, t2, ri, rj, lever, c, g)
-
-
-@cuda.jit
-def _residual_kernel(g, x_0, x_1, x_2, control, s, mu, mu_r, parts):
-    """parts[0..3] (per block): the largest cone violation of the gaps y = g / s and of the forces
-    lam = s x (x the slot the control names now), the sum of the positive normal forces and
-    sum_k |lam_k . y_k| (colsim.engine.cones._residual_parts)."""
+def _residual_kernel(control, h_0, h_1, h_2, x_0, x_1, x_2, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, mu,
+                     mu_r, parts):
+    """parts[0..3] (per block): at the iterate x (the slot the control names now, and hx = T x its
+    slot of h), the largest cone violation of the gaps y = g / s, g = S B Mbar^-1 hx + c (its rows
+    in registers: :func:`colsim.engine.cuda_operator.gradient_values`, not extrapolated), and of the
+    forces lam = s x, the sum of the positive normal forces and sum_k |lam_k . y_k|
+    (colsim.engine.cones._residual_parts); one thread a contact."""
     primal = cuda.shared.array(THREADS, dtype=np.float64)
     dual = cuda.shared.array(THREADS, dtype=np.float64)
     total = cuda.shared.array(THREADS, dtype=np.float64)
@@ -231,10 +223,13 @@ def _residual_kernel(g, x_0, x_1, x_2, control, s, mu, mu_r, parts):
     total[t] = 0.0
     comp[t] = 0.0
     if k < mu.shape[0]:
+        hx = _slot(h_0, h_1, h_2, control, X)
+        g0, g1, g2, g3, g4 = gradient_values(k, hx, hx, 0.0, False, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever,
+                                             c)
         x = _slot(x_0, x_1, x_2, control, X)
         o = 5 * k
-        y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
-        y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
+        y0, y1, y2 = g0 / s[o], g1 / s[o + 1], g2 / s[o + 2]
+        y3, y4 = g3 / s[o + 3], g4 / s[o + 4]
         p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
         r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
         primal[t] = mu[k] * math.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * math.sqrt(y3 * y3 + y4 * y4) - y0
@@ -408,7 +403,6 @@ class CudaIteration:
         self._readout = None         # the whole readout as last read with a residual check
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
-        self.gap = cuda.device_array(5 * self.m, dtype=np.float64)
         self._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
                                 for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
 
@@ -495,13 +489,11 @@ class CudaIteration:
         return self._residuals_read(scale, floor)
 
     def _launch_check(self) -> None:
-        """The residual check's kernels at the iterate the control names (no wait)."""
+        """The residual check's kernel at the iterate the control names (no wait)."""
         geo = self.geometry
-        launch(_gradient_at_x_kernel, blocks_for(self.m), THREADS, self.control, *self.h_slots, self.inv_mass, geo.s,
-               geo.i, geo.j, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, self.c,
-               self.gap)
-        launch(_residual_kernel, blocks_for(self.m), THREADS, self.gap, *self.x_slots, self.control, geo.s, self.mu,
-               self.mu_r, self.residual_parts)
+        launch(_residual_kernel, blocks_for(self.m), THREADS, self.control, *self.h_slots, *self.x_slots,
+               self.inv_mass, geo.s, geo.i, geo.j, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j,
+               geo.lever, self.c, self.mu, self.mu_r, self.residual_parts)
 
     def _read_back(self, check: bool) -> None:
         """Copy the control array (and with `check` the residual check's sums, in the same copy)."""
