@@ -124,9 +124,10 @@ def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
     """The kinetic energy, the floor's and the cylinder's largest overlaps (a DeviceState's) and the
     stopping rule's lengths (a DeviceProgram's) are summed on the device in another order than
     numpy's: equal to the host's within n units in the last place (a sum of n terms of one sign
-    reordered; the largest overlaps, a subtraction and a maximum, exactly, and the cylinder's to a unit
-    in the last place of rho); the overlaps then need no particle's on the host. 700 spheres, three
-    of the simulator's blocks, some pushed into the floor and the cylinder."""
+    reordered; the largest overlaps, a subtraction and a maximum, exactly, and the cylinder's to 4
+    units in the last place of the cylinder's radius: rho = sqrt(x^2 + y^2) against np.hypot, a unit
+    or two, and a card fuses its multiply-add); the overlaps then need no particle's on the host. 700
+    spheres, three of the simulator's blocks, some pushed into the floor and the cylinder."""
     from numba import cuda
 
     from colsim.engine.cones import force_floor, length_scale, mean_diameter
@@ -153,7 +154,7 @@ def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
         assert (gpu.cylinder is None) == (tolerance == 0.01)
         assert gpu.largest_floor == cpu.largest_floor == pytest.approx(0.003, rel=1e-9)
         assert cpu.largest == pytest.approx(0.004, rel=1e-9)   # the cylinder's
-        assert abs(gpu.largest - cpu.largest) <= 2 * np.spacing(walls.cylinder_radius)
+        assert abs(gpu.largest - cpu.largest) <= 4 * np.spacing(walls.cylinder_radius)
     assert set(cuda_state.MOVING) & set(vars(moved)) == {"position"}   # read by the check beyond the tolerance
     program = assemble(device_state, None, settings.dt, settings.gravity, "cuda")
     host_program = assemble(state, None, settings.dt, settings.gravity)
