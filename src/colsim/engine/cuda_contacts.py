@@ -344,8 +344,9 @@ class _SweptPairs:
         n = state.n
         # a step's own, made on the device from the last step's (cuda_state), else copied once
         self.position = state_array_on_device(state, "position")
-        self.predicted = particle_array_on_device(predicted if isinstance(predicted, DeviceParticleArray)
-                                                  else np.ascontiguousarray(predicted, dtype=float))
+        if not isinstance(predicted, DeviceParticleArray):   # a host array: its copy (kept) or one made now
+            predicted = np.ascontiguousarray(predicted, dtype=float)
+        self.predicted = particle_array_on_device(predicted)
         self.radius = particle_array_on_device(state.radius)   # the particles' radii never change: one copy a run
         d_midpoint = midpoints_on_device(self.position, self.predicted)
         lower, upper, reach = _bounds(d_midpoint, self.predicted, self.radius, margin, slack)
@@ -513,7 +514,7 @@ def _bounds(midpoint, predicted, radius, margin: float, slack: float) -> tuple:
     :func:`colsim.engine.contacts.swept_midpoints`, measured on the device (midpoint, predicted (n, 3),
     radius (n,) there): each block's smallest and largest coordinates and largest R_i + (1 + slack)
     |u_i| / 2, one copy to the host. The corners are the host's; the reach is 2 max(...) + margin, to
-    a unit in the last place of the host's (a fused multiply-add in |u_i|)."""
+    a few units in the last place of the host's (a card fuses multiply-adds in R_i + (1 + slack) |u_i| / 2)."""
     n = midpoint.shape[0]
     parts = cuda.device_array((7, blocks_for(n)), dtype=np.float64)
     launch(_bounds_kernel, blocks_for(n), THREADS, midpoint, predicted, radius, float(slack), parts)
