@@ -30,7 +30,8 @@ import numpy as np
 from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close
 from .state import CYLINDER, FLOOR, PARTICLE, pair_key
 from .cuda_launch import launch
-from .cuda_state import DeviceParticleArray, midpoints_on_device, particle_array_on_device, state_array_on_device
+from .cuda_state import (DeviceParticleArray, axis_distance, midpoints_on_device, particle_array_on_device,
+                         state_array_on_device)
 from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, full_on_device,
                             keep_device_copy, prefix_sums_on_device, sort_range_on_device)
 
@@ -446,12 +447,20 @@ class _WallContacts:
 
 
 @cuda.jit(device=True)
+def _motion_length(predicted, i):
+    """|u_i| of particle i's predicted motion, the squares summed in order as
+    :func:`colsim.engine.contacts.row_lengths` sums them."""
+    square = predicted[i, 0] * predicted[i, 0]
+    square += predicted[i, 1] * predicted[i, 1]
+    square += predicted[i, 2] * predicted[i, 2]
+    return math.sqrt(square)
+
+
+@cuda.jit(device=True)
 def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered):
     """(particle i's gap to the cylinder, relaxed as :func:`colsim.engine.contacts.recovery_relaxation`
-    relaxes it; its distance rho from the axis). rho = sqrt(x^2 + y^2), the host's np.hypot to a unit
-    in the last place (the card's own hypot is not glibc's either, and holds fused multiply-adds that
-    libNVVM's -fma=0 leaves: benchmarks/unfused.py)."""
-    rho = math.sqrt(position[i, 0] * position[i, 0] + position[i, 1] * position[i, 1])
+    relaxes it; its distance rho from the axis, :func:`colsim.engine.cuda_state.axis_distance`)."""
+    rho = axis_distance(position, i)
     true_gap = cylinder_radius - rho - radius[i]
     return true_gap + max(0.0, -true_gap - most_recovered), rho
 
@@ -464,10 +473,7 @@ def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, marg
     n = position.shape[0]
     if i >= n:
         return
-    square = predicted[i, 0] * predicted[i, 0]   # colsim.engine.contacts.row_lengths
-    square += predicted[i, 1] * predicted[i, 1]
-    square += predicted[i, 2] * predicted[i, 2]
-    reach = margin + (1.0 + slack) * math.sqrt(square)
+    reach = margin + (1.0 + slack) * _motion_length(predicted, i)
     flags[i] = 1 if floor and position[i, 2] - radius[i] < reach else 0
     flags[n + i] = 0
     if not math.isnan(cylinder_radius):
@@ -536,10 +542,7 @@ def _bounds_kernel(midpoint, predicted, radius, slack, parts):
         for d in range(3):
             cache[d, t] = -midpoint[i, d]
             cache[3 + d, t] = midpoint[i, d]
-        square = predicted[i, 0] * predicted[i, 0]   # colsim.engine.contacts.row_lengths
-        square += predicted[i, 1] * predicted[i, 1]
-        square += predicted[i, 2] * predicted[i, 2]
-        cache[6, t] = radius[i] + 0.5 * math.sqrt(square) * (1.0 + slack)
+        cache[6, t] = radius[i] + 0.5 * _motion_length(predicted, i) * (1.0 + slack)
     for row in range(7):
         block_reduce(cache[row], t, True)
     if t == 0:

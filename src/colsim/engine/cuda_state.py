@@ -25,7 +25,7 @@ that a sum reads is made by a kernel of its own (the weights m g, the motion v d
 u/2). The reductions' sums are taken in another order than numpy's: they differ from the host's by
 rounding (a fixed order: the same every run).
 
-A host array kept so must not change in place (its device copy would not follow): :func:`frozen`
+A host array kept so must not change in place (its device copy would not follow): :func:`host_copy`
 makes each read-only, so a change fails loudly; so are the radii, whose masses are kept. Without a
 GPU the kernels run on numba's simulator (NUMBA_ENABLE_CUDASIM=1), where
 tests/engine/test_cuda_state.py compares each with the host's.
@@ -52,23 +52,19 @@ _particles: dict = {}
 MOVING = ("position", "velocity", "angular_velocity")
 
 
-def frozen(array: np.ndarray, copy) -> None:
-    """Keep `copy` as the device copy of the host array `array`, and make `array` read-only."""
-    keep_device_copy(array, copy)
-    array.flags.writeable = False
-
-
-def host_copy(on_device) -> np.ndarray:
-    """The host's copy of a device array, read-only, which keeps the device's as its copy."""
+def host_copy(on_device, read_only: bool = True) -> np.ndarray:
+    """The host's copy of a device array, which keeps the device's as its copy; read-only unless told
+    (a change in place would not reach the device's)."""
     host = on_device.copy_to_host()
-    frozen(host, on_device)
+    keep_device_copy(host, on_device)
+    host.flags.writeable = not read_only
     return host
 
 
 def particle_array_on_device(array):
     """The device copy of a particle array (a state's, a predicted motion): a
     :class:`DeviceParticleArray`'s own, the one kept, or one made now from the host's (a run's
-    first step; the array is then read-only, :func:`frozen`)."""
+    first step; the array is then read-only, as a :func:`host_copy` is)."""
     if isinstance(array, DeviceParticleArray):
         return array.on_device
     kept = kept_device_copy(array)
@@ -94,11 +90,6 @@ class DeviceParticleArray:
     def __init__(self, on_device):
         self.on_device = on_device
         self._host = None
-
-    shape = property(lambda self: self.on_device.shape)
-
-    def __len__(self) -> int:
-        return self.on_device.shape[0]
 
     def __array__(self, dtype=None, copy=None):
         if self._host is None:
@@ -401,10 +392,18 @@ def _midpoint_kernel(position, predicted, out):
             out[i, d] = position[i, d] + 0.5 * predicted[i, d]
 
 
+@cuda.jit(device=True)
+def axis_distance(position, i):
+    """rho_i = sqrt(x_i^2 + y_i^2), particle i's distance from the z axis: the host's np.hypot to a unit
+    or two in the last place (the card's own hypot is not glibc's either, and holds fused
+    multiply-adds that libNVVM's -fma=0 leaves: benchmarks/unfused.py)."""
+    return math.sqrt(position[i, 0] * position[i, 0] + position[i, 1] * position[i, 1])
+
+
 @cuda.jit
 def _measures_kernel(position, velocity, angular, radius, mass, inertia, parts):
     """parts[0..3] (per block of particles): the sums of m |v|^2 and I |w|^2, the largest R - z and the
-    largest rho + R (rho = sqrt(x^2 + y^2), as the walls' kernels take it), one thread a particle."""
+    largest rho + R (rho: :func:`axis_distance`, as the walls' kernels take it), one thread a particle."""
     trans = cuda.shared.array(THREADS, dtype=np.float64)
     rot = cuda.shared.array(THREADS, dtype=np.float64)
     sunk = cuda.shared.array(THREADS, dtype=np.float64)
@@ -418,7 +417,7 @@ def _measures_kernel(position, velocity, angular, radius, mass, inertia, parts):
         trans[t] = mass[i] * v
         rot[t] = inertia[i] * w
         sunk[t] = radius[i] - position[i, 2]
-        out[t] = math.sqrt(position[i, 0] * position[i, 0] + position[i, 1] * position[i, 1]) + radius[i]
+        out[t] = axis_distance(position, i) + radius[i]
     block_reduce(trans, t, False)
     block_reduce(rot, t, False)
     block_reduce(sunk, t, True)

@@ -30,7 +30,7 @@ import numpy as np
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
                                     dot, full_on_device, gradient_on_device,
-                                    gradient_values, keep_device_copy, kept_device_copy, normalise_on_device,
+                                    gradient_values, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
@@ -575,7 +575,7 @@ class CudaIteration:
     def forces(self) -> np.ndarray:
         """(m, 5) the contact forces S z of the iterate, on the host; their device copy is kept
         (:func:`colsim.engine.cuda_operator.keep_device_copy`) for the warm start the step leaves."""
-        return DeviceSolution.host_copy(self.forces_on_device())
+        return host_copy(self.forces_on_device(), read_only=False)
 
     def forces_on_device(self):
         """(m, 5) the contact forces S z of the iterate, a device array."""
@@ -605,19 +605,12 @@ class DeviceSolution(ConeSolution):
 
     def __getattr__(self, name):   # only for an attribute not set: a host copy not yet made
         if name == "forces":
-            self.forces = self.host_copy(self.__dict__["on_device"])
+            self.forces = host_copy(self.__dict__["on_device"], read_only=False)
             return self.forces
         if name == "increments":
             self.increments = host_copy(self.__dict__["increments_on_device"])
             return self.increments
         raise AttributeError(name)
-
-    @staticmethod
-    def host_copy(on_device) -> np.ndarray:
-        """The host's copy of device forces (m, 5), which keeps them as its device copy."""
-        forces = on_device.copy_to_host()
-        keep_device_copy(forces, on_device)
-        return forces
 
     def forces_for(self, device: str):
         return self.on_device if device == "cuda" else self.forces
