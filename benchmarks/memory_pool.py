@@ -13,7 +13,7 @@ pooled (host memory stays numba-cuda's). Blocks are returned when numba-cuda dro
 kernel and copy runs on the one default stream, so a block reused by a later launch is not touched
 before the earlier ones that used it are done. The same kernels on the same data: the same bits.
 
-An experiment for the GPU sittings (docs/performance.md), not a part of colsim.
+An experiment for the GPU sittings (docs/gpu-record.md), not a part of colsim.
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ signatures, a host array, a debug or extended kernel, another numba-cuda) it lau
 through :func:`launch`. (A launch through the driver's cuLaunchKernel with the parameters packed once,
 skipping numba-cuda's and cuda.core's work, was tried and measured on an H200 at baf89b8: 10.2 us an
 empty launch against 9.8, and APGD's iterations 0.99x as fast, since the GPU's work paces them; it
-was removed. docs/performance.md, "The third GPU sitting".)
+was removed. docs/gpu-record.md, "The third GPU sitting".)
 """
 from __future__ import annotations
 
