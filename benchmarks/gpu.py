@@ -43,6 +43,14 @@ how many times the time to move them the GPU took, at the card's nominal bandwid
 1 GiB device-to-device copy; and the GPU's time with every launch the plain way (numba-cuda's
 dispatcher, colsim.engine.cuda_launch.plain_launches) from the same start, whose iterate must be
 the same bits. Run the CPU baseline on the same machine, in the same call.
+With --storage-variants, the iterations again with some of their arrays stored narrower
+(:data:`STORAGE_VARIANTS`: the indices in int32; the iterate x, the bodies' h = T x and the wrenches
+in float32; the contacts' geometry in float32 too), each on its own compiled copy of the kernels that
+read them: milliseconds an iteration, the bytes it must move, and how far its iterate ends from the
+one stored as compiled (int32 indices: the same bits; float32: about 1e-7, its rounding). An
+iteration moves its bytes at 1.2-1.5x a copy's time on an H200, so narrower storage is the lever
+on its time that is left; the iterate's residuals are not checked here (a solver storing float32
+would check them from a float64 T x).
 Without a GPU the kernels run on numba's simulator (NUMBA_ENABLE_CUDASIM=1): only to check the
 script, at a hundred spheres and a few iterations; its times mean nothing.
 """
@@ -76,12 +84,14 @@ GRAVITY, DT = 9.81, 1e-3
 WORD = 8
 
 
-def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: int, checks: int) -> int:
+def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: int, checks: int,
+                    sizes: dict | None = None) -> int:
     """The bytes APGD's CUDA kernels (colsim.solvers.apgd_cuda, colsim.engine.cuda_operator) must move
     over `iterations` iterations made of `trial_steps` trial steps (the backtracks' repeats included)
     and `checks` residual checks, for m contacts among n bodies with `entries` (body, contact) entries:
     every array element a kernel reads or writes, counted once (a gathered entry read by several
-    threads once too): a lower bound on the traffic to the GPU's memory.
+    threads once too): a lower bound on the traffic to the GPU's memory. `sizes`: the bytes of an
+    element of the groups STORED_GROUPS names (:data:`STORAGE_VARIANTS`), 8 for any not given.
 
     A trial step: the projection reads x, x_prev and the two scaled coefficients and writes x_new
     (17m); the same thread's gradient at y reads hx, hx_prev and inv_mass of its bodies (18n: hy = hx
@@ -96,9 +106,16 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     (18n + 29m an iteration, and 5m more a trial step); until 2026-11-27 the kernels also read back
     x_new and h_new (5m + 6n a trial step), stored hy (18n an iteration) and copied x_new and h_new
     into their slots; the bound counted the first two."""
-    trial = 17 * m + 18 * n + 7 * m + 26 * m + (7 * n + 1 + entries + 9 * m) + 18 * n
-    check = 12 * n + 24 * m + 7 * m
-    return WORD * (trial_steps * trial + checks * check)
+    size = {group: WORD for group in STORED_GROUPS} | (sizes or {})
+    iterate, bodies, work, geometry, indices = (size[g] for g in STORED_GROUPS)
+    trial = (iterate * 15 * m + WORD * 2 * m                                  # the projection
+             + bodies * 12 * n + WORD * 6 * n + indices * 2 * m + WORD * 5 * m   # the gradient at y
+             + geometry * 17 * m + work * 9 * m                                # the wrench
+             + indices * (n + 1 + entries) + work * 9 * m + bodies * 6 * n     # the bodies' sums
+             + bodies * 12 * n + WORD * 6 * n)                                 # the descent test
+    check = (bodies * 6 * n + WORD * 6 * n + indices * 2 * m + WORD * 5 * m + geometry * 17 * m
+             + iterate * 5 * m + WORD * 2 * m)
+    return trial_steps * trial + checks * check
 
 
 def bandwidth(cuda, gib: float = 1.0, repeat: int = 5) -> tuple[float | None, float]:
@@ -168,6 +185,71 @@ def projection_kernel(kernel):
         yield
     finally:
         apgd_cuda._project_kernel = before
+
+
+#: the groups of an iteration's arrays whose element size --storage-variants changes: the iterate's
+#: three slots x (5m each), the bodies' three slots h = T x (6n each), the wrenches (m, 9), the
+#: contacts' geometry read as floats (s, the frames, the two radii and the lever: 17m) and the integers
+#: (i, j, each body's start and entries)
+STORED_GROUPS = ("iterate", "bodies", "work", "geometry", "indices")
+
+#: --storage-variants: each a name and the element size of the groups it narrows (the rest stay 8
+#: bytes). float32 holds a stored value to 6e-8 of itself; the kernels' arithmetic stays float64 where
+#: a float64 takes part (numba promotes; a difference of two stored values rounds in float32), so
+#: what changes is the rounding of what is stored. int32 holds any index below 2**31 exactly.
+STORAGE_VARIANTS = (
+    ("indices int32", {"indices": 4}),
+    ("x, T x and the wrenches float32", {"iterate": 4, "bodies": 4, "work": 4}),
+    ("x, T x, the wrenches and the geometry float32", {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4}),
+    ("all of these", {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4, "indices": 4}),
+)
+
+
+@contextlib.contextmanager
+def fresh_iteration_kernels():
+    """APGD's kernels that read the stored arrays (the projection, the bodies' sums, the residual
+    check) compiled anew while inside: a variant's arrays of other element types then compile one
+    signature a kernel, which colsim.engine.cuda_launch.launch takes (it launches a kernel of several
+    the plain way, numba-cuda's slower dispatch)."""
+    from numba import cuda
+
+    from colsim.solvers import apgd_cuda
+
+    names = ("_project_kernel", "_transpose_change_kernel", "_residual_kernel")
+    before = {name: getattr(apgd_cuda, name) for name in names}
+    try:
+        for name, kernel in before.items():
+            setattr(apgd_cuda, name, cuda.jit(kernel.py_func))
+        yield
+    finally:
+        for name, kernel in before.items():
+            setattr(apgd_cuda, name, kernel)
+
+
+def stored_as(run, sizes: dict):
+    """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device (float32 for
+    4-byte floats, int32 for 4-byte indices), its trial steps prepared again with them."""
+    from numba import cuda
+
+    from colsim.engine.cuda_launch import Prepared
+
+    def narrowed(array, group):
+        if sizes.get(group, WORD) == WORD:
+            return array
+        kind = np.int32 if group == "indices" else np.float32
+        return cuda.to_device(array.copy_to_host().astype(kind))
+
+    geo = run.geometry
+    run.geometry = geo._replace(
+        work=narrowed(geo.work, "work"),
+        **{name: narrowed(getattr(geo, name), "geometry")
+           for name in ("s", "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")},
+        **{name: narrowed(getattr(geo, name), "indices") for name in ("i", "j", "start", "entry")})
+    run.x_slots = tuple(narrowed(slot, "iterate") for slot in run.x_slots)
+    run.h_slots = tuple(narrowed(slot, "bodies") for slot in run.h_slots)
+    run._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
+                           for kernel, blocks, threads, arguments in run._launches_of_a_trial()]
+    return run
 
 
 def registers_of(kernel) -> str:
@@ -461,6 +543,10 @@ def main(argv=None):
     parser.add_argument("--register-variants", action="store_true", help="also time the iterations on each "
                         "--spheres lattice with APGD's projection kernel compiled with each of REGISTER_VARIANTS' "
                         "launch bounds (fewer registers, more threads an SM), and say whether the iterate is the same")
+    parser.add_argument("--storage-variants", action="store_true", help="also time the iterations on each "
+                        "--spheres lattice with some of their arrays stored narrower (STORAGE_VARIANTS: int32 "
+                        "indices, float32 iterate, bodies' sums, wrenches and geometry), and say how far the "
+                        "iterate ends from the float64 one's")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
@@ -539,6 +625,35 @@ def main(argv=None):
                          data={"spheres": operator.n, "contacts": operator.m, "launch_bounds": bounds,
                                "registers": registers, "gpu_ms": 1e3 * seconds / args.iterations,
                                "same_iterate": same, "device": device, "iterations": args.iterations})
+    if args.spheres and args.storage_variants:
+        stored = record.table(["spheres", "stored", f"GPU ms an iteration ({device})", "GB an iteration (counted)",
+                               "GPU over the bound (copy bandwidth)", "iterate difference / largest"],
+                              title="APGD's iteration with its arrays stored narrower")
+    starts = {spheres: start_of(spheres) for spheres in args.spheres} if args.storage_variants else {}
+    reference = {}   # each lattice's iterate as compiled
+    for name, sizes in (("as compiled", {}), *STORAGE_VARIANTS) if args.storage_variants else ():
+        with fresh_iteration_kernels():   # one compilation a variant, for every lattice
+            for spheres, (cpu, operator, mu, mu_r) in starts.items():
+                try:
+                    timed(stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes), 1, mu, mu_r,
+                          cuda.synchronize)   # compiles this variant's kernels, or warms them up
+                    run = stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes)
+                    seconds = timed(run, args.iterations, mu, mu_r, cuda.synchronize)
+                except Exception as error:   # one variant's failure leaves the others
+                    stored.row(operator.n, name, f"failed: {type(error).__name__}: {str(error)[:120]}", "-", "-",
+                               "-")
+                    continue
+                x = run.host_x().astype(np.float64)
+                first = reference.setdefault(spheres, x)
+                difference = float(np.max(np.abs(x - first)) / max(np.max(np.abs(first)), 1e-300))
+                moved = iteration_bytes(operator.m, operator.n, len(operator.entry), args.iterations + run.backtracks,
+                                        args.iterations, math.ceil(args.iterations / 10), sizes) / args.iterations
+                per = seconds / args.iterations
+                stored.row(operator.n, name, f"{1e3 * per:.3f}", f"{moved / 1e9:.3f}",
+                           f"{per / (moved / (1e9 * copied)):.1f}" if copied else "-", f"{difference:.1e}",
+                           data={"spheres": operator.n, "contacts": operator.m, "stored": name, "sizes": sizes,
+                                 "gpu_ms": 1e3 * per, "bytes_an_iteration": moved, "relative_difference": difference,
+                                 "backtracks": run.backtracks, "device": device, "iterations": args.iterations})
     if args.spheres:
         found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",
                               "GPU vs CPU", "same pairs"], title="the swept pairs of contact detection")
