@@ -193,16 +193,18 @@ def projection_kernel(kernel):
 #: (i, j, each body's start and entries)
 STORED_GROUPS = ("iterate", "bodies", "work", "geometry", "indices")
 
-#: --storage-variants: each a name and the element size of the groups it narrows (the rest stay 8
-#: bytes). float32 holds a stored value to 6e-8 of itself; the kernels' arithmetic stays float64 where
-#: a float64 takes part (numba promotes; a difference of two stored values rounds in float32), so
-#: what changes is the rounding of what is stored. int32 holds any index below 2**31 exactly.
-STORAGE_VARIANTS = (
-    ("indices int32", {"indices": 4}),
-    ("x, T x and the wrenches float32", {"iterate": 4, "bodies": 4, "work": 4}),
-    ("x, T x, the wrenches and the geometry float32", {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4}),
-    ("all of these", {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4, "indices": 4}),
-)
+#: --storage-variants and --stored: each by its key, a name and the element size of the groups it
+#: narrows (the rest stay 8 bytes). float32 holds a stored value to 6e-8 of itself; the kernels'
+#: arithmetic stays float64 where a float64 takes part (numba promotes; a difference of two stored
+#: values rounds in float32), so what changes is the rounding of what is stored. int32 holds any
+#: index below 2**31 exactly.
+STORAGE_VARIANTS = {
+    "int32": ("indices int32", {"indices": 4}),
+    "float32": ("x, T x and the wrenches float32", {"iterate": 4, "bodies": 4, "work": 4}),
+    "float32-geometry": ("x, T x, the wrenches and the geometry float32",
+                         {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4}),
+    "all": ("all of these", {"iterate": 4, "bodies": 4, "work": 4, "geometry": 4, "indices": 4}),
+}
 
 
 @contextlib.contextmanager
@@ -226,18 +228,43 @@ def fresh_iteration_kernels():
             setattr(apgd_cuda, name, kernel)
 
 
+#: numba.cuda once a cast is asked for (a module global, as numba's simulator wants a kernel's cuda),
+#: and the cast kernel compiled from :func:`_cast`
+cuda = _cast_kernel = None
+
+
+def _cast(source, target):
+    """target[k] = source[k] cast to target's type, one element a thread."""
+    k = cuda.grid(1)
+    if k < source.shape[0]:
+        target[k] = source[k]
+
+
+def cast_on_device(array, kind):
+    """A new device array of `array`'s shape (C-contiguous) and numpy type `kind`, its values cast on the
+    device (the nearest float32, an int32's same value)."""
+    global cuda, _cast_kernel
+    from numba import cuda
+
+    from colsim.engine.cuda_operator import THREADS, blocks_for
+
+    if _cast_kernel is None:
+        _cast_kernel = cuda.jit(_cast)
+    out = cuda.device_array(array.shape, dtype=kind)
+    if array.size:
+        _cast_kernel[blocks_for(array.size), THREADS](array.reshape(array.size), out.reshape(array.size))
+    return out
+
+
 def stored_as(run, sizes: dict):
     """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device (float32 for
     4-byte floats, int32 for 4-byte indices), its trial steps prepared again with them."""
-    from numba import cuda
-
     from colsim.engine.cuda_launch import Prepared
 
     def narrowed(array, group):
         if sizes.get(group, WORD) == WORD:
             return array
-        kind = np.int32 if group == "indices" else np.float32
-        return cuda.to_device(array.copy_to_host().astype(kind))
+        return cast_on_device(array, np.int32 if group == "indices" else np.float32)
 
     geo = run.geometry
     run.geometry = geo._replace(
@@ -250,6 +277,29 @@ def stored_as(run, sizes: dict):
     run._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
                            for kernel, blocks, threads, arguments in run._launches_of_a_trial()]
     return run
+
+
+@contextlib.contextmanager
+def narrow_storage(key: str):
+    """Every APGD iteration on the device made inside the block stored as STORAGE_VARIANTS[key] has it
+    (:func:`stored_as`, on :func:`fresh_iteration_kernels`). For timing a collapse's steps: the
+    residual check then reads the narrowed T x (its rounding, 6e-8 of a body's net force and moment),
+    where a solver that stores float32 would make T x again in float64 for it."""
+    from colsim.solvers.apgd_cuda import CudaIteration
+
+    sizes = STORAGE_VARIANTS[key][1]
+    made = CudaIteration.__init__
+
+    def narrowed(self, *args, **kwargs):
+        made(self, *args, **kwargs)
+        stored_as(self, sizes)
+
+    with fresh_iteration_kernels():
+        CudaIteration.__init__ = narrowed
+        try:
+            yield
+        finally:
+            CudaIteration.__init__ = made
 
 
 def registers_of(kernel) -> str:
@@ -547,6 +597,9 @@ def main(argv=None):
                         "--spheres lattice with some of their arrays stored narrower (STORAGE_VARIANTS: int32 "
                         "indices, float32 iterate, bodies' sums, wrenches and geometry), and say how far the "
                         "iterate ends from the float64 one's")
+    parser.add_argument("--stored", nargs="*", default=[], choices=sorted(STORAGE_VARIANTS),
+                        help="also run each --columns' GPU steps again with APGD's arrays stored as each of these "
+                        "STORAGE_VARIANTS has them (e.g. float32: x, T x and the wrenches)")
     args = parser.parse_args(argv)
     from numba import cuda
     from numba.core import config as numba_config
@@ -631,7 +684,7 @@ def main(argv=None):
                               title="APGD's iteration with its arrays stored narrower")
     starts = {spheres: start_of(spheres) for spheres in args.spheres} if args.storage_variants else {}
     reference = {}   # each lattice's iterate as compiled
-    for name, sizes in (("as compiled", {}), *STORAGE_VARIANTS) if args.storage_variants else ():
+    for name, sizes in (("as compiled", {}), *STORAGE_VARIANTS.values()) if args.storage_variants else ():
         with fresh_iteration_kernels():   # one compilation a variant, for every lattice
             for spheres, (cpu, operator, mu, mu_r) in starts.items():
                 try:
@@ -697,6 +750,11 @@ def collapse_table(args, device: str) -> None:
                           "GPU's " + ", ".join(name for name in PHASES if name != "solve")
                           + ", rest (shares; the rest's in redone steps)"],
                          title=f"the first {args.steps} collapse steps")
+    if args.stored:
+        narrow = record.table(["column", "spheres", "stored", f"GPU s a step ({device}), as compiled", "stored so",
+                               "APGD share (as compiled; stored so)", "iterations a step (as compiled; stored so)",
+                               "redone steps (as compiled; stored so)", "end positions apart / mean diameter"],
+                              title=f"the first {args.steps} collapse steps with APGD's arrays stored narrower")
     if args.profile:
         Path(args.profile).mkdir(parents=True, exist_ok=True)
     cpu_steps = args.steps if args.cpu_steps is None else args.cpu_steps
@@ -713,6 +771,21 @@ def collapse_table(args, device: str) -> None:
             Path(args.kernel_trace).mkdir(parents=True, exist_ok=True)
             collapse_steps(column, min(args.trace_steps, args.steps), "cuda",
                            trace=str(Path(args.kernel_trace) / f"{Path(column).stem}.kernels"))
+        for key in args.stored if args.steps else ():
+            with narrow_storage(key):
+                collapse_steps(column, 1, "cuda")   # compiles this variant's kernels
+                other = collapse_steps(column, args.steps, "cuda")
+            narrowed_apart = float(np.abs(other["end"] - gpu["end"]).max() / gpu["diameter"])
+            narrow.row(column, gpu["spheres"], key, f"{gpu['s_a_step']:.3f}", f"{other['s_a_step']:.3f}",
+                       f"{gpu['solve_share']:.0%}; {other['solve_share']:.0%}",
+                       f"{gpu['iterations']:.0f}; {other['iterations']:.0f}",
+                       f"{gpu['redone_steps']}; {other['redone_steps']}", f"{narrowed_apart:.1e}",
+                       data={"column": column, "spheres": gpu["spheres"], "stored": key, "steps": args.steps,
+                             "device": device, "gpu_s_a_step": gpu["s_a_step"], "stored_s_a_step": other["s_a_step"],
+                             "stored_s_by_step": other["s_by_step"], "stored_by_step": other["by_step"],
+                             "gpu_solve_share": gpu["solve_share"], "stored_solve_share": other["solve_share"],
+                             "gpu_iterations": gpu["iterations"], "stored_iterations": other["iterations"],
+                             "stored_redone_steps": other["redone_steps"], "apart_over_diameter": narrowed_apart})
         shares = gpu["shares"]
         rest = 1.0 - sum(shares.values())
         if cpu is None:

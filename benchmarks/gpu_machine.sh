@@ -221,6 +221,9 @@ fi
 # threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres). BIG_TRACE=K
 # then runs its first K steps again with their kernels traced (`benchmarks gpu --kernel-trace`): the
 # tables come back as COLUMN.kernels (which kernels take APGD's three quarters of a step).
+# BIG_STORED (e.g. "float32 float32-geometry") then runs the same steps again with APGD's arrays stored
+# as each of those `benchmarks gpu` STORAGE_VARIANTS has them (`--stored`: whether narrower storage
+# brings a step under the target).
 if [[ "$stages" == *" big "* ]]; then
     tiled_from=.gpu/rest/r0_6_a5_seed1.nc
     [ -e "$tiled_from" ] || tiled_from=results/gpu-pour/r0_6_seed1/column.nc
@@ -229,5 +232,6 @@ if [[ "$stages" == *" big "* ]]; then
         --columns "${BIG_SOURCE:-$tiled_from}" --tile "${BIG_R0:-13}" \
         --steps "${BIG_STEPS:-100}" --cpu-steps 0 \
         ${BIG_TRACE:+--kernel-trace "${OUT:-results/benchmarks}" --trace-steps "$BIG_TRACE"} \
+        ${BIG_STORED:+--stored $BIG_STORED} \
         || echo "benchmarks gpu (big): failed (exit $?)"
 fi
