@@ -176,15 +176,19 @@ def projection_variant(bounds: tuple[int, int]):
 
 
 @contextlib.contextmanager
-def projection_kernel(kernel):
-    """The block's CUDA iterations made (their trial steps prepared) with `kernel` as the projection's."""
+def kernels_swapped(kernels: dict):
+    """colsim.solvers.apgd_cuda's kernels named in `kernels` replaced by the ones given while inside:
+    the CUDA iterations made there (their trial steps prepared, their checks launched) use them."""
     from colsim.solvers import apgd_cuda
 
-    before, apgd_cuda._project_kernel = apgd_cuda._project_kernel, kernel
+    before = {name: getattr(apgd_cuda, name) for name in kernels}
     try:
+        for name, kernel in kernels.items():
+            setattr(apgd_cuda, name, kernel)
         yield
     finally:
-        apgd_cuda._project_kernel = before
+        for name, kernel in before.items():
+            setattr(apgd_cuda, name, kernel)
 
 
 #: the groups of an iteration's arrays whose element size --storage-variants changes: the iterate's
@@ -207,25 +211,17 @@ STORAGE_VARIANTS = {
 }
 
 
-@contextlib.contextmanager
 def fresh_iteration_kernels():
     """APGD's kernels that read the stored arrays (the projection, the bodies' sums, the residual
-    check) compiled anew while inside: a variant's arrays of other element types then compile one
-    signature a kernel, which colsim.engine.cuda_launch.launch takes (it launches a kernel of several
-    the plain way, numba-cuda's slower dispatch)."""
+    check) compiled anew while inside (:func:`kernels_swapped`): a variant's arrays of other element
+    types then compile one signature a kernel, which colsim.engine.cuda_launch.launch takes (it
+    launches a kernel of several the plain way, numba-cuda's slower dispatch)."""
     from numba import cuda
 
     from colsim.solvers import apgd_cuda
 
     names = ("_project_kernel", "_transpose_change_kernel", "_residual_kernel")
-    before = {name: getattr(apgd_cuda, name) for name in names}
-    try:
-        for name, kernel in before.items():
-            setattr(apgd_cuda, name, cuda.jit(kernel.py_func))
-        yield
-    finally:
-        for name, kernel in before.items():
-            setattr(apgd_cuda, name, kernel)
+    return kernels_swapped({name: cuda.jit(getattr(apgd_cuda, name).py_func) for name in names})
 
 
 #: numba.cuda once a cast is asked for (a module global, as numba's simulator wants a kernel's cuda),
@@ -663,7 +659,7 @@ def main(argv=None):
         for bounds in (None, *REGISTER_VARIANTS):
             try:
                 kernel = apgd_cuda._project_kernel if bounds is None else projection_variant(bounds)
-                with projection_kernel(kernel):
+                with kernels_swapped({"_project_kernel": kernel}):
                     timed(CudaIteration.like(cpu, operator, mu, mu_r), 1, mu, mu_r, cuda.synchronize)   # compiles it
                     run = CudaIteration.like(cpu, operator, mu, mu_r)
                     seconds = timed(run, args.iterations, mu, mu_r, cuda.synchronize)
