@@ -100,7 +100,11 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     wrenches and write h_new (7n + 1 + entries + 9m); the same thread's part of the descent test
     reads hx, hx_prev and inv_mass (18n). A residual check, one kernel: the gradient at x in registers
     (hx and inv_mass of its bodies, i, j, c, s, the frame and the three lengths: 12n + 24m), x, mu
-    and mu_r (7m); until 2026-11-29 a kernel of its own stored the gradient (12n + 29m) and the
+    and mu_r (7m), every one float64 under any storage; under float32 storage two kernels first widen
+    the iterate (5m read at its size, 5m written) and make its T x in float64 (the wrench reads 5m + 17m
+    and writes 9m, the bodies' sums read n + 1 + entries + 9m and write 6n). Until 2026-11-29 (the
+    storage a solver's option) a check read the trial steps' arrays as stored, and before that day a
+    kernel of its own stored the gradient (12n + 29m) and the
     residual kernel read it back (g, x, s, mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed
     by a kernel that took the gradient at the new y and wrote it, for the next projection to read
     (18n + 29m an iteration, and 5m more a trial step); until 2026-11-27 the kernels also read back
@@ -113,8 +117,9 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
              + geometry * 17 * m + work * 9 * m                                # the wrench
              + indices * (n + 1 + entries) + work * 9 * m + bodies * 6 * n     # the bodies' sums
              + bodies * 12 * n + WORD * 6 * n)                                 # the descent test
-    check = (bodies * 6 * n + WORD * 6 * n + indices * 2 * m + WORD * 5 * m + geometry * 17 * m
-             + iterate * 5 * m + WORD * 2 * m)
+    check = WORD * (12 * n + 31 * m)
+    if iterate != WORD:   # float32 storage: the iterate widened, its T x made in float64
+        check += iterate * 5 * m + WORD * (5 * m + 31 * m + n + 1 + entries + 9 * m + 6 * n)
     return trial_steps * trial + checks * check
 
 
@@ -212,75 +217,47 @@ STORAGE_VARIANTS = {
 
 
 def fresh_iteration_kernels():
-    """APGD's kernels that read the stored arrays (the projection, the bodies' sums, the residual
-    check) compiled anew while inside (:func:`kernels_swapped`): a variant's arrays of other element
-    types then compile one signature a kernel, which colsim.engine.cuda_launch.launch takes (it
-    launches a kernel of several the plain way, numba-cuda's slower dispatch)."""
+    """APGD's trial-step kernels that read the stored arrays (the projection and the bodies' sums, as
+    compiled and their twins for float32 storage) compiled anew while inside (:func:`kernels_swapped`):
+    a variant's arrays of other element types then compile one signature a kernel, which
+    colsim.engine.cuda_launch.launch takes (it launches a kernel of several the plain way, numba-cuda's
+    slower dispatch). A residual check reads float64 arrays under every variant."""
     from numba import cuda
 
     from colsim.solvers import apgd_cuda
 
-    names = ("_project_kernel", "_transpose_change_kernel", "_residual_kernel")
+    names = ("_project_kernel", "_transpose_change_kernel", "_project_kernel_narrow",
+             "_transpose_change_kernel_narrow")
     return kernels_swapped({name: cuda.jit(getattr(apgd_cuda, name).py_func) for name in names})
 
 
-#: numba.cuda once a cast is asked for (a module global, as numba's simulator wants a kernel's cuda),
-#: and the cast kernel compiled from :func:`_cast`
-cuda = _cast_kernel = None
-
-
-def _cast(source, target):
-    """target[k] = source[k] cast to target's type, one element a thread."""
-    k = cuda.grid(1)
-    if k < source.shape[0]:
-        target[k] = source[k]
-
-
-def cast_on_device(array, kind):
-    """A new device array of `array`'s shape (C-contiguous) and numpy type `kind`, its values cast on the
-    device (the nearest float32, an int32's same value)."""
-    global cuda, _cast_kernel
-    from numba import cuda
-
-    from colsim.engine.cuda_operator import THREADS, blocks_for
-
-    if _cast_kernel is None:
-        _cast_kernel = cuda.jit(_cast)
-    out = cuda.device_array(array.shape, dtype=kind)
-    if array.size:
-        _cast_kernel[blocks_for(array.size), THREADS](array.reshape(array.size), out.reshape(array.size))
-    return out
-
-
 def stored_as(run, sizes: dict):
-    """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device (float32 for
-    4-byte floats, int32 for 4-byte indices), its trial steps prepared again with them."""
-    from colsim.engine.cuda_launch import Prepared
+    """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device, its trial steps
+    prepared again with them: the floats by the solver's own float32 storage
+    (:meth:`colsim.solvers.apgd_cuda.CudaIteration.narrow_storage`: the iterate, T x and the wrenches
+    together, the geometry with them or not; its checks widen the iterate and make T x in float64), the
+    indices in int32 (the trial steps' alone)."""
+    from colsim.engine.cuda_operator import cast_on_device
 
-    def narrowed(array, group):
-        if sizes.get(group, WORD) == WORD:
-            return array
-        return cast_on_device(array, np.int32 if group == "indices" else np.float32)
-
-    geo = run.geometry
-    run.geometry = geo._replace(
-        work=narrowed(geo.work, "work"),
-        **{name: narrowed(getattr(geo, name), "geometry")
-           for name in ("s", "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")},
-        **{name: narrowed(getattr(geo, name), "indices") for name in ("i", "j", "start", "entry")})
-    run.x_slots = tuple(narrowed(slot, "iterate") for slot in run.x_slots)
-    run.h_slots = tuple(narrowed(slot, "bodies") for slot in run.h_slots)
-    run._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
-                           for kernel, blocks, threads, arguments in run._launches_of_a_trial()]
+    narrow = {group for group, size in sizes.items() if size != WORD}
+    if narrow & {"iterate", "bodies", "work"}:
+        if not {"iterate", "bodies", "work"} <= narrow:
+            raise ValueError("float32 storage narrows the iterate, T x and the wrenches together")
+        run.narrow_storage(geometry="geometry" in narrow)
+    if "indices" in narrow:
+        geo = run.trial_geometry
+        run.trial_geometry = geo._replace(**{name: cast_on_device(getattr(geo, name), np.int32)
+                                             for name in ("i", "j", "start", "entry")})
+    run.prepare_trial()
     return run
 
 
 @contextlib.contextmanager
-def narrow_storage(key: str):
+def every_iteration_stored(key: str):
     """Every APGD iteration on the device made inside the block stored as STORAGE_VARIANTS[key] has it
-    (:func:`stored_as`, on :func:`fresh_iteration_kernels`). For timing a collapse's steps: the
-    residual check then reads the narrowed T x (its rounding, 6e-8 of a body's net force and moment),
-    where a solver that stores float32 would make T x again in float64 for it."""
+    (:func:`stored_as`, on :func:`fresh_iteration_kernels`), to time a collapse's steps so. Its checks,
+    forces and increments are float64, as under the solver's float32 storage (`float32-geometry` is
+    that storage: `colsim collapse --gpu-storage float32`)."""
     from colsim.solvers.apgd_cuda import CudaIteration
 
     sizes = STORAGE_VARIANTS[key][1]
@@ -768,7 +745,7 @@ def collapse_table(args, device: str) -> None:
             collapse_steps(column, min(args.trace_steps, args.steps), "cuda",
                            trace=str(Path(args.kernel_trace) / f"{Path(column).stem}.kernels"))
         for key in args.stored if args.steps else ():
-            with narrow_storage(key):
+            with every_iteration_stored(key):
                 collapse_steps(column, 1, "cuda")   # compiles this variant's kernels
                 other = collapse_steps(column, args.steps, "cuda")
             narrowed_apart = float(np.abs(other["end"] - gpu["end"]).max() / gpu["diameter"])

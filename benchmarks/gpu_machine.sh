@@ -68,11 +68,12 @@ fi
 # a later call goes on from them). SCATTER_LIMIT (seconds) stops the GPU's scatter, its finished runs
 # kept, its tables then left to be made here (`scatter --also`). With SCATTER_GPU_UNFUSED=1 the
 # GPU's runs are benchmarks/unfused.py's (kernels compiled with libNVVM's -fma=0, rounding as the plain
-# CPU; recorded as "cuda-unfused"), after its check that a kernel's a * b + c is then not fused.
+# CPU; recorded as "cuda-unfused"), after its check that a kernel's a * b + c is then not fused. With
+# SCATTER_GPU_STORAGE=float32 they store APGD's arrays in float32 (`--gpu-storage`; "cuda-float32").
 if [[ "$stages" == *" scatter "* ]]; then
     column=.gpu/rest/${SCATTER_COLUMN:-r0_3_a2_seed1}
     common=("$column.nc" --settings "$column.settings.yaml" --tolerances ${SCATTER_TOLERANCES:-9e-6 1.1e-5})
-    gpu=(--device cuda)
+    gpu=(--device cuda --gpu-storage "${SCATTER_GPU_STORAGE:-float64}")
     if [ "${SCATTER_GPU_UNFUSED:-0}" = 1 ]; then
         gpu+=(--unfused)
         python3 benchmarks/unfused.py --check || echo "unfused check: the unfused kernel fused (exit $?)"

@@ -5,9 +5,10 @@ multiply-adds each kernel holds (issue 46: the card's rounding).
     python -m benchmarks ptx                 # sm_90 (H100, H200): no card; numba-cuda and libNVVM
     python -m benchmarks ptx --cc 8.0        # another compute capability
 
-First, two steps of `colsim collapse --device cuda` on numba's simulator (a 27-sphere column poured
-on the CPU: a pour on the simulator takes many minutes, and `colsim pack --device cuda` steps with the
-same stepper) record the types of every kernel launch's arguments (colsim's kernels only). Then,
+First, two steps of `colsim collapse --device cuda` on numba's simulator, with each of APGD's
+storages (`--gpu-storage`; a 27-sphere column poured on the CPU: a pour on the simulator takes many
+minutes, and `colsim pack --device cuda` steps with the same stepper) record the types of every kernel
+launch's arguments (colsim's kernels only). Then,
 with the simulator off, each kernel is compiled with each of its argument types by
 `numba.cuda.compile_ptx` (libNVVM; no driver, no card), once by default and once with libNVVM's
 `-fma=0` (benchmarks/unfused.py). The table: each kernel, its signatures, its PTX's
@@ -62,6 +63,7 @@ def record_launches(folder: Path) -> dict[tuple[str, str], set]:
     from numba.cuda.simulator import kernel as simulated
 
     from colsim.cli.entry import main as colsim
+    from colsim.solvers.defaults import GPU_STORAGES
 
     launches: dict[tuple[str, str], set] = {}
     call = simulated.FakeCUDAKernel.__call__
@@ -77,7 +79,8 @@ def record_launches(folder: Path) -> dict[tuple[str, str], set]:
         for argv in ([*POUR, "--output", str(folder / "pack.nc")],
                      ["trim", "--input", str(folder / "pack.nc"), "--aspect-ratio", "1",
                       "--output", str(folder / "column.nc")],
-                     [*COLLAPSE, "--input", str(folder / "column.nc"), "--output", str(folder / "collapse.nc")]):
+                     *([*COLLAPSE, "--gpu-storage", storage, "--input", str(folder / "column.nc"),
+                        "--output", str(folder / f"collapse-{storage}.nc")] for storage in GPU_STORAGES)):
             if colsim(["-q", *argv]):
                 raise RuntimeError(f"colsim {' '.join(argv)} failed")
     finally:

@@ -15,7 +15,8 @@ means for two devices, whose arithmetic rounds differently. `--device` and `--th
 GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused" (`--fused
 colsim.solvers`: only the kernels of the modules named, "cpu-fused:colsim.solvers"), and `--unfused`
 with the GPU's kernels compiled not to fuse them, as the plain CPU (benchmarks/unfused.py),
-"cuda-unfused"; `--jobs` runs that many at once. Each finished run is appended to `--record` as
+"cuda-unfused"; `--gpu-storage float32` with APGD's float32 storage on the GPU, "cuda-float32";
+`--jobs` runs that many at once. Each finished run is appended to `--record` as
 one JSON line, and runs already there are skipped, so a killed scatter resumes. The tables: each
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
@@ -72,9 +73,12 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def recorded_device(device: str, fused: list[str] | None, unfused: bool = False) -> str:
+def recorded_device(device: str, fused: list[str] | None, unfused: bool = False, storage: str = "float64") -> str:
     """The device a run is recorded as: `device`, or for a `--fused` run "cpu-fused", or "cpu-fused:"
-    and the modules fused; for an `--unfused` one "cuda-unfused"."""
+    and the modules fused; for an `--unfused` one "cuda-unfused"; for one with float32 storage on the
+    GPU "cuda-float32"."""
+    if storage != "float64":
+        return f"{recorded_device(device, fused, unfused)}-{storage}"
     if unfused:
         return f"{device}-unfused"
     if fused is None:
@@ -93,10 +97,11 @@ def colsim_command(fused: list[str] | None, unfused: bool) -> tuple[list[str], d
 
 
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
-            fused: list[str] | None = None, unfused: bool = False) -> dict:
+            fused: list[str] | None = None, unfused: bool = False, storage: str = "float64") -> dict:
     """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
     with the CPU's kernels fusing multiply-adds, those of the modules listed or (empty) all (device
-    "cpu" only); unfused: with the GPU's kernels not fusing them (device "cuda" only)."""
+    "cpu" only); unfused: with the GPU's kernels not fusing them (device "cuda" only); storage: APGD's
+    on the GPU (`--gpu-storage`)."""
     with tempfile.TemporaryDirectory(prefix="scatter-") as scratch:
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
@@ -104,7 +109,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
         colsim, environment = colsim_command(fused, unfused)
         command = [*colsim, "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
-                   "--threads", str(threads), "-q", *flags]
+                   "--threads", str(threads), "--gpu-storage", storage, "-q", *flags]
         started = time.perf_counter()
         done = subprocess.run(command, capture_output=True, text=True, env=environment)
         wall = time.perf_counter() - started
@@ -119,7 +124,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": recorded_device(device, fused, unfused), "kind": run["kind"],
+    return {"column": str(column), "device": recorded_device(device, fused, unfused, storage), "kind": run["kind"],
             "value": run["value"], "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -214,6 +219,8 @@ def main(argv=None):
     parser.add_argument("--unfused", action="store_true",
                         help="the GPU's kernels compiled without fused multiply-adds, as the plain CPU's "
                              "(device cuda-unfused)")
+    parser.add_argument("--gpu-storage", default="float64", choices=("float64", "float32"),
+                        help="APGD's storage on the GPU (--device cuda), recorded as cuda-float32")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once")
     parser.add_argument("--record", type=Path, default=Path("scatter.jsonl"))
@@ -227,7 +234,9 @@ def main(argv=None):
         parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
     if args.unfused and args.device != "cuda":
         parser.error("--unfused is a GPU run's (the CPU's kernels fuse nothing unless --fused)")
-    device = recorded_device(args.device, args.fused, args.unfused)
+    if args.gpu_storage != "float64" and args.device != "cuda":
+        parser.error("--gpu-storage float32 is a GPU run's (--device cuda)")
+    device = recorded_device(args.device, args.fused, args.unfused, args.gpu_storage)
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]
@@ -240,7 +249,7 @@ def main(argv=None):
 
     def one(run):
         return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon, args.fused,
-                       args.unfused)
+                       args.unfused, args.gpu_storage)
 
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         for result in pool.map(one, plan):

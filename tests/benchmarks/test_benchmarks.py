@@ -239,6 +239,8 @@ def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp
     change = np.abs(after.position - before.position)
     assert 0 < change.max() <= 1e-3 * 0.5 and "default_rng(3)" in dataset.attrs["scatter_perturbation"]
     assert scatter.draws_of("1-3,7") == [1, 2, 3, 7]
+    assert scatter.recorded_device("cuda", None, False, "float32") == "cuda-float32"
+    assert scatter.recorded_device("cuda", None, True, "float32") == "cuda-unfused-float32"
 
 
 def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():

@@ -58,6 +58,27 @@ def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
     assert '"device": "cuda"' in gpu.attrs["config"] and '"kernel": "cuda"' in gpu.attrs["config"]
 
 
+@pytest.mark.slow
+def test_a_collapse_stored_in_float32_on_the_gpu_stops_where_float64_does(column):
+    """--gpu-storage float32, 2 steps beside float64's (the first test's first two): every step by
+    APGD, to its tolerance checked in float64, so the end positions agree within what the stopping rule
+    admits (a step's velocities to its primal tolerance over its length, 1e-4 d of overlap under auto, a
+    step: 2e-4 d over two); the file records the storage in the solver's settings."""
+    runs = {}
+    for storage in ("float64", "float32"):
+        done = colsim("collapse", "--input", "column.nc", "--steps", "2", "--duration", "0.008", "--device", "cuda",
+                      "--gpu-storage", storage, "--output", f"{storage}.nc", cwd=column)
+        assert done.returncode == 0, done.stderr[-2000:]
+        runs[storage] = xr.load_dataset(column / f"{storage}.nc")
+    wide, narrow = runs["float64"], runs["float32"]
+    assert set(narrow.step_solver_backend.values) == {"apgd"}
+    diameter = 2 * float(wide.radius.mean())
+    end = [run.position.isel(time=-1).values for run in (wide, narrow)]
+    assert np.abs(end[0] - end[1]).max() <= 2e-4 * diameter
+    assert '"storage": "float32"' in narrow.attrs["config"] and '"gpu_storage": "float32"' in narrow.attrs["config"]
+    assert '"storage"' not in wide.attrs["config"].replace('"gpu_storage"', "")
+
+
 def test_device_auto_runs_a_small_column_on_the_cpu_and_records_it(column):
     """--device auto (issue 46.5) on a 27-sphere column, far below GPU_FROM_SPHERES: APGD's compiled
     CPU kernels, and the file records the device that ran, cpu."""
@@ -72,6 +93,8 @@ def test_device_auto_runs_a_small_column_on_the_cpu_and_records_it(column):
     (["--solver", "clarabel", "--device", "cuda"], True, ["--device cuda", "APGD's", "--solver clarabel"]),
     (["--device", "cuda"], False, ["needs a CUDA GPU", "NUMBA_ENABLE_CUDASIM"]),
     (["--device", "tpu"], True, ["--device", "invalid choice", "tpu"]),   # argparse's quotes vary by Python
+    (["--solver", "clarabel", "--gpu-storage", "float32"], True, ["--gpu-storage float32", "APGD's", "--solver clarabel"]),
+    (["--gpu-storage", "float16"], True, ["--gpu-storage", "invalid choice", "float16"]),
 ])
 def test_a_device_colsim_cannot_use_is_refused_in_one_line(column, extra, simulator, words):
     if not simulator and _gpu_outside_the_simulator():

@@ -134,6 +134,76 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
 
 
+def test_float32_storage_holds_the_nearest_float32_and_checks_in_float64(program):
+    """storage='float32': the trial steps' slots and contact arrays (NARROW_GEOMETRY, the wrenches)
+    hold the float64 ones' nearest float32, the check's stay float64. After ten iterations the iterate
+    it gives (x, widened) is the stored one exactly, hx its T x and the residuals the CPU's at it, to
+    the bounds above (1e-12: sums in another order): the check is float64's, only the iterate rounds."""
+    cpu = ApgdSolver(kernel="numba").prepare(program, ApgdSolver(kernel="numba").solve(program).forces)
+    gpu = ApgdSolver(kernel="cuda", storage="float32").prepare(program, cpu.forces())
+    for name in (*apgd_cuda.NARROW_GEOMETRY, "work"):
+        stored, wide = getattr(gpu.trial_geometry, name), getattr(gpu.geometry, name)
+        assert (stored.dtype, wide.dtype) == (np.float32, np.float64), name
+        if name != "work":   # room for the wrenches, written before read
+            assert np.array_equal(stored.copy_to_host(), wide.copy_to_host().astype(np.float32)), name
+    start = gpu.x_slots[0].copy_to_host()
+    assert start.dtype == np.float32 and np.array_equal(start, gpu.host_x().astype(np.float32))
+    gpu.iterate(10)
+    stored = gpu._role(gpu.x_slots, apgd_cuda.X).copy_to_host()
+    assert stored.dtype == np.float32 and np.array_equal(gpu.host_x(), stored.astype(np.float64))
+    cpu.x = stored.astype(np.float64)
+    cpu.hx = cpu.apply_T(cpu.x)
+    np.testing.assert_allclose(gpu.hx.copy_to_host(), cpu.hx, rtol=0, atol=1e-12 * np.abs(cpu.hx).max())
+    for scale, floor in ((1.0, 1e-6), (1e-3, 1e-2)):
+        expected = cpu.residuals(program.mu, program.mu_r, scale, floor)
+        assert gpu.residuals(program.mu, program.mu_r, scale, floor) == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+def test_a_solve_stored_in_float32_agrees_with_clarabel(program):
+    """The float32-stored solve, warm-started as the float64 one above: it stops on its float64 check
+    within the same bounds of Clarabel (1e-3), its increments B' lam of its own forces to 1e-12."""
+    warm = ApgdSolver(kernel="numba").solve(program).forces
+    sol = ApgdSolver(kernel="cuda", storage="float32").solve(program, warm_start=warm)
+    assert sol.info["storage"] == "float32" and sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
+    expected = program.increments(sol.forces)
+    np.testing.assert_allclose(sol.increments, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    ref = ClarabelSolver(tolerance=1e-10).solve(program)
+    du = np.linalg.norm(sol.increments - ref.increments) / np.linalg.norm(ref.increments)
+    net, net_ref = (program.jacobian.T @ forces.ravel() for forces in (sol.forces, ref.forces))
+    assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
+
+
+def test_a_float32_solve_that_reaches_its_cap_is_made_again_in_float64(program, monkeypatch):
+    """A float32-stored solve that fails (made to, here, before it iterates) is solved again from the
+    same start with float64 storage, which the solution's info names; float64's own failure is the
+    solver's (SolverError, for auto's Clarabel)."""
+    from colsim.engine.solver_contract import SolverError
+
+    warm = ApgdSolver(kernel="numba").solve(program).forces
+    solve, storages = ApgdSolver._solve, []
+
+    def failing_in_float32(self, program, warm_start, step, max_iter, storage):
+        storages.append(storage)
+        if storage == "float32":
+            raise SolverError("APGD did not converge (made to fail)", status="MaxIterations")
+        return solve(self, program, warm_start, step, max_iter, storage)
+
+    monkeypatch.setattr(ApgdSolver, "_solve", failing_in_float32)
+    sol = ApgdSolver(kernel="cuda", storage="float32").solve(program, warm_start=warm)
+    assert storages == ["float32", "float64"] and sol.info["storage"] == "float64" and sol.info["primal"] <= 1e-5
+    with pytest.raises(SolverError, match="did not converge"):
+        ApgdSolver(kernel="cuda", storage="float32", max_iter=1).solve(program)
+
+
+def test_float32_storage_is_the_gpu_s_and_recorded_only_when_chosen():
+    with pytest.raises(ValueError, match="float32 storage is the GPU's"):
+        ApgdSolver(kernel="numba", storage="float32")
+    with pytest.raises(ValueError, match="float64, float32"):
+        ApgdSolver(kernel="cuda", storage="float16")
+    assert "storage" not in ApgdSolver(kernel="cuda").describe()
+    assert ApgdSolver(kernel="cuda", storage="float32").describe()["storage"] == "float32"
+
+
 @pytest.mark.parametrize("largest", [1.0, -1.0], ids=["pushing", "none-pushing"])
 def test_the_active_contacts_counted_on_the_device_are_the_host_s(largest):
     """A solution's active contacts (normal force above 1e-8 of the largest, none when no force is

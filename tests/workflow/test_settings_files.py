@@ -54,13 +54,13 @@ def test_the_workflow_s_settings_files_are_what_the_stages_run_with(tmp_path):
 
 def test_the_rules_command_lines_name_no_setting_that_changes_a_result():
     """A setting reaches a stage in its settings.yaml alone: adding one touches its dataclass, the
-    schema and config.yaml, not a rule. The rules' flags are files, threads, checkpoints and the
-    packing's size bound, and the trim's swept a."""
+    schema and config.yaml, not a rule. The rules' flags are files, threads, the device and its
+    storage, checkpoints and the packing's size bound, and the trim's swept a."""
     rules = (ROOT / "workflow/rules/simulate.smk").read_text()
     flags = set(re.findall(r'colsim [a-z-]+[^\n]*|^\s+" --[^\n]*', rules, flags=re.M))
     named = {flag for line in flags for flag in re.findall(r"--([a-z-]+)", line)}
-    assert named <= {"settings", "input", "output", "output-dir", "threads", "device", "checkpoint-every",
-                     "max-spheres", "aspect-ratio"}, named
+    assert named <= {"settings", "input", "output", "output-dir", "threads", "device", "gpu-storage",
+                     "checkpoint-every", "max-spheres", "aspect-ratio"}, named
     for command in ("pack", "collapse", "analyse"):
         assert re.search(rf"colsim {command} --settings", rules), command
 

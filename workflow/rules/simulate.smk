@@ -3,7 +3,7 @@
 # settings.yaml their folder's key names (common.smk: packing_of, column_of, run_of;
 # colsim.study.workflow.plan), read by `colsim STAGE --settings`, never parsed back from the folder's
 # name, so a changed setting is a new folder and never an overwrite. The command lines add only
-# what does not change a result: threads, the device, checkpoints, the packing's size bound. A job
+# what does not change a result: threads, the device and its storage, checkpoints, the packing's size bound. A job
 # on a GPU (device cuda, or auto for a large column where a GPU is) asks for resources gpu=1
 # (profiles/default: one GPU, so such jobs run one at a time; SLURM: a GPU request).
 
@@ -49,13 +49,14 @@ rule pack:
     params:
         max_spheres=config["pack"]["max_spheres"],
         device=config["device"],
+        gpu_storage=config["gpu_storage"],
     log:
         logged(f"{PACKING_DIR}/pack.log"),
     benchmark:
         benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
         "colsim pack --settings {input:q} --max-spheres {params.max_spheres} --threads {threads}"
-        " --device {params.device} --output {output:q} > {log:q} 2>&1"
+        " --device {params.device} --gpu-storage {params.gpu_storage} --output {output:q} > {log:q} 2>&1"
 
 
 # A trim takes a second and unblocks collapses: it goes before any of them (priorities are not
@@ -94,6 +95,7 @@ rule collapse:
     params:
         checkpoint_every=config["collapse"]["checkpoint_every"],
         device=config["device"],
+        gpu_storage=config["gpu_storage"],
     log:
         logged(f"{RUN_DIR}/collapse.log"),
     benchmark:
@@ -101,7 +103,7 @@ rule collapse:
     shell:
         "colsim collapse --settings {input.settings:q} --input {input.column:q}"
         " --checkpoint-every {params.checkpoint_every} --threads {threads} --device {params.device}"
-        " --output {output:q} > {log:q} 2>&1"
+        " --gpu-storage {params.gpu_storage} --output {output:q} > {log:q} 2>&1"
 
 
 rule analysis_settings:

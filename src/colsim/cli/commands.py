@@ -90,8 +90,9 @@ def _recorded(args, *stage_settings) -> dict:
 
 def _apgd_options(solver: SolverSettings, tolerance=None) -> dict:
     """APGD's options the settings set (solver_tolerance, else `tolerance` when given;
-    solver_length_floor, solver_overlap_tolerance, the device); the rest keep the back-end's defaults."""
-    options = {"kernel": "cuda"} if solver.device == "cuda" else {}
+    solver_length_floor, solver_overlap_tolerance, the device and on a GPU its storage); the rest keep
+    the back-end's defaults."""
+    options = {"kernel": "cuda", "storage": solver.gpu_storage} if solver.device == "cuda" else {}
     if solver.solver_tolerance is not None or tolerance is not None:
         options["tolerance"] = tolerance if solver.solver_tolerance is None else solver.solver_tolerance
     if solver.solver_length_floor is not None:
@@ -113,6 +114,8 @@ def _solver(solver: SolverSettings, scaled_time_step: float):
                    if value is not None]
         if solver.device != "cpu":
             ignored.append(f"--device {solver.device}")
+        if solver.gpu_storage != defaults.DEFAULT_GPU_STORAGE:
+            ignored.append(f"--gpu-storage {solver.gpu_storage}")
         if ignored:
             raise io.InputError(f"{' and '.join(ignored)} {'are' if len(ignored) > 1 else 'is'} APGD's"
                                 f" (--solver auto or apgd); --solver {solver.solver} would ignore it")

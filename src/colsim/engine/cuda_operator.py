@@ -269,6 +269,29 @@ def full_on_device(shape, value, dtype=np.float64):
     return out
 
 
+@cuda.jit
+def _cast_kernel(source, target):
+    """target[k] = source[k] in target's type (the nearest float32, an int32's same value), a thread each."""
+    k = cuda.grid(1)
+    if k < source.shape[0]:
+        target[k] = source[k]
+
+
+#: :func:`_cast_kernel` compiled anew for each pair of types (one signature each: :func:`launch`'s fast way)
+_cast_kernels: dict = {}
+
+
+def cast_on_device(array, dtype):
+    """A new C-contiguous device array of `array`'s shape in numpy type `dtype`, its values cast there."""
+    out = cuda.device_array(array.shape, dtype=dtype)
+    if array.size:
+        key = (np.dtype(array.dtype), np.dtype(dtype))
+        if key not in _cast_kernels:
+            _cast_kernels[key] = cuda.jit(_cast_kernel.py_func)
+        launch(_cast_kernels[key], blocks_for(array.size), THREADS, array.reshape(array.size), out.reshape(array.size))
+    return out
+
+
 @cuda.jit(device=True)
 def block_reduce(cache, t, largest):
     """Reduce a block's shared array `cache` (one value a thread, thread t's at cache[t]; its length

@@ -393,6 +393,10 @@ class ApgdSolver(Solver):
     lipschitz_decay: the Lipschitz estimate L shrinks by this factor after every iteration and
     doubles when the descent test fails (as in Chrono's APGD): longer steps where W is flatter
     (docs/performance.md, "Fewer iterations a step: what was tried").
+    storage: how the GPU's iteration stores its arrays (kernel 'cuda'; defaults.GPU_STORAGES):
+    'float64', or 'float32' (:data:`colsim.solvers.apgd_cuda.NARROW_GEOMETRY`: fewer bytes an
+    iteration, the stopping test and the step's forces still in float64); a float32 solve that reaches
+    the cap is made again in float64 before the solver gives up.
     """
 
     name = "apgd"
@@ -400,7 +404,8 @@ class ApgdSolver(Solver):
 
     def __init__(self, tolerance: float = defaults.APGD_TOLERANCE, max_iter: int = defaults.APGD_MAX_ITER, check_every: int = 10,
                  precondition: bool = True, kernel: str | None = None, lipschitz_decay: float = 0.9,
-                 length_floor: float = 0.0, overlap_tolerance: float = 0.0, verbose: bool = False):
+                 length_floor: float = 0.0, overlap_tolerance: float = 0.0, storage: str = defaults.DEFAULT_GPU_STORAGE,
+                 verbose: bool = False):
         if not tolerance > 0:
             raise ValueError(f"APGD tolerance must be positive, got {tolerance}")
         if max_iter < 1 or check_every < 1:
@@ -417,6 +422,12 @@ class ApgdSolver(Solver):
             if not cuda.is_available():
                 raise ValueError("APGD kernel 'cuda' needs a CUDA GPU (none is visible here) or numba's "
                                  "simulator (NUMBA_ENABLE_CUDASIM=1)")
+        if storage not in defaults.GPU_STORAGES:
+            raise ValueError(f"APGD's storage must be one of {', '.join(defaults.GPU_STORAGES)}, got {storage!r}")
+        if storage != defaults.DEFAULT_GPU_STORAGE and kernel != "cuda":
+            raise ValueError(f"APGD's {storage} storage is the GPU's (kernel 'cuda'); the {kernel} kernel stores "
+                             f"{defaults.DEFAULT_GPU_STORAGE}")
+        self.storage = storage
         self.tolerance = float(tolerance)
         self.max_iter = int(max_iter)
         self.check_every = int(check_every)
@@ -438,21 +449,27 @@ class ApgdSolver(Solver):
         return "cuda" if self.kernel == "cuda" else "cpu"
 
     def describe(self) -> dict:
-        """The settings; the overlap tolerance only when it is on, so that runs made before it
-        existed (and the packings, which do not use it) compare equal to those made after."""
+        """The settings; the overlap tolerance only when it is on and the storage only when it is not
+        float64, so that runs made before they existed (and the packings, which do not use the first)
+        compare equal to those made after."""
         settings = super().describe()
         if not self.overlap_tolerance:
             del settings["overlap_tolerance"]
+        if self.storage == defaults.DEFAULT_GPU_STORAGE:   # likewise the storage, where it is the default
+            del settings["storage"]
         return settings
 
     # -- the iteration ---------------------------------------------------------------------
-    def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None) -> "_Iteration":
-        """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate."""
+    def prepare(self, program: ConeProgram, warm_start: np.ndarray | None = None,
+                storage: str | None = None) -> "_Iteration":
+        """The scaled problem of `program` (m > 0 contacts) and its first iterate, ready to iterate
+        (storage: the GPU's, default the solver's)."""
         m = program.m
         if self.kernel == "cuda":   # the scaling, the start and the iterations, all on the device
             from .apgd_cuda import CudaIteration
 
-            return CudaIteration.of_program(program, warm_start, self.precondition, self.lipschitz_decay)
+            return CudaIteration.of_program(program, warm_start, self.precondition, self.lipschitz_decay,
+                                            storage or self.storage)
         inv_mass = 1.0 / program.mass
         # the compiled kernels apply B and B' from the contacts' frames and never form B
         operator = program.operator if self.kernel == "numba" else None
@@ -495,13 +512,25 @@ class ApgdSolver(Solver):
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None, max_iter: int | None = None) -> ConeSolution:
         """Solve `program` from `warm_start` ((m, 5) forces or None); max_iter: this call's cap
-        (default: the solver's)."""
+        (default: the solver's). Under float32 storage a solve that reaches the cap is made again from
+        the same start in float64 (its info's `storage` says which solved)."""
         if program.m == 0:
             return self.no_contacts(program)
+        if self.storage == defaults.DEFAULT_GPU_STORAGE:
+            return self._solve(program, warm_start, step, max_iter, self.storage)
+        try:
+            return self._solve(program, warm_start, step, max_iter, self.storage)
+        except SolverError as error:
+            log.info("%s with %s storage; solving this step again with %s", error, self.storage,
+                     defaults.DEFAULT_GPU_STORAGE)
+            return self._solve(program, warm_start, step, max_iter, defaults.DEFAULT_GPU_STORAGE)
+
+    def _solve(self, program: ConeProgram, warm_start, step, max_iter, storage: str) -> ConeSolution:
+        """:meth:`solve` with the GPU's `storage`."""
         start = time.perf_counter()
         m = program.m
         max_iter = self.max_iter if max_iter is None else int(max_iter)
-        run = self.prepare(program, warm_start)
+        run = self.prepare(program, warm_start, storage)
         started = "warm" if run.is_warm() else "cold"
         scale, floor, primal_tolerance = self.stopping_scales(program)
         setup_time = time.perf_counter() - start
@@ -522,6 +551,8 @@ class ApgdSolver(Solver):
         solve_time = time.perf_counter() - start - setup_time
         info = dict(res, start=started, backtracks=run.backtracks, restarts=run.restarts,
                     lipschitz=run.lip, length_scale=scale, kernel=self.kernel)
+        if self.kernel == "cuda":
+            info["storage"] = storage
         if not converged:
             raise SolverError(
                 f"APGD did not converge{at_step(step)} within {max_iter} iterations "

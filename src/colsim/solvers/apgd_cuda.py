@@ -28,8 +28,8 @@ import math
 import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
-                                    body_sums_on_device, contact_arrays_on_device, cuda,     # on numpy 2.5
-                                    dot, full_on_device, gradient_on_device,
+                                    body_sums_on_device, cast_on_device, contact_arrays_on_device,
+                                    cuda, dot, full_on_device, gradient_on_device,   # cuda: on numpy 2.5
                                     gradient_values, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
@@ -44,6 +44,15 @@ from .apgd import decide, lipschitz_estimate, power_start_drawn
 #: steps (iterations), backtracks and restarts
 LIP, THETA, BETA, LIP_DECAY, ACCEPTED, SLOT, ITERATIONS, BACKTRACKS, RESTARTS = range(9)
 CONTROL_SIZE = 9
+
+#: APGD's storages on the GPU (colsim.solvers.defaults.GPU_STORAGES). float32: the iterate's three
+#: slots, the bodies' three slots of h = T x, the wrenches between them and these contact arrays, as a
+#: trial step reads them, hold float32 (half the bytes of an iteration that moves them: its time on a
+#: GPU, whose iteration is bound by memory); the kernels' arithmetic stays float64 wherever a float64
+#: takes part, and a residual check, the forces and the increments are made in float64 from the stored
+#: iterate widened (:meth:`CudaIteration._widen`) and the float64 contact arrays: the same program,
+#: checked as exactly as under float64
+NARROW_GEOMETRY = ("s", "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")
 
 #: where x, x_prev and x_new are among the three slots of x (and hx, hx_prev, h_new among those of
 #: h = T x), from the control's SLOT r: r, r + 2 and r + 1 (mod 3). An accepted trial step moves r
@@ -137,6 +146,20 @@ def _transpose_change_kernel(work, start, entry, h_0, h_1, h_2, control, inv_mas
     block_reduce(cache, t, False)
     if t == 0:
         parts[2, cuda.blockIdx.x] = cache[0]
+
+
+#: the trial step's kernels again, compiled for float32 storage (:data:`NARROW_GEOMETRY`): a dispatcher of
+#: one signature each, so that :func:`colsim.engine.cuda_launch.launch` keeps its fast way for both
+_project_kernel_narrow = cuda.jit(_project_kernel.py_func)
+_transpose_change_kernel_narrow = cuda.jit(_transpose_change_kernel.py_func)
+
+
+@cuda.jit
+def _widen_kernel(x_0, x_1, x_2, control, out):
+    """out (5m,) float64 = the iterate x, from the slot the control names (float32 storage)."""
+    i = cuda.grid(1)
+    if i < out.shape[0]:
+        out[i] = _slot(x_0, x_1, x_2, control, X)[i]
 
 
 _decide_on_device = cuda.jit(device=True)(getattr(decide, "py_func", decide))
@@ -258,12 +281,16 @@ def trial_step(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, p
 
 
 def trial_launches(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, parts):
-    """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments)."""
+    """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments); slots of float32
+    (:data:`NARROW_GEOMETRY`) take the kernels compiled for them."""
     geo = geometry
-    return ((_project_kernel, blocks_for(mu_s.shape[0]), THREADS,
+    narrow = x_slots[0].dtype == np.float32
+    project, transpose = ((_project_kernel_narrow, _transpose_change_kernel_narrow) if narrow
+                          else (_project_kernel, _transpose_change_kernel))
+    return ((project, blocks_for(mu_s.shape[0]), THREADS,
              (*x_slots, *h_slots, control, inv_mass, c, mu_s, mu_r_s, geo.s, geo.i, geo.j, geo.normal, geo.tangent1,
               geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)),
-            (_transpose_change_kernel, blocks_for(geo.start.shape[0] - 1), THREADS,
+            (transpose, blocks_for(geo.start.shape[0] - 1), THREADS,
              (geo.work, geo.start, geo.entry, *h_slots, control, inv_mass, parts)))
 
 
@@ -375,9 +402,15 @@ class CudaIteration:
     that trade roles on the device (:data:`X`), and so are hx, hx_prev and h_new (y and hy = T y are
     made where they are read); `x`, `x_prev`, `x_new`, `hx` and `h_new` are the slots in those roles
     at the last read, `lip`, `theta`, `beta`, `backtracks` and `restarts` are the control array's
-    now (a copy from the device when a trial step ran since the last read)."""
+    now (a copy from the device when a trial step ran since the last read).
 
-    def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None):
+    storage: 'float64', or 'float32' (:data:`NARROW_GEOMETRY`): the trial steps then read and write
+    float32 slots and contact arrays (`trial_geometry`), and `x` and `hx` are the float64 iterate and
+    T x widened from the stored iterate (:meth:`_widen`), where a check, the forces and the increments
+    read them."""
+
+    def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None,
+                 storage: str = "float64"):
         self.m = len(mu_s)
         device = operator if isinstance(operator, CudaContactOperator) else CudaContactOperator.from_operator(operator)
         self.geometry = device.geometry(_to_device(scaling).reshape(5 * self.m))
@@ -392,6 +425,8 @@ class CudaIteration:
         self.x_slots = (x, cuda.device_array_like(x), _copy(x))
         self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
         lip = self._lipschitz_estimate()
+        self.trial_geometry = self.geometry   # the contact arrays as a trial step reads them
+        self._wide = None   # float32 storage: the float64 iterate and T x (:meth:`_widen`)
         # what the host reads: the control array, then the residual check's block sums (one copy a check)
         self.readout = cuda.device_array(CONTROL_SIZE + 4 * blocks_for(self.m), dtype=np.float64)
         self.control = self.readout[:CONTROL_SIZE]
@@ -403,18 +438,23 @@ class CudaIteration:
         self._readout = None         # the whole readout as last read with a residual check
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
-        self._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
-                                for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
+        self.prepare_trial()
+        if storage == "float32":
+            self.narrow_storage()
+        elif storage != "float64":
+            raise ValueError(f"APGD's storage on the GPU is float64 or float32, not {storage!r}")
 
     @classmethod
-    def of_program(cls, program, warm_start, precondition: bool, lip_decay: float) -> "CudaIteration":
+    def of_program(cls, program, warm_start, precondition: bool, lip_decay: float,
+                   storage: str = "float64") -> "CudaIteration":
         """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
         (m, 5) forces projected onto the scaled cones, or zero) by the CPU's arithmetic, 1 / mass
-        too. A step on the GPU has every array there already: the contacts' (its detection's), the
-        masses and free forces (:mod:`colsim.engine.cuda_state`), the warm start (its matching's) and
-        a Coulomb fixed point's last forces; others are copied once."""
+        too; storage: 'float64' or 'float32' (:class:`CudaIteration`). A step on the GPU has every
+        array there already: the contacts' (its detection's), the masses and free forces
+        (:mod:`colsim.engine.cuda_state`), the warm start (its matching's) and a Coulomb fixed point's
+        last forces; others are copied once."""
         m = program.m
         device = CudaContactOperator(program.contacts, program.n_unknowns // 6)   # no host operator
         # the masses and free forces: made on the device by a step there (cuda_state), else copied once
@@ -436,7 +476,7 @@ class CudaIteration:
             warm = _to_device(warm_start if kept is None else kept)
             launch(_first_iterate_kernel, blocks_for(m), THREADS, warm, s, mu_s, mu_r_s, x, nonzero)
         return cls(c, mu_s, mu_r_s, d_inv_mass, x, s, lip_decay, device, mu, mu_r,
-                   warm=bool(nonzero.copy_to_host()[0]))
+                   warm=bool(nonzero.copy_to_host()[0]), storage=storage)
 
     @classmethod
     def like(cls, start, operator, mu, mu_r) -> "CudaIteration":
@@ -444,6 +484,31 @@ class CudaIteration:
         :class:`colsim.solvers.apgd._Iteration`): both begin at the same point."""
         return cls(start.c, start.mu_s, start.mu_r_s, start.inv_mass, start.x, start.scaling, start.lip_decay,
                    operator, mu, mu_r)
+
+    def narrow_storage(self, geometry: bool = True) -> None:
+        """Store the trial steps' iterate, T x and wrenches in float32 from now on (float32 storage), and
+        with `geometry` the contact arrays of :data:`NARROW_GEOMETRY` too (the benchmarks time the
+        share of each); made from the float64 slots on the device, which are kept as the float64 iterate
+        and T x that :meth:`_widen` makes anew from the stored one."""
+        geo = self.geometry
+        narrowed = {name: cast_on_device(getattr(geo, name), np.float32) for name in NARROW_GEOMETRY} if geometry else {}
+        self.trial_geometry = geo._replace(work=cuda.device_array(geo.work.shape, dtype=np.float32), **narrowed)
+        x, hx = cast_on_device(self.x_slots[0], np.float32), cast_on_device(self.h_slots[0], np.float32)
+        self._wide = (self.x_slots[0], self.h_slots[0])
+        self._wide_current = False   # they hold the float64 start, not its float32 rounding
+        self.x_slots = (x, cuda.device_array_like(x), _copy(x))
+        self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
+        self.prepare_trial()
+
+    def _widen(self):
+        """Float32 storage: the float64 iterate and its T x (the float64 contact arrays' B' S x), made on
+        the device from the slot the control names there now (no wait); returns them."""
+        x, hx = self._wide
+        if not self._wide_current:
+            launch(_widen_kernel, blocks_for(5 * self.m), THREADS, *self.x_slots, self.control, x)
+            transpose_on_device(self.geometry, x, hx)
+            self._wide_current = True
+        return x, hx
 
     def _lipschitz_estimate(self) -> float:
         """:func:`colsim.solvers.apgd.lipschitz_estimate` with the device's kernels: G T v into one of
@@ -491,9 +556,13 @@ class CudaIteration:
     def _launch_check(self) -> None:
         """The residual check's kernel at the iterate the control names (no wait)."""
         geo = self.geometry
-        launch(_residual_kernel, blocks_for(self.m), THREADS, self.control, *self.h_slots, *self.x_slots,
-               self.inv_mass, geo.s, geo.i, geo.j, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j,
-               geo.lever, self.c, self.mu, self.mu_r, self.residual_parts)
+        x_slots, h_slots = self.x_slots, self.h_slots
+        if self._wide is not None:   # float32 storage: checked at the iterate widened, in float64
+            x, hx = self._widen()
+            x_slots, h_slots = (x, x, x), (hx, hx, hx)
+        launch(_residual_kernel, blocks_for(self.m), THREADS, self.control, *h_slots, *x_slots, self.inv_mass,
+               geo.s, geo.i, geo.j, geo.normal, geo.tangent1, geo.tangent2, geo.radius_i, geo.radius_j, geo.lever,
+               self.c, self.mu, self.mu_r, self.residual_parts)
 
     def _read_back(self, check: bool) -> None:
         """Copy the control array (and with `check` the residual check's sums, in the same copy)."""
@@ -516,12 +585,19 @@ class CudaIteration:
         for prepared in self._trial_launches:
             prepared()
         self._stale = True
+        self._wide_current = False
+
+    def prepare_trial(self) -> None:
+        """Prepare the trial step's launches (:meth:`_trial`) with the slots and the trial steps'
+        contact arrays as they are now (again after :meth:`narrow_storage`, or the benchmarks' changes)."""
+        self._trial_launches = [Prepared(kernel, blocks, threads, *arguments)
+                                for kernel, blocks, threads, arguments in self._launches_of_a_trial()]
 
     def _launches_of_a_trial(self) -> list:
         """The trial step's two launches and its decision's: each (kernel, blocks, threads, arguments)."""
         decide = ((_decide_kernel_few, 1, FEW_DECIDE_THREADS) if self.parts.shape[1] <= FEW_DECIDE_THREADS
                   else (_decide_kernel, 1, DECIDE_THREADS))
-        return [*trial_launches(self.x_slots, self.h_slots, self.control, self.c, self.geometry, self.mu_s,
+        return [*trial_launches(self.x_slots, self.h_slots, self.control, self.c, self.trial_geometry, self.mu_s,
                                 self.mu_r_s, self.inv_mass, self.parts),
                 (*decide, (self.parts, self.control))]
 
@@ -529,11 +605,13 @@ class CudaIteration:
         """The slot of `slots` that holds `role` (:data:`X`), as of the control array's last read."""
         return slots[(int(self._read[SLOT]) + role) % 3]
 
-    x = property(lambda self: self._role(self.x_slots, X),
-                 doc="(5m,) device array: the iterate z (as of the control array's last read).")
+    x = property(lambda self: self._role(self.x_slots, X) if self._wide is None else self._widen()[0],
+                 doc="(5m,) device array: the iterate z (as of the control array's last read; float64, widened "
+                     "now, under float32 storage).")
     x_prev = property(lambda self: self._role(self.x_slots, X_PREV), doc="(5m,) device array: the iterate before it.")
     x_new = property(lambda self: self._role(self.x_slots, X_NEW), doc="(5m,) device array: the last trial point.")
-    hx = property(lambda self: self._role(self.h_slots, X), doc="(6n,) device array: T x.")
+    hx = property(lambda self: self._role(self.h_slots, X) if self._wide is None else self._widen()[1],
+                  doc="(6n,) device array: T x (as x).")
     h_new = property(lambda self: self._role(self.h_slots, X_NEW), doc="(6n,) device array: T x_new.")
 
     def _scalar(self, index: int) -> float:

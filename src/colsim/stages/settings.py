@@ -83,6 +83,11 @@ class SolverSettings:
                           "step stays on the CPU for now) or auto (cuda for "
                           f"{defaults.GPU_FROM_SPHERES:,} spheres or more where a GPU is visible, else cpu); "
                           "results differ between devices by rounding only", kind="choice", choices=DEVICES)
+    gpu_storage: str = setting(defaults.DEFAULT_GPU_STORAGE, "how APGD's iteration stores its arrays on a GPU: "
+                               "float64, or float32 (the iterate, T x, the wrenches and the contacts' frames; the "
+                               "arithmetic, the stopping test and the step's forces stay float64; about 40 % fewer "
+                               "bytes an iteration); the CPU stores float64 either way", kind="choice",
+                               choices=defaults.GPU_STORAGES)
 
 
 #: the pour's step over sqrt(d_min / g), the time to fall about a diameter, must lie in this range:

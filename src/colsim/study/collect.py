@@ -31,11 +31,11 @@ RUN_ATTRIBUTES = {
 
 
 # what a run's settings may differ in between the runs of one summary: the swept values, file names,
-# checkpointing, threads, the device and the packing's size bound (none of which changes a result
-# beyond rounding), and the logging
+# checkpointing, threads, the device, its storage and the packing's size bound (none of which changes
+# a result beyond rounding), and the logging
 SWEPT = ("aspect_ratio", "mu_r", "seed")
 NOT_SETTINGS = set(SWEPT) | {"input", "output", "checkpoint", "checkpoint_every", "command", "threads", "device",
-                             "max_spheres", "settings", "verbose", "quiet"}
+                             "gpu_storage", "max_spheres", "settings", "verbose", "quiet"}
 
 
 def run_settings(analysis) -> dict:

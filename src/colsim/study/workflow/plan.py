@@ -29,7 +29,7 @@ RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
 ANALYSIS_SETTINGS = RESULTS + "/analysis_settings/{analysis}.yaml"
 
 #: settings that do not change a result (threads: by rounding only), so no key holds them
-NOT_IDENTITY = ("max_spheres", "threads", "checkpoint_every", "device")
+NOT_IDENTITY = ("max_spheres", "threads", "checkpoint_every", "device", "gpu_storage")
 #: ... nor do the layers' settings of a packing poured in one cloud (layer_height null), which so
 #: keeps the folder it had before layers existed
 ONE_CLOUD_NOT_IDENTITY = NOT_IDENTITY + ("layer_height", "freeze_depth")
