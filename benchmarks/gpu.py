@@ -104,9 +104,9 @@ def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: 
     the iterate (5m read at its size, 5m written) and make its T x in float64 (the wrench reads 5m + 17m
     and writes 9m, the bodies' sums read n + 1 + entries + 9m and write 6n). Until 2026-11-29 (the
     storage a solver's option) a check read the trial steps' arrays as stored, and before that day a
-    kernel of its own stored the gradient (12n + 29m) and the
-    residual kernel read it back (g, x, s, mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed
-    by a kernel that took the gradient at the new y and wrote it, for the next projection to read
+    kernel of its own stored the gradient (12n + 29m) and the residual kernel read it back (g, x, s,
+    mu and mu_r: 17m). Until 2026-11-28 an accepted trial step was followed by a kernel that took the
+    gradient at the new y and wrote it, for the next projection to read
     (18n + 29m an iteration, and 5m more a trial step); until 2026-11-27 the kernels also read back
     x_new and h_new (5m + 6n a trial step), stored hy (18n an iteration) and copied x_new and h_new
     into their slots; the bound counted the first two."""

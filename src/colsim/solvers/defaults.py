@@ -58,7 +58,8 @@ GPU_FROM_SPHERES = 73_000
 
 #: how APGD's iteration stores its arrays on a GPU: float64, the reference, or float32 (the iterate,
 #: T x, the wrenches and the contacts' frames as a trial step reads them; the arithmetic, the stopping
-#: test and the step's forces and increments stay float64): about 40 % fewer bytes an iteration, whose
-#: time on a GPU its bytes set (docs/solvers.md, "Float32 storage on a GPU")
+#: test and the step's forces and increments stay float64): about a third fewer bytes an iteration,
+#: its float64 checks counted, whose time on a GPU its bytes set (docs/solvers.md, "Float32 storage on
+#: a GPU")
 GPU_STORAGES = ("float64", "float32")
 DEFAULT_GPU_STORAGE = "float64"

@@ -85,7 +85,7 @@ class SolverSettings:
                           "results differ between devices by rounding only", kind="choice", choices=DEVICES)
     gpu_storage: str = setting(defaults.DEFAULT_GPU_STORAGE, "how APGD's iteration stores its arrays on a GPU: "
                                "float64, or float32 (the iterate, T x, the wrenches and the contacts' frames; the "
-                               "arithmetic, the stopping test and the step's forces stay float64; about 40 % fewer "
+                               "arithmetic, the stopping test and the step's forces stay float64; about a third fewer "
                                "bytes an iteration); the CPU stores float64 either way", kind="choice",
                                choices=defaults.GPU_STORAGES)
 
