@@ -216,21 +216,6 @@ STORAGE_VARIANTS = {
 }
 
 
-def fresh_iteration_kernels():
-    """APGD's trial-step kernels that read the stored arrays (the projection and the bodies' sums, as
-    compiled and their twins for float32 storage) compiled anew while inside (:func:`kernels_swapped`):
-    a variant's arrays of other element types then compile one signature a kernel, which
-    colsim.engine.cuda_launch.launch takes (it launches a kernel of several the plain way, numba-cuda's
-    slower dispatch). A residual check reads float64 arrays under every variant."""
-    from numba import cuda
-
-    from colsim.solvers import apgd_cuda
-
-    names = ("_project_kernel", "_transpose_change_kernel", "_project_kernel_narrow",
-             "_transpose_change_kernel_narrow")
-    return kernels_swapped({name: cuda.jit(getattr(apgd_cuda, name).py_func) for name in names})
-
-
 def stored_as(run, sizes: dict):
     """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device, its trial steps
     prepared again with them: the floats by the solver's own float32 storage
@@ -255,7 +240,7 @@ def stored_as(run, sizes: dict):
 @contextlib.contextmanager
 def every_iteration_stored(key: str):
     """Every APGD iteration on the device made inside the block stored as STORAGE_VARIANTS[key] has it
-    (:func:`stored_as`, on :func:`fresh_iteration_kernels`), to time a collapse's steps so. Its checks,
+    (:func:`stored_as`; each variant's kernels compiled for its types), to time a collapse's steps so. Its checks,
     forces and increments are float64, as under the solver's float32 storage (`float32-geometry` is
     that storage: `colsim collapse --gpu-storage float32`)."""
     from colsim.solvers.apgd_cuda import CudaIteration
@@ -267,12 +252,11 @@ def every_iteration_stored(key: str):
         made(self, *args, **kwargs)
         stored_as(self, sizes)
 
-    with fresh_iteration_kernels():
-        CudaIteration.__init__ = narrowed
-        try:
-            yield
-        finally:
-            CudaIteration.__init__ = made
+    CudaIteration.__init__ = narrowed
+    try:
+        yield
+    finally:
+        CudaIteration.__init__ = made
 
 
 def registers_of(kernel) -> str:
@@ -658,28 +642,27 @@ def main(argv=None):
     starts = {spheres: start_of(spheres) for spheres in args.spheres} if args.storage_variants else {}
     reference = {}   # each lattice's iterate as compiled
     for name, sizes in (("as compiled", {}), *STORAGE_VARIANTS.values()) if args.storage_variants else ():
-        with fresh_iteration_kernels():   # one compilation a variant, for every lattice
-            for spheres, (cpu, operator, mu, mu_r) in starts.items():
-                try:
-                    timed(stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes), 1, mu, mu_r,
-                          cuda.synchronize)   # compiles this variant's kernels, or warms them up
-                    run = stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes)
-                    seconds = timed(run, args.iterations, mu, mu_r, cuda.synchronize)
-                except Exception as error:   # one variant's failure leaves the others
-                    stored.row(operator.n, name, f"failed: {type(error).__name__}: {str(error)[:120]}", "-", "-",
-                               "-")
-                    continue
-                x = run.host_x().astype(np.float64)
-                first = reference.setdefault(spheres, x)
-                difference = float(np.max(np.abs(x - first)) / max(np.max(np.abs(first)), 1e-300))
-                moved = iteration_bytes(operator.m, operator.n, len(operator.entry), args.iterations + run.backtracks,
-                                        args.iterations, math.ceil(args.iterations / 10), sizes) / args.iterations
-                per = seconds / args.iterations
-                stored.row(operator.n, name, f"{1e3 * per:.3f}", f"{moved / 1e9:.3f}",
-                           f"{per / (moved / (1e9 * copied)):.1f}" if copied else "-", f"{difference:.1e}",
-                           data={"spheres": operator.n, "contacts": operator.m, "stored": name, "sizes": sizes,
-                                 "gpu_ms": 1e3 * per, "bytes_an_iteration": moved, "relative_difference": difference,
-                                 "backtracks": run.backtracks, "device": device, "iterations": args.iterations})
+        for spheres, (cpu, operator, mu, mu_r) in starts.items():
+            try:
+                timed(stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes), 1, mu, mu_r,
+                      cuda.synchronize)   # compiles this variant's kernels, or warms them up
+                run = stored_as(CudaIteration.like(cpu, operator, mu, mu_r), sizes)
+                seconds = timed(run, args.iterations, mu, mu_r, cuda.synchronize)
+            except Exception as error:   # one variant's failure leaves the others
+                stored.row(operator.n, name, f"failed: {type(error).__name__}: {str(error)[:120]}", "-", "-",
+                           "-")
+                continue
+            x = run.host_x().astype(np.float64)
+            first = reference.setdefault(spheres, x)
+            difference = float(np.max(np.abs(x - first)) / max(np.max(np.abs(first)), 1e-300))
+            moved = iteration_bytes(operator.m, operator.n, len(operator.entry), args.iterations + run.backtracks,
+                                    args.iterations, math.ceil(args.iterations / 10), sizes) / args.iterations
+            per = seconds / args.iterations
+            stored.row(operator.n, name, f"{1e3 * per:.3f}", f"{moved / 1e9:.3f}",
+                       f"{per / (moved / (1e9 * copied)):.1f}" if copied else "-", f"{difference:.1e}",
+                       data={"spheres": operator.n, "contacts": operator.m, "stored": name, "sizes": sizes,
+                             "gpu_ms": 1e3 * per, "bytes_an_iteration": moved, "relative_difference": difference,
+                             "backtracks": run.backtracks, "device": device, "iterations": args.iterations})
     if args.spheres:
         found = record.table(["spheres", "pairs", f"CPU ms ({threads()} threads)", f"GPU ms ({device})",
                               "GPU vs CPU", "same pairs"], title="the swept pairs of contact detection")

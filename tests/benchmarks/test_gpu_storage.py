@@ -46,18 +46,17 @@ def test_the_narrowed_iteration_holds_the_nearest_float32_and_the_same_int32():
 
     start, operator, mu, mu_r = gpu.start_of(40)
     wide = CudaIteration.like(start, operator, mu, mu_r)
-    with gpu.fresh_iteration_kernels():
-        narrow = gpu.stored_as(CudaIteration.like(start, operator, mu, mu_r), gpu.STORAGE_VARIANTS["all"][1])
-        for name in ("s", "normal", "lever", "i", "entry", "work"):
-            before, after = getattr(wide.geometry, name).copy_to_host(), getattr(narrow.trial_geometry, name).copy_to_host()
-            kind = np.int32 if name in ("i", "entry") else np.float32
-            assert after.dtype == kind and after.shape == before.shape, name
-            assert getattr(narrow.geometry, name).dtype == before.dtype, name
-            if name != "work":   # room for the wrenches, written before read
-                assert np.array_equal(after, before.astype(kind)), name
-        assert np.array_equal(narrow.x_slots[0].copy_to_host(), wide.x.copy_to_host().astype(np.float32))
-        assert np.array_equal(narrow.h_slots[0].copy_to_host(), wide.hx.copy_to_host().astype(np.float32))
-        narrow.iterate(3)
+    narrow = gpu.stored_as(CudaIteration.like(start, operator, mu, mu_r), gpu.STORAGE_VARIANTS["all"][1])
+    for name in ("s", "normal", "lever", "i", "entry", "work"):
+        before, after = getattr(wide.geometry, name).copy_to_host(), getattr(narrow.trial_geometry, name).copy_to_host()
+        kind = np.int32 if name in ("i", "entry") else np.float32
+        assert after.dtype == kind and after.shape == before.shape, name
+        assert getattr(narrow.geometry, name).dtype == before.dtype, name
+        if name != "work":   # room for the wrenches, written before read
+            assert np.array_equal(after, before.astype(kind)), name
+    assert np.array_equal(narrow.x_slots[0].copy_to_host(), wide.x.copy_to_host().astype(np.float32))
+    assert np.array_equal(narrow.h_slots[0].copy_to_host(), wide.hx.copy_to_host().astype(np.float32))
+    narrow.iterate(3)
     wide.iterate(3)
     x = wide.host_x()
     assert np.max(np.abs(narrow.host_x() - x)) <= 3e-6 * np.max(np.abs(x))

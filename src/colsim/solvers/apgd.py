@@ -516,11 +516,11 @@ class ApgdSolver(Solver):
         the same start in float64 (its info's `storage` says which solved)."""
         if program.m == 0:
             return self.no_contacts(program)
-        if self.storage == defaults.DEFAULT_GPU_STORAGE:
-            return self._solve(program, warm_start, step, max_iter, self.storage)
         try:
             return self._solve(program, warm_start, step, max_iter, self.storage)
         except SolverError as error:
+            if self.storage == defaults.DEFAULT_GPU_STORAGE:
+                raise
             log.info("%s with %s storage; solving this step again with %s", error, self.storage,
                      defaults.DEFAULT_GPU_STORAGE)
             return self._solve(program, warm_start, step, max_iter, defaults.DEFAULT_GPU_STORAGE)

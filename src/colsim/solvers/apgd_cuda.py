@@ -29,7 +29,7 @@ import numpy as np
 
 from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
                                     body_sums_on_device, cast_on_device, contact_arrays_on_device,
-                                    cuda, dot, full_on_device, gradient_on_device,   # cuda: on numpy 2.5
+                                    cuda, dot, for_types, full_on_device, gradient_on_device,   # cuda: on numpy 2.5
                                     gradient_values, kept_device_copy, normalise_on_device,
                                     project_point_on_device, transpose_on_device, wrench_on_device)
 from ..engine.cones import combine_residuals
@@ -146,12 +146,6 @@ def _transpose_change_kernel(work, start, entry, h_0, h_1, h_2, control, inv_mas
     block_reduce(cache, t, False)
     if t == 0:
         parts[2, cuda.blockIdx.x] = cache[0]
-
-
-#: the trial step's kernels again, compiled for float32 storage (:data:`NARROW_GEOMETRY`): a dispatcher of
-#: one signature each, so that :func:`colsim.engine.cuda_launch.launch` keeps its fast way for both
-_project_kernel_narrow = cuda.jit(_project_kernel.py_func)
-_transpose_change_kernel_narrow = cuda.jit(_transpose_change_kernel.py_func)
 
 
 @cuda.jit
@@ -281,12 +275,15 @@ def trial_step(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, p
 
 
 def trial_launches(x_slots, h_slots, control, c, geometry, mu_s, mu_r_s, inv_mass, parts):
-    """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments); slots of float32
-    (:data:`NARROW_GEOMETRY`) take the kernels compiled for them."""
+    """:func:`trial_step`'s two launches, each (kernel, blocks, threads, arguments); narrower arrays
+    (float32 storage, :data:`NARROW_GEOMETRY`; the benchmarks' int32 indices) take the kernels compiled
+    anew for their types (:func:`colsim.engine.cuda_operator.for_types`: one signature a dispatcher, so
+    that :func:`colsim.engine.cuda_launch.launch` keeps its fast way for each)."""
     geo = geometry
-    narrow = x_slots[0].dtype == np.float32
-    project, transpose = ((_project_kernel_narrow, _transpose_change_kernel_narrow) if narrow
-                          else (_project_kernel, _transpose_change_kernel))
+    types = (np.dtype(x_slots[0].dtype), np.dtype(geo.s.dtype), np.dtype(geo.i.dtype))
+    project, transpose = _project_kernel, _transpose_change_kernel
+    if types != (np.float64, np.float64, np.int64):
+        project, transpose = for_types(project, *types), for_types(transpose, *types)
     return ((project, blocks_for(mu_s.shape[0]), THREADS,
              (*x_slots, *h_slots, control, inv_mass, c, mu_s, mu_r_s, geo.s, geo.i, geo.j, geo.normal, geo.tangent1,
               geo.tangent2, geo.radius_i, geo.radius_j, geo.lever, geo.work, parts)),
@@ -439,10 +436,10 @@ class CudaIteration:
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
         self.prepare_trial()
+        if storage not in ("float64", "float32"):
+            raise ValueError(f"APGD's storage on the GPU is float64 or float32, not {storage!r}")
         if storage == "float32":
             self.narrow_storage()
-        elif storage != "float64":
-            raise ValueError(f"APGD's storage on the GPU is float64 or float32, not {storage!r}")
 
     @classmethod
     def of_program(cls, program, warm_start, precondition: bool, lip_decay: float,
