@@ -13,7 +13,7 @@ bounds of test_apgd's test_agrees_with_clarabel (1e-3)."""
 import numpy as np
 import pytest
 
-from colsim.solvers import ClarabelSolver
+from colsim.solvers import AutoSolver, ClarabelSolver, defaults
 from colsim.solvers.apgd import ApgdSolver, _trial_step
 from solver_cases import collapse_program, mid_collapse
 
@@ -191,6 +191,9 @@ def test_a_float32_solve_that_reaches_its_cap_is_made_again_in_float64(program, 
     monkeypatch.setattr(ApgdSolver, "_solve", failing_in_float32)
     sol = ApgdSolver(kernel="cuda", storage="float32").solve(program, warm_start=warm)
     assert storages == ["float32", "float64"] and sol.info["storage"] == "float64" and sol.info["primal"] <= 1e-5
+    assert sol.backend == defaults.FLOAT64_FALLBACK   # the step's record names the retry, under auto too
+    auto = AutoSolver(apgd={"kernel": "cuda", "storage": "float32"}).solve(program, warm_start=warm)
+    assert auto.backend == defaults.FLOAT64_FALLBACK and auto.info["storage"] == "float64"
     with pytest.raises(SolverError, match="did not converge"):
         ApgdSolver(kernel="cuda", storage="float32", max_iter=1).solve(program)
 

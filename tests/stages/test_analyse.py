@@ -44,3 +44,11 @@ def test_floor_contacts_do_not_link_grains():
     deposit = analysis.measure_deposit(state, tolerance=1e-6)
     # grains 0 and 1 both touch the floor but not each other: main mass = the stack {1, 2}
     assert deposit.main_mass.tolist() == [False, True, True]
+
+
+def test_steps_are_counted_by_the_back_end_that_solved_them():
+    """apgd_steps counts a step APGD solved in float64 after float32 storage reached its cap (it is
+    APGD's); fallback_steps counts Clarabel's after APGD's cap; a file without back-ends gives NaN."""
+    backends = np.array(["apgd", "apgd-float64-fallback", "clarabel", "clarabel-fallback", "apgd"])
+    assert analysis.solver_step_counts(backends) == (3.0, 1.0)
+    assert all(np.isnan(analysis.solver_step_counts([])))

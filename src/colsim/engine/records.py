@@ -8,7 +8,8 @@ from .warm_start import WarmStart
 
 #: diagnostics that are text, with their long names
 TEXT_DIAGNOSTICS = {"solver_status": "solver status per step",
-                    "solver_backend": "back-end that solved the step (apgd, clarabel or clarabel-fallback)"}
+                    "solver_backend": "back-end that solved the step (apgd, clarabel, clarabel-fallback or "
+                                      "apgd-float64-fallback)"}
 
 
 @dataclass

@@ -513,7 +513,8 @@ class ApgdSolver(Solver):
               step: int | None = None, max_iter: int | None = None) -> ConeSolution:
         """Solve `program` from `warm_start` ((m, 5) forces or None); max_iter: this call's cap
         (default: the solver's). Under float32 storage a solve that reaches the cap is made again from
-        the same start in float64 (its info's `storage` says which solved)."""
+        the same start in float64 (its info's `storage` says which solved, and its `backend` is
+        :data:`colsim.solvers.defaults.FLOAT64_FALLBACK`, so a collapse's `step_solver_backend` records the step)."""
         if program.m == 0:
             return self.no_contacts(program)
         try:
@@ -523,7 +524,9 @@ class ApgdSolver(Solver):
                 raise
             log.info("%s with %s storage; solving this step again with %s", error, self.storage,
                      defaults.DEFAULT_GPU_STORAGE)
-            return self._solve(program, warm_start, step, max_iter, defaults.DEFAULT_GPU_STORAGE)
+            solution = self._solve(program, warm_start, step, max_iter, defaults.DEFAULT_GPU_STORAGE)
+            solution.backend = defaults.FLOAT64_FALLBACK
+            return solution
 
     def _solve(self, program: ConeProgram, warm_start, step, max_iter, storage: str) -> ConeSolution:
         """:meth:`solve` with the GPU's `storage`."""

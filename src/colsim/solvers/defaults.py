@@ -63,3 +63,6 @@ GPU_FROM_SPHERES = 73_000
 #: a GPU")
 GPU_STORAGES = ("float64", "float32")
 DEFAULT_GPU_STORAGE = "float64"
+#: the back-end a step records (step_solver_backend) when float32 storage reached the cap and APGD then
+#: solved the step in float64
+FLOAT64_FALLBACK = "apgd-float64-fallback"

@@ -67,7 +67,8 @@ class AutoSolver(Solver):
     cold step: a column that comes without its packing's forces, the first contacts of a pour).
     APGD then has `max_iter` iterations; a step that reaches them is solved again by Clarabel.
     Larger steps go to Clarabel. The solution's `backend` says which back-end solved the step:
-    'apgd', 'clarabel', or 'clarabel-fallback' (APGD reached its cap).
+    'apgd', 'clarabel', 'clarabel-fallback' (APGD reached its cap), or 'apgd-float64-fallback' (APGD
+    with float32 storage reached its cap, and then solved the step in float64).
 
     Why APGD up to the paper's step and no further, why cold steps too, and why the cap: the
     measurements are in docs/solvers.md ("Why APGD, and where: the auto rule").
@@ -131,5 +132,5 @@ class AutoSolver(Solver):
 
 
 def _by(solver: Solver, solution: ConeSolution) -> ConeSolution:
-    solution.backend = solver.name
+    solution.backend = solution.backend or solver.name   # kept where the back-end named its own fallback
     return solution

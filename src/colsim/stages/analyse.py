@@ -29,6 +29,7 @@ from ..engine.contacts import touching_pairs
 from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
 from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates
 from ..io.state_file import state_from_dataset
+from ..solvers import defaults
 from .settings import AnalysisSettings
 
 DEFAULT_CONTACT_TOLERANCE = AnalysisSettings.contact_tolerance  # fraction of the smallest diameter
@@ -107,6 +108,17 @@ def undisturbed_top_radius(initial: ParticleState, final: ParticleState, h0: flo
     return float(np.percentile(np.hypot(initial.position[still, 0], initial.position[still, 1]), 95))
 
 
+def solver_step_counts(backends) -> tuple[float, float]:
+    """(steps solved by APGD, steps Clarabel solved after APGD reached its cap) from each step's
+    back-end (step_solver_backend); APGD's count includes the steps it solved in float64 after float32
+    storage reached the cap. NaN for both where no back-end is recorded."""
+    if len(backends) == 0:
+        return np.nan, np.nan
+    names = [str(name) for name in backends]
+    return (float(names.count("apgd") + names.count(defaults.FLOAT64_FALLBACK)),
+            float(names.count("clarabel-fallback")))
+
+
 def _scalar(value, units: str, long_name: str):
     return (), value, {"units": units, "long_name": long_name}
 
@@ -136,10 +148,8 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
     centres, height = deposit_profile(final, deposit.main_mass, bin_width, deposit.r_inf + bin_width)
     energy = trajectory["step_kinetic_energy"].values + trajectory["step_rotational_energy"].values
     top_radius = undisturbed_top_radius(initial, final, h0, 2.0 * float(final.radius.min()) * 0.1)
-    backends = list(trajectory["step_solver_backend"].values) if "step_solver_backend" in trajectory else []
-
-    def count(name):
-        return float(backends.count(name)) if backends else np.nan   # NaN: not recorded
+    backends = trajectory["step_solver_backend"].values if "step_solver_backend" in trajectory else []
+    apgd_steps, fallback_steps = solver_step_counts(backends)
     data = {
         "h_inf": _scalar(deposit.h_inf, "length", "final height of the main mass"),
         "r_inf": _scalar(deposit.r_inf, "length", "run-out radius of the main mass"),
@@ -152,8 +162,8 @@ def analyse_trajectory(trajectory, settings: AnalysisSettings, attrs: dict) -> x
         "final_to_peak_kinetic_energy": _scalar(float(energy[-1] / max(energy.max(), 1e-300)), "1",
                                                 "kinetic energy at the end over its peak"),
         "wall_time": _scalar(float(trajectory.attrs["wall_time"]), "s", "wall time of the collapse"),
-        "apgd_steps": _scalar(count("apgd"), "1", "steps solved by APGD"),
-        "fallback_steps": _scalar(count("clarabel-fallback"), "1",
+        "apgd_steps": _scalar(apgd_steps, "1", "steps solved by APGD"),
+        "fallback_steps": _scalar(fallback_steps, "1",
                                   "steps solved by Clarabel after APGD reached its iteration cap"),
         "cone_programs_per_step": _scalar(
             float(trajectory["step_friction_iterations"].mean()) if "step_friction_iterations" in trajectory
