@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 
 from colsim.study.experimental_laws import lube_height, lube_runout
-from colsim.study.collect import collect_analyses, one_row_per_run, one_run, run_status
+from colsim.study.collect import collect_analyses, one_row_per_run, one_run, run_key, run_status
 from colsim.study.markdown import lube_markdown, lube_rst
 
 
@@ -194,6 +194,12 @@ def _analysis(**attrs) -> xr.Dataset:
     base = {"aspect_ratio": 2.0, "mu_r": 0.12, "seed": 1, "r0": 3.0, "mu": 0.577,
             "friction_law": "associated", "rolling_lever": "paper", "solver_backends": '{"apgd": 10}'}
     return xr.Dataset({"h_inf_over_r0": ((), 1.0, {"units": "1", "long_name": "h"})}, attrs={**base, **attrs})
+
+
+def test_collect_takes_every_back_end_a_step_may_record():
+    """Clarabel's fallback and APGD's float64 retry of float32 storage are back-ends a step records."""
+    backends = '{"apgd": 7, "apgd-float64-fallback": 2, "clarabel-fallback": 1}'
+    assert run_key(_analysis(solver_backends=backends)) == (2.0, 0.12, 1)
 
 
 @pytest.mark.parametrize("attrs, words", [

@@ -13,7 +13,7 @@ import xarray as xr
 from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
 from ..io.checks import FileProblem, check_attributes
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
-from ..solvers.defaults import SOLVERS
+from ..solvers.defaults import FLOAT64_FALLBACK, SOLVERS
 from ..stages.settings import CollapseSettings
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
@@ -91,8 +91,9 @@ def one_row_per_run(summary) -> xr.Dataset:
 
 #: what a run's attributes of a fixed vocabulary may say (they reach the tables and the report)
 VOCABULARY = {"friction_law": FRICTION_LAWS, "rolling_lever": ROLLING_LEVERS}
-#: the back-ends a step may name (colsim.solvers.AutoSolver adds clarabel-fallback)
-BACKENDS = set(SOLVERS) | {"clarabel-fallback"}
+#: the back-ends a step may name (colsim.solvers.AutoSolver adds clarabel-fallback, APGD with float32
+#: storage its float64 retry)
+BACKENDS = set(SOLVERS) | {"clarabel-fallback", FLOAT64_FALLBACK}
 
 
 def run_key(analysis) -> tuple[float, float, int]:
