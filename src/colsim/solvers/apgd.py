@@ -392,7 +392,7 @@ class ApgdSolver(Solver):
     diameters (0: the relative tolerance alone). Complementarity keeps `tolerance` either way.
     lipschitz_decay: the Lipschitz estimate L shrinks by this factor after every iteration and
     doubles when the descent test fails (as in Chrono's APGD): longer steps where W is flatter
-    (docs/performance.md, "Fewer iterations a step: what was tried").
+    (docs/solvers.md, "The Lipschitz estimate's decay").
     storage: how the GPU's iteration stores its arrays (kernel 'cuda'; defaults.GPU_STORAGES):
     'float64', or 'float32' (:data:`colsim.solvers.apgd_cuda.NARROW_GEOMETRY`: fewer bytes an
     iteration, the stopping test and the step's forces still in float64); a float32 solve that reaches
@@ -403,7 +403,7 @@ class ApgdSolver(Solver):
     uses_warm_start = True
 
     def __init__(self, tolerance: float = defaults.APGD_TOLERANCE, max_iter: int = defaults.APGD_MAX_ITER, check_every: int = 10,
-                 precondition: bool = True, kernel: str | None = None, lipschitz_decay: float = 0.9,
+                 precondition: bool = True, kernel: str | None = None, lipschitz_decay: float = defaults.APGD_LIPSCHITZ_DECAY,
                  length_floor: float = 0.0, overlap_tolerance: float = 0.0, storage: str = defaults.DEFAULT_GPU_STORAGE,
                  verbose: bool = False):
         if not tolerance > 0:
