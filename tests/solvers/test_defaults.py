@@ -42,3 +42,11 @@ def test_the_schema_offers_the_modules_solvers_and_default():
     solver = schema["properties"]["solver"]
     assert tuple(solver["enum"]) == defaults.SOLVERS
     assert solver["default"] == defaults.DEFAULT_SOLVER
+
+
+def test_apgd_takes_its_lipschitz_decay_from_the_module():
+    """The decay is a default of the solver's signature, read from the module (one place)."""
+    from colsim.solvers.apgd import ApgdSolver
+
+    assert ApgdSolver().lipschitz_decay == defaults.APGD_LIPSCHITZ_DECAY
+    assert ApgdSolver().describe()["lipschitz_decay"] == defaults.APGD_LIPSCHITZ_DECAY   # recorded in a run's settings

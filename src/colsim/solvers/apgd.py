@@ -514,7 +514,7 @@ class ApgdSolver(Solver):
         """Solve `program` from `warm_start` ((m, 5) forces or None); max_iter: this call's cap
         (default: the solver's). Under float32 storage a solve that reaches the cap is made again from
         the same start in float64 (its info's `storage` says which solved, and its `backend` is
-        :data:`colsim.solvers.defaults.FLOAT64_FALLBACK`, so a collapse's `step_solver_backend` records the step)."""
+        defaults.FLOAT64_FALLBACK, which a collapse records as the step's `step_solver_backend`)."""
         if program.m == 0:
             return self.no_contacts(program)
         try:
