@@ -233,7 +233,7 @@ def stored_as(run, sizes: dict):
         geo = run.trial_geometry
         run.trial_geometry = geo._replace(**{name: cast_on_device(getattr(geo, name), np.int32)
                                              for name in ("i", "j", "start", "entry")})
-    run.prepare_trial()
+        run.prepare_trial()   # narrow_storage prepares its own
     return run
 
 

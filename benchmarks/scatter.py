@@ -41,6 +41,7 @@ import numpy as np
 import fused as fused_build
 import record
 import unfused as unfused_build
+from colsim.solvers.defaults import DEFAULT_GPU_STORAGE, GPU_STORAGES
 
 # HDF5, under netCDF4, is not safe to call from two threads at once: `--jobs 14` segfaulted in
 # libhdf5 on the 16-core GPU host (2026-11-28). The runs themselves are child processes; only this
@@ -73,11 +74,12 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def recorded_device(device: str, fused: list[str] | None, unfused: bool = False, storage: str = "float64") -> str:
+def recorded_device(device: str, fused: list[str] | None, unfused: bool = False,
+                    storage: str = DEFAULT_GPU_STORAGE) -> str:
     """The device a run is recorded as: `device`, or for a `--fused` run "cpu-fused", or "cpu-fused:"
     and the modules fused; for an `--unfused` one "cuda-unfused"; for one with float32 storage on the
     GPU "cuda-float32"."""
-    if storage != "float64":
+    if storage != DEFAULT_GPU_STORAGE:
         return f"{recorded_device(device, fused, unfused)}-{storage}"
     if unfused:
         return f"{device}-unfused"
@@ -97,7 +99,7 @@ def colsim_command(fused: list[str] | None, unfused: bool) -> tuple[list[str], d
 
 
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
-            fused: list[str] | None = None, unfused: bool = False, storage: str = "float64") -> dict:
+            fused: list[str] | None = None, unfused: bool = False, storage: str = DEFAULT_GPU_STORAGE) -> dict:
     """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
     with the CPU's kernels fusing multiply-adds, those of the modules listed or (empty) all (device
     "cpu" only); unfused: with the GPU's kernels not fusing them (device "cuda" only); storage: APGD's
@@ -219,7 +221,7 @@ def main(argv=None):
     parser.add_argument("--unfused", action="store_true",
                         help="the GPU's kernels compiled without fused multiply-adds, as the plain CPU's "
                              "(device cuda-unfused)")
-    parser.add_argument("--gpu-storage", default="float64", choices=("float64", "float32"),
+    parser.add_argument("--gpu-storage", default=DEFAULT_GPU_STORAGE, choices=GPU_STORAGES,
                         help="APGD's storage on the GPU (--device cuda), recorded as cuda-float32")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
     parser.add_argument("--jobs", type=int, default=1, help="runs at once")
@@ -234,7 +236,7 @@ def main(argv=None):
         parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
     if args.unfused and args.device != "cuda":
         parser.error("--unfused is a GPU run's (the CPU's kernels fuse nothing unless --fused)")
-    if args.gpu_storage != "float64" and args.device != "cuda":
+    if args.gpu_storage != DEFAULT_GPU_STORAGE and args.device != "cuda":
         parser.error("--gpu-storage float32 is a GPU run's (--device cuda)")
     device = recorded_device(args.device, args.fused, args.unfused, args.gpu_storage)
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()

@@ -42,6 +42,8 @@ def test_the_schema_offers_the_modules_solvers_and_default():
     solver = schema["properties"]["solver"]
     assert tuple(solver["enum"]) == defaults.SOLVERS
     assert solver["default"] == defaults.DEFAULT_SOLVER
+    storage = schema["properties"]["gpu_storage"]
+    assert tuple(storage["enum"]) == defaults.GPU_STORAGES and storage["default"] == defaults.DEFAULT_GPU_STORAGE
 
 
 def test_apgd_takes_its_lipschitz_decay_from_the_module():

@@ -36,6 +36,7 @@ from ..engine.cones import combine_residuals
 from ..engine.cuda_launch import Prepared, launch
 from ..engine.cuda_state import host_copy, increments_on_device, inverses_on_device, program_array_on_device
 from ..engine.solver_contract import ACTIVE_FRACTION, ConeSolution
+from . import defaults
 from .apgd import decide, lipschitz_estimate, power_start_drawn
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
@@ -407,7 +408,9 @@ class CudaIteration:
     read them."""
 
     def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None,
-                 storage: str = "float64"):
+                 storage: str = defaults.DEFAULT_GPU_STORAGE):
+        if storage not in defaults.GPU_STORAGES:
+            raise ValueError(f"APGD's storage on the GPU is {' or '.join(defaults.GPU_STORAGES)}, not {storage!r}")
         self.m = len(mu_s)
         device = operator if isinstance(operator, CudaContactOperator) else CudaContactOperator.from_operator(operator)
         self.geometry = device.geometry(_to_device(scaling).reshape(5 * self.m))
@@ -424,6 +427,7 @@ class CudaIteration:
         lip = self._lipschitz_estimate()
         self.trial_geometry = self.geometry   # the contact arrays as a trial step reads them
         self._wide = None   # float32 storage: the float64 iterate and T x (:meth:`_widen`)
+        self._wide_current = False   # ... made from the stored iterate since its last trial step
         # what the host reads: the control array, then the residual check's block sums (one copy a check)
         self.readout = cuda.device_array(CONTROL_SIZE + 4 * blocks_for(self.m), dtype=np.float64)
         self.control = self.readout[:CONTROL_SIZE]
@@ -435,15 +439,14 @@ class CudaIteration:
         self._readout = None         # the whole readout as last read with a residual check
         # the trial step's blocks' sums: its kernels write their own blocks, the rest stay zero
         self.parts = full_on_device((3, max(blocks_for(self.m), blocks_for(len(inv_mass) // 6))), 0.0)
-        self.prepare_trial()
-        if storage not in ("float64", "float32"):
-            raise ValueError(f"APGD's storage on the GPU is float64 or float32, not {storage!r}")
         if storage == "float32":
-            self.narrow_storage()
+            self.narrow_storage()   # prepares the trial step with the narrowed arrays
+        else:
+            self.prepare_trial()
 
     @classmethod
     def of_program(cls, program, warm_start, precondition: bool, lip_decay: float,
-                   storage: str = "float64") -> "CudaIteration":
+                   storage: str = defaults.DEFAULT_GPU_STORAGE) -> "CudaIteration":
         """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
@@ -491,8 +494,8 @@ class CudaIteration:
         narrowed = {name: cast_on_device(getattr(geo, name), np.float32) for name in NARROW_GEOMETRY} if geometry else {}
         self.trial_geometry = geo._replace(work=cuda.device_array(geo.work.shape, dtype=np.float32), **narrowed)
         x, hx = cast_on_device(self.x_slots[0], np.float32), cast_on_device(self.h_slots[0], np.float32)
-        self._wide = (self.x_slots[0], self.h_slots[0])
-        self._wide_current = False   # they hold the float64 start, not its float32 rounding
+        self._wide = (self.x_slots[0], self.h_slots[0])   # the float64 start, not yet its float32 rounding
+        self._wide_current = False
         self.x_slots = (x, cuda.device_array_like(x), _copy(x))
         self.h_slots = (hx, cuda.device_array_like(hx), _copy(hx))
         self.prepare_trial()
