@@ -1,10 +1,10 @@
-"""The cost of one APGD iteration against the number of contacts: fused numba kernel vs numpy.
+"""The cost of one APGD iteration on the host against the number of contacts (the fused numba kernels).
 
     python benchmarks/apgd_iteration.py COLUMN.nc [COLUMN.nc ...]   # columns from colsim trim
     python benchmarks/apgd_iteration.py                             # the columns benchmarks/collapse.py cached
 
 The program is the first step of each column's collapse (mu = 0.577, mu_r = 0.12, dt/sqrt(h0/g) =
-0.004), warm-started from the packing's forces. Each kernel runs 10 iterations to compile and warm
+0.004), warm-started from the packing's forces. The iteration runs 10 iterations to compile and warm
 up, then the best of 3 timings of `--iterations` iterations (CPU time of this process) is printed in
 ms per iteration, with the time of one residual check (done every 10 iterations) beside it.
 """
@@ -22,7 +22,8 @@ from colsim.solvers.apgd import ApgdSolver
 from colsim.stages.collapse import CollapseSettings
 from colsim.engine.contacts import detect
 from colsim.engine.program import assemble
-from colsim.engine.stepper import base_margin, predicted_displacement
+from colsim.engine.backend import predicted_displacement
+from colsim.engine.stepper import base_margin
 
 CACHE = record.cache_dir()
 
@@ -40,9 +41,9 @@ def first_step(column: Path):
     return assemble(state, found, settings.dt, settings.gravity), guess, state.n
 
 
-def per_iteration(program, guess, kernel: str, iterations: int) -> tuple[float, float]:
+def per_iteration(program, guess, iterations: int) -> tuple[float, float]:
     """(ms per iteration, ms per residual check), best of 3, CPU time."""
-    solver = ApgdSolver(kernel=kernel)
+    solver = ApgdSolver()
     best = np.inf
     for _ in range(3):
         run = solver.prepare(program, guess)
@@ -63,15 +64,13 @@ def main(argv=None):
     parser.add_argument("--iterations", type=int, default=200)
     args = parser.parse_args(argv)
     columns = args.columns or sorted(CACHE.glob("column_*.nc"))
-    table = record.table(["spheres", "contacts", "numba ms/iteration", "numpy ms/iteration", "numba speed-up",
-                          "gradient check ms"])
+    table = record.table(["spheres", "contacts", "numba ms/iteration", "gradient check ms"])
     for column in columns:
         program, guess, n = first_step(column)
-        fast, check = per_iteration(program, guess, "numba", args.iterations)
-        plain, _ = per_iteration(program, guess, "numpy", max(20, args.iterations // 5))
-        table.row(n, program.m, f"{fast:.2f}", f"{plain:.2f}", f"{plain / fast:.1f}", f"{check:.2f}",
+        fast, check = per_iteration(program, guess, args.iterations)
+        table.row(n, program.m, f"{fast:.2f}", f"{check:.2f}",
                   data={"column": str(column), "spheres": n, "contacts": program.m, "numba_ms": fast,
-                        "numpy_ms": plain, "gradient_check_ms": check})
+                        "gradient_check_ms": check})
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ step's data on the device (issue 46, "kernels at 80 %") has left to remove.
     NUMBA_ENABLE_CUDASIM=1 python -m benchmarks device_copies --redo 5  # a redone step
 
 A stack of 12 spheres (3 layers of 2 x 2, diameter 0.5) in a cylinder of radius 0.65 on the floor
-collapses with mu = 0.577, mu_r = 0.12 and dt = 0.02 by APGD on the device (`ApgdSolver(kernel="cuda")`,
+collapses with mu = 0.577, mu_r = 0.12 and dt = 0.02 by APGD on the device (the CUDA back-end, `make_backend("cuda")`,
 `colsim.engine.stepper.run` with the swept pairs, the warm start's matching and the overlap check
 there too); after one step to start from, `--steps` more of the same run are counted. Each `cuda.to_device`, device
 array's `copy_to_host` and `copy_to_device` from a host array is counted with its bytes, by the
@@ -165,24 +165,27 @@ def main(argv=None):
     parser.add_argument("--redo", type=int, metavar="SIDE", help="count one redone step instead, beside a cube "
                         "of SIDE^3 spheres at rest")
     args = parser.parse_args(argv)
+    from colsim.engine.backends import make_backend
     from colsim.engine.cuda_launch import plain_counts
     from colsim.engine.stepper import run, step
     from colsim.solvers.apgd import ApgdSolver
 
+    cuda = make_backend("cuda")
+
     if args.redo:
         state, settings = redone_step(args.redo)
-        solver = ApgdSolver(tolerance=1e-8, kernel="cuda")
-        step(state, settings, solver, 1)   # not counted: the kernels compiled, the radii's copy kept
+        solver = ApgdSolver(tolerance=1e-8, backend=cuda)
+        step(state, settings, solver, 1, backend=cuda)   # not counted: the kernels compiled, the radii's copy kept
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()
         launches = counting_launches()
         plain_before = dict(plain_counts)
-        results = [step(state, settings, solver, 2)]
+        results = [step(state, settings, solver, 2, backend=cuda)]
         args.steps = 1
     else:
         state, settings = stack()
-        solver = ApgdSolver(kernel="cuda")
-        steps = run(state, settings, 1 + args.steps, solver)
+        solver = ApgdSolver(backend=cuda)
+        steps = run(state, settings, 1 + args.steps, solver, backend=cuda)
         next(steps)   # the first step, not counted: it made the second's first detection, as any step does
         counts, sizes = counting_copies()
         allocations, allocated = counting_allocations()

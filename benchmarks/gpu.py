@@ -1,6 +1,6 @@
 """APGD's iterations on one GPU against the CPU's, on the same program from the same start: the
-same decisions (colsim.solvers.apgd.decide) made on the device between the CUDA kernels
-(colsim.solvers.apgd_cuda) and in the compiled CPU loop (the process's numba threads), with a
+same decisions (colsim.engine.apgd_iteration.decide) made on the device between the CUDA kernels
+(colsim.engine.cuda_apgd) and in the compiled CPU loop (the process's numba threads), with a
 residual check every 10 iterations as a solve makes it.
 
     python -m benchmarks gpu --spheres 73000 704000 2000000 --iterations 60
@@ -77,7 +77,7 @@ from colsim.engine.contacts import swept_pairs
 from colsim.engine.state import ParticleState
 from colsim.engine.operator import ContactOperator
 from colsim.engine.threads import threads
-from colsim.solvers.apgd import _Iteration
+from colsim.engine.apgd_iteration import CpuIteration
 
 GRAVITY, DT = 9.81, 1e-3
 #: bytes of a float64 or an int64, the kernels' only element types
@@ -86,7 +86,7 @@ WORD = 8
 
 def iteration_bytes(m: int, n: int, entries: int, trial_steps: int, iterations: int, checks: int,
                     sizes: dict | None = None) -> int:
-    """The bytes APGD's CUDA kernels (colsim.solvers.apgd_cuda, colsim.engine.cuda_operator) must move
+    """The bytes APGD's CUDA kernels (colsim.engine.cuda_apgd, colsim.engine.cuda_operator) must move
     over `iterations` iterations made of `trial_steps` trial steps (the backtracks' repeats included)
     and `checks` residual checks, for m contacts among n bodies with `entries` (body, contact) entries:
     every array element a kernel reads or writes, counted once (a gathered entry read by several
@@ -144,7 +144,7 @@ def bandwidth(cuda, gib: float = 1.0, repeat: int = 5) -> tuple[float | None, fl
     return nominal, 2 * size * WORD / best / 1e9
 
 
-def start_of(spheres: int) -> tuple[_Iteration, ContactOperator, np.ndarray, np.ndarray]:
+def start_of(spheres: int) -> tuple[CpuIteration, ContactOperator, np.ndarray, np.ndarray]:
     """(the APGD start on the CPU, its operator, mu, mu_r) of the lattice column of about `spheres`."""
     contacts, n = lattice_contacts(spheres)
     operator = ContactOperator(contacts, n)
@@ -156,7 +156,7 @@ def start_of(spheres: int) -> tuple[_Iteration, ContactOperator, np.ndarray, np.
     c[::5] += contacts.gap
     c *= s.ravel()
     mu_s, mu_r_s = contacts.mu * s[:, 0] / s[:, 1], contacts.mu_r * s[:, 0] / s[:, 3]
-    start = _Iteration(None, None, c, mu_s, mu_r_s, inv_mass, np.zeros(5 * contacts.m), s, 0.9, operator=operator)
+    start = CpuIteration(operator.geometry(s.ravel()), c, mu_s, mu_r_s, inv_mass, np.zeros(5 * contacts.m), s, 0.9)
     return start, operator, contacts.mu, contacts.mu_r
 
 
@@ -168,13 +168,13 @@ REGISTER_VARIANTS = ((256, 3), (256, 4))
 
 
 def projection_variant(bounds: tuple[int, int]):
-    """APGD's projection kernel (colsim.solvers.apgd_cuda._project_kernel, the largest of a trial step)
+    """APGD's projection kernel (colsim.engine.cuda_apgd._project_kernel, the largest of a trial step)
     compiled anew with launch bounds `bounds`, which cap its registers: the same arithmetic, so the
     same iterate; on numba's simulator, which has no launch bounds, compiled without."""
     from numba import cuda
     from numba.core import config as numba_config
 
-    from colsim.solvers import apgd_cuda
+    from colsim.engine import cuda_apgd as apgd_cuda
 
     function = apgd_cuda._project_kernel.py_func
     return cuda.jit(function) if numba_config.ENABLE_CUDASIM else cuda.jit(launch_bounds=bounds)(function)
@@ -182,9 +182,9 @@ def projection_variant(bounds: tuple[int, int]):
 
 @contextlib.contextmanager
 def kernels_swapped(kernels: dict):
-    """colsim.solvers.apgd_cuda's kernels named in `kernels` replaced by the ones given while inside:
+    """colsim.engine.cuda_apgd's kernels named in `kernels` replaced by the ones given while inside:
     the CUDA iterations made there (their trial steps prepared, their checks launched) use them."""
-    from colsim.solvers import apgd_cuda
+    from colsim.engine import cuda_apgd as apgd_cuda
 
     before = {name: getattr(apgd_cuda, name) for name in kernels}
     try:
@@ -219,7 +219,7 @@ STORAGE_VARIANTS = {
 def stored_as(run, sizes: dict):
     """`run` (a fresh CudaIteration) with the groups of `sizes` narrowed on the device, its trial steps
     prepared again with them: the floats by the solver's own float32 storage
-    (:meth:`colsim.solvers.apgd_cuda.CudaIteration.narrow_storage`: the iterate, T x and the wrenches
+    (:meth:`colsim.engine.cuda_apgd.CudaIteration.narrow_storage`: the iterate, T x and the wrenches
     together, the geometry with them or not; its checks widen the iterate and make T x in float64), the
     indices in int32 (the trial steps' alone)."""
     from colsim.engine.cuda_operator import cast_on_device
@@ -243,7 +243,7 @@ def every_iteration_stored(key: str):
     (:func:`stored_as`; each variant's kernels compiled for its types), to time a collapse's steps so. Its checks,
     forces and increments are float64, as under the solver's float32 storage (`float32-geometry` is
     that storage: `colsim collapse --gpu-storage float32`)."""
-    from colsim.solvers.apgd_cuda import CudaIteration
+    from colsim.engine.cuda_apgd import CudaIteration
 
     sizes = STORAGE_VARIANTS[key][1]
     made = CudaIteration.__init__
@@ -370,19 +370,21 @@ def matching(spheres: int, repeat: int = 3) -> dict:
     solver (gpu_carried_s: to the end of the kernels)."""
     from numba import cuda
 
+    from colsim.engine.backends import make_backend
     from colsim.engine.warm_start import WarmStart
 
+    backends = {device: make_backend(device) for device in ("cpu", "cuda")}
     contacts, n = lattice_contacts(spheres)
     forces = np.random.default_rng(2).uniform(0.0, 1.0, (contacts.m, 5)) * [1.0, 0.3, 0.3, 0.05, 0.05]
     record_on_host = WarmStart.from_step(contacts, forces)
-    record_on_device = WarmStart.from_step(contacts, forces, "cuda")
+    record_on_device = backends["cuda"].carried(contacts, forces)
 
     def matched(device):   # on the host: the GPU's result copied back, so that its time is all in
-        out = record_on_host.match(contacts, device)
+        out = backends[device].matched(record_on_host, contacts)
         return out.copy_to_host() if device == "cuda" else out
 
     def matched_on_device():
-        out = record_on_device.match(contacts, "cuda")
+        out = backends["cuda"].matched(record_on_device, contacts)
         cuda.synchronize()
         return out
 
@@ -455,19 +457,20 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     of the steps (None: none); trace: a file for the steps' kernel trace (benchmarks/kernel_trace.py:
     the card's busy share, idle gaps and kernels; None: none)."""
     from colsim import io
+    from colsim.engine.backends import make_backend
     from colsim.solvers import make_solver
     from colsim.stages.collapse import collapse
     from colsim.stages.settings import CollapseSettings
 
     state, source = io.read_state(column)
     settings = CollapseSettings(mu_r=0.12, checkpoint_every=10**9, frame_every=steps)   # the last step a frame
-    solver = make_solver("auto", scaled_time_step=settings.scaled_step,
-                         apgd={"kernel": "cuda"} if device == "cuda" else {})
+    backend = make_backend(device)
+    solver = make_solver("auto", scaled_time_step=settings.scaled_step, apgd={"backend": backend})
     busy = contextlib.nullcontext({"busy": math.nan, "samples": 0}) if device == "cpu" else kernels_busy()
     start = time.perf_counter()
     with _profiled(profile), busy as kernels, _traced(trace) as traced:
         run = collapse(state, float(source.attrs["h0"]), settings, solver, warm_start=io.contact_forces_of(source),
-                       stop_after=steps)
+                       stop_after=steps, backend=backend)
     wall = time.perf_counter() - start
     if trace is not None:
         kernel_trace.write_summary(traced["found"], traced["why"], f"kernel trace of the first {steps} steps of "
@@ -561,8 +564,8 @@ def main(argv=None):
     from numba import cuda
     from numba.core import config as numba_config
 
-    from colsim.solvers import apgd_cuda
-    from colsim.solvers.apgd_cuda import CudaIteration
+    from colsim.engine import cuda_apgd as apgd_cuda
+    from colsim.engine.cuda_apgd import CudaIteration
 
     device = ("simulator" if numba_config.ENABLE_CUDASIM else cuda.get_current_device().name if cuda.is_available()
               else "no GPU")   # --trajectories alone needs none

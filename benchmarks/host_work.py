@@ -2,7 +2,7 @@
 
     python -m benchmarks host_work COLUMN [--tile R0] [--repeat 5]
 
-A step on the GPU (`ApgdSolver(kernel="cuda")`) still runs some numpy on the host: detection's fixed
+A step on the GPU (the CUDA back-end) still runs some numpy on the host: detection's fixed
 spheres (the pairs, the walls and every contact's arrays are made on the device) and the step's
 smallest and mean diameters from the radii. The rest has left the host, and is timed here as it was
 made there: the increments, 1 / mass, the predicted motion, the grid's bounds, the midpoints, the
@@ -62,7 +62,8 @@ def main(argv=None):
     from colsim.engine.cuda_contacts import _grid
     from colsim.engine.program import assemble
     from colsim.engine.state import ContactLaw, StepSettings, Walls, pair_keys
-    from colsim.engine.stepper import advance, predicted_displacement
+    from colsim.engine.backend import advance, predicted_displacement
+    from colsim.engine.backends import make_backend
     from colsim.engine.warm_start import WarmStart
 
     with tempfile.TemporaryDirectory() as scratch:
@@ -93,16 +94,18 @@ def main(argv=None):
 
     found = detect_given_pairs()
 
-    def detect_given_the_gpu_s():   # detect as the GPU's step runs it, the device's contacts given
-        from colsim.engine import cuda_contacts
+    cuda = make_backend("cuda")
 
-        device_part = cuda_contacts.swept_contacts
-        cuda_contacts.swept_contacts = lambda *a, **k: found
+    def detect_given_the_gpu_s():   # detect as the GPU's step runs it, the device's contacts given
+        from colsim.engine import cuda_backend
+
+        device_part = cuda_backend.swept_contacts
+        cuda_backend.swept_contacts = lambda *a, **k: found
         try:
-            return detection.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
-                                    np.zeros(state.n), None, 0.01, "cuda")
+            return cuda.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
+                               np.zeros(state.n), None, 0.01)
         finally:
-            cuda_contacts.swept_contacts = device_part
+            cuda_backend.swept_contacts = device_part
 
     def walls_on_the_host():   # the walls' contacts as the GPU's step made them on the host before 2026-11-29
         reach = margin + (1.0 + settings.detection_slack) * detection.row_lengths(predicted)
@@ -152,9 +155,9 @@ def main(argv=None):
         ("the update", best_ms(r, advance, state, 1e-9 * np.ones(6 * state.n), settings.dt),
          "on the device (before 2026-11-29: also host)"),
         ("the overlap check, pairs measured on the host",
-         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", found), "before"),
+         best_ms(r, cuda.overlaps, moved, settings.walls, 1e-4, found), "before"),
         ("the overlap check, pairs measured by detection",
-         best_ms(r, detection.overlaps, moved, settings.walls, 1e-4, "cuda", measured),
+         best_ms(r, cuda.overlaps, moved, settings.walls, 1e-4, measured),
          "before 2026-11-29 (now the walls' on the device too)"),
         ("the kinetic energy", best_ms(r, moved.kinetic_energy), "on the device (before 2026-11-29: host)"),
         ("the warm start's global forces", best_ms(r, WarmStart.from_step, found, forces), "on the device"),

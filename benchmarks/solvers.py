@@ -38,7 +38,8 @@ from colsim.engine.contacts import detect
 from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver, SolverError, WarmStart
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.engine.stepper import predicted_displacement, run, step
+from colsim.engine.backend import predicted_displacement
+from colsim.engine.stepper import run, step
 
 HERE = Path(__file__).resolve().parent
 CACHE = record.cache_dir()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 # the CUDA kernels' tests run on numba's CUDA simulator unless told otherwise (NUMBA_ENABLE_CUDASIM=0
 # on a machine with a GPU); set before numba is imported, which reads it then
@@ -54,7 +55,13 @@ def _index_like_a_card() -> None:
 
 
 if os.environ["NUMBA_ENABLE_CUDASIM"] == "1":
+    import cuda_simulator
+
+    cuda_simulator.use()   # faster, and its shared arrays made under a lock
     _index_like_a_card()
+#: the processes the tests start set the simulator up the same way (simulator_site/sitecustomize.py)
+os.environ["PYTHONPATH"] = os.pathsep.join(
+    [str(Path(__file__).resolve().parent / "simulator_site"), *filter(None, [os.environ.get("PYTHONPATH")])])
 
 CYLINDER_RADIUS = 1.5
 N_SPHERES = 200

@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from colsim.engine.contacts import detect
 from colsim.stages.pack import starting_cloud
 from colsim.engine.program import assemble
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import ContactLaw, ParticleState, StepSettings, Walls
-from colsim.engine.stepper import predicted_displacement, run, step
+from colsim.engine.backend import HOST, Backend, predicted_displacement
+from colsim.engine.stepper import run, step
 
 COLLAPSE = StepSettings(dt=0.02, law=ContactLaw.uniform(0.577, 0.12))
 
@@ -23,11 +23,12 @@ def small_pile() -> ParticleState:
     return state
 
 
-def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE, device: str = "cpu"):
-    """(program, contacts) of one collapse step from `state`, detected as the stepper does (on `device`)."""
+def collapse_program(state: ParticleState, settings: StepSettings = COLLAPSE, backend: Backend = HOST):
+    """(program, contacts) of one collapse step from `state`, detected as the stepper does (by `backend`;
+    the program assembled on the host)."""
     margin = settings.detection_margin_fraction * 2 * state.radius.min()
-    found = detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
-                   margin, settings.detection_slack, device=device)
+    found = backend.detect(state, settings.walls, settings.law, predicted_displacement(state, settings),
+                           margin, settings.detection_slack)
     return assemble(state, found, settings.dt, settings.gravity), found
 
 

@@ -149,3 +149,65 @@ def test_a_dry_run_loads_no_numba(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     loaded = {line.rsplit("|", 1)[-1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")}
     assert not {name for name in loaded if name.split(".")[0] == "numba" or name in HEAVY}, sorted(loaded & set(HEAVY))
+
+
+#: the packages whose modules must not import each other round in a circle, function-level imports included
+INNER_PACKAGES = ("engine", "solvers")
+#: the one module that may import a GPU module without being one: the back-ends' construction
+CHOOSES_THE_DEVICE = "colsim.engine.backends"
+
+
+def is_gpu_module(module: str) -> bool:
+    return module.rsplit(".", 1)[-1].startswith("cuda_")
+
+
+def inner_graph(package: str) -> dict[str, set[str]]:
+    """The imports (function-level ones too) between the modules of colsim.`package`."""
+    prefix = f"colsim.{package}."
+    return {module_name(p): {t for t in imports_of(p) if t.startswith(prefix)}
+            for p in MODULES if module_name(p).startswith(prefix)}
+
+
+def cycle_in(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import circle of `graph` (its modules in order, the first again at the end), or None."""
+    done, stack = set(), []
+
+    def visit(node):
+        if node in stack:
+            return stack[stack.index(node):] + [node]
+        if node in done:
+            return None
+        stack.append(node)
+        for target in sorted(graph.get(node, ())):
+            found = visit(target)
+            if found:
+                return found
+        stack.pop()
+        done.add(node)
+        return None
+
+    for node in sorted(graph):
+        found = visit(node)
+        if found:
+            return found
+    return None
+
+
+@pytest.mark.parametrize("package", INNER_PACKAGES)
+def test_no_import_circle_inside_the_engine_or_the_solvers(package):
+    """Every module of engine/ and solvers/ sits above the modules it imports, function-level imports
+    included: the package's import graph has no circle (so no arrow points back up)."""
+    assert cycle_in(inner_graph(package)) is None, " -> ".join(cycle_in(inner_graph(package)))
+
+
+def test_no_cpu_module_imports_a_gpu_module():
+    """The GPU wing (cuda_* modules) imports the CPU's records and scalar functions, never the reverse:
+    a CPU module reaches the GPU only through the back-end chosen once (colsim.engine.backends)."""
+    wrong = [(module_name(p), target) for p in MODULES for target in imports_of(p)
+             if not is_gpu_module(module_name(p)) and module_name(p) != CHOOSES_THE_DEVICE and is_gpu_module(target)]
+    assert not wrong, wrong
+
+
+def test_the_circle_check_finds_a_circle():
+    assert cycle_in({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert cycle_in({"a": {"b"}, "b": set()}) is None

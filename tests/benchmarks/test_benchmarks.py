@@ -383,7 +383,7 @@ def test_every_cuda_kernel_a_collapse_launches_compiles_for_a_card(tmp_path):
     rows = json.loads(written.read_text())["tables"][0]["data"]
     modules = {row["module"] for row in rows}
     assert {"colsim.engine.cuda_contacts", "colsim.engine.cuda_operator", "colsim.engine.cuda_state",
-            "colsim.engine.cuda_warm_start", "colsim.solvers.apgd_cuda"} <= modules
+            "colsim.engine.cuda_warm_start", "colsim.engine.cuda_apgd"} <= modules
     assert all(row["error"] == "" and row["fma_unfused"] == 0 for row in rows), [r for r in rows if r["error"]]
     assert sum(row["fma"] for row in rows) > 0
 

@@ -55,7 +55,10 @@ def test_every_launch_of_a_collapse_step_goes_through_launch(monkeypatch):
     from colsim.engine.stepper import run
     from device_copies import counting_launches, stack
 
-    results = run(*stack(), 4, ApgdSolver(kernel="cuda"))
+    from colsim.engine.backends import make_backend
+
+    cuda = make_backend("cuda")
+    results = run(*stack(), 4, ApgdSolver(backend=cuda), backend=cuda)
     next(results)
     next(results)
     if numba_config.ENABLE_CUDASIM:
@@ -74,7 +77,7 @@ def test_every_launch_of_a_collapse_step_goes_through_launch(monkeypatch):
         assert sum(plain.values()) == made
     else:
         from colsim.engine import cuda_contacts, cuda_operator, cuda_state, cuda_warm_start
-        from colsim.solvers import apgd_cuda
+        from colsim.engine import cuda_apgd as apgd_cuda
 
         modules = (cuda_operator, cuda_contacts, cuda_state, cuda_warm_start, apgd_cuda)
         kernels = {name: getattr(m, name) for m in modules for name in plain if hasattr(m, name)}

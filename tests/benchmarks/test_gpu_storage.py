@@ -42,7 +42,7 @@ def test_the_narrowed_iteration_holds_the_nearest_float32_and_the_same_int32():
     entry. The bound is the storage's: an iteration is a gradient step of length 1/L and a projection,
     which do not enlarge a difference, so three iterations' roundings of what they store (6e-8 each)
     stay within 3e-6, fifty of them."""
-    from colsim.solvers.apgd_cuda import CudaIteration
+    from colsim.engine.cuda_apgd import CudaIteration
 
     start, operator, mu, mu_r = gpu.start_of(40)
     wide = CudaIteration.like(start, operator, mu, mu_r)

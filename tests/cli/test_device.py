@@ -15,7 +15,7 @@ import xarray as xr
 
 def _gpu_outside_the_simulator() -> bool:
     """Whether numba.cuda sees a GPU once the simulator is off (a subprocess: numba reads it at import)."""
-    probe = "from colsim.solvers.registry import gpu_visible; print(gpu_visible())"
+    probe = "from colsim.engine.backends import gpu_visible; print(gpu_visible())"
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                           env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0"})
     return done.stdout.strip() == "True"

@@ -14,6 +14,13 @@ from colsim.stages.pack import starting_cloud
 
 cuda_contacts = pytest.importorskip("colsim.engine.cuda_contacts", reason="numba.cuda is not importable")
 
+from colsim.engine.backend import HOST  # noqa: E402
+from colsim.engine.backends import make_backend  # noqa: E402
+
+#: the GPU's back-end (numba's simulator here), and both by device
+CUDA = make_backend("cuda")
+BACKENDS = {"cuda": CUDA, "cpu": HOST}
+
 
 def _moving(state: ParticleState, scale: float, seed: int) -> np.ndarray:
     """(n, 3) predicted displacements up to `scale` (length) in random directions."""
@@ -116,9 +123,9 @@ def test_detect_on_the_gpu_gives_the_cpu_s_contacts(redo):
     from colsim.engine.cuda_contacts import DeviceContacts
     from colsim.engine.cuda_operator import blocks_for
 
-    gpu, read = _reading_back(lambda: detect(state, walls, law, predicted, 0.05, renormal=renormal,
-                                             most_recovered=0.002, device="cuda"))
-    cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002, device="cpu")
+    gpu, read = _reading_back(lambda: CUDA.detect(state, walls, law, predicted, 0.05, renormal=renormal,
+                                                  most_recovered=0.002))
+    cpu = detect(state, walls, law, predicted, 0.05, renormal=renormal, most_recovered=0.002)
     # the contacts stay on the device, with no host array until one is read
     assert isinstance(gpu, DeviceContacts) and not set(DEVICE_ARRAYS) & set(vars(gpu))
     # the grid's bounds, the pairs' and the walls' counts and each block's largest overlap
@@ -192,7 +199,7 @@ def test_the_gpu_measures_the_cpu_s_overlaps():
     state = starting_cloud(60, 1.0, seed=3)
     state.position[:, 2] *= 0.45
     walls = Walls(floor=True, cylinder_radius=1.0)
-    gpu, cpu = overlaps(state, walls, 1e-3, "cuda"), overlaps(state, walls, 1e-3)
+    gpu, cpu = CUDA.overlaps(state, walls, 1e-3), overlaps(state, walls, 1e-3)
     order = np.lexsort((cpu.pairs[1], cpu.pairs[0]))
     assert len(order) >= 20
     for ours, theirs in zip(gpu.pairs, cpu.pairs):
@@ -205,13 +212,13 @@ def test_the_gpu_measures_the_cpu_s_overlaps():
 def test_detect_on_the_gpu_without_contacts():
     """Two spheres far apart with no walls: no contacts, no frames kept on the device, and no pair
     overlap measured (-inf), which the overlap check takes as within any tolerance."""
-    from colsim.engine.contacts import detect, overlaps
+    from colsim.engine.contacts import overlaps
     from colsim.engine.cuda_operator import kept_device_copy
     from colsim.engine.state import ContactLaw, Walls
 
     state = ParticleState.at_rest([[0.0, 0.0, 5.0], [3.0, 0.0, 5.0]], [0.5, 0.5])
     walls = Walls(floor=False)
-    found = detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05, device="cuda")
+    found = CUDA.detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05)
     assert found.m == 0 and found.largest_pair_overlap == -np.inf
     assert kept_device_copy(found.normal) is None
     checked = overlaps(state, walls, 0.0, detected=found)
@@ -222,15 +229,14 @@ def test_a_redo_on_the_gpu_with_no_pair_found():
     """A redo whose detection finds no particle pair, only the floor's contacts (two spheres on it, far
     apart), given one pair (the stepper's missed pair, with a normal given): on the device, as on the
     host, the given pair comes first and the floor's rows after it."""
-    from colsim.engine.contacts import detect
     from colsim.engine.cuda_contacts import DeviceContacts
     from colsim.engine.state import ContactLaw, Walls
 
     state = ParticleState.at_rest([[0.0, 0.0, 0.5], [3.0, 0.0, 0.5]], [0.5, 0.5])
     walls = Walls(floor=True)
     renormal = (np.array([0]), np.array([1]), np.array([[0.6, 0.0, 0.8]]))
-    gpu, cpu = (detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05, renormal=renormal,
-                       device=device) for device in ("cuda", "cpu"))
+    gpu, cpu = (BACKENDS[device].detect(state, walls, ContactLaw.uniform(0.5, 0.1), np.zeros((2, 3)), 0.05,
+                                        renormal=renormal) for device in ("cuda", "cpu"))
     assert isinstance(gpu, DeviceContacts) and gpu.pair_count == 1 and gpu.m == cpu.m == 3
     assert list(cpu.j) == [1, -1, -1]
     for name in ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever",

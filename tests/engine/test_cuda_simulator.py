@@ -1,4 +1,4 @@
-"""numba's CUDA simulator as colsim sets it up (colsim.engine.cuda_simulator): every thread of a
+"""numba's CUDA simulator as colsim sets it up (tests/cuda_simulator.py): every thread of a
 block gets the same shared array, and sees the simulator's cuda module in a device function,
 however the threads interleave.
 
@@ -13,8 +13,9 @@ import pytest
 kernelapi = pytest.importorskip("numba.cuda.simulator.kernelapi", reason="numba's simulator is not importable")
 from numba import cuda  # noqa: E402
 
-from colsim.engine import cuda_simulator  # noqa: E402
-from colsim.engine.cuda_operator import THREADS, _entry, block_reduce  # noqa: E402
+import cuda_simulator  # noqa: E402
+from colsim.engine.cuda_apgd import _extrapolated  # noqa: E402
+from colsim.engine.cuda_operator import THREADS, block_reduce  # noqa: E402
 
 
 def test_threads_asking_at_once_share_one_shared_array():
@@ -44,11 +45,11 @@ def test_threads_asking_at_once_share_one_shared_array():
 
 def test_a_device_function_of_another_module_sees_the_simulator_in_every_thread():
     """128 threads call device functions of another module (colsim.engine.cuda_operator): first a
-    plain one (_entry) a different number of times each, then block_reduce (which calls
+X
     cuda.syncthreads) twice, four rounds a launch, five launches, with a switch between any two
     bytecodes. Every call must
     see the simulator's cuda module, and the sums must come out right. numba's own swap lets the
-    thread that swapped the module in for _entry put numba.cuda back while others wait inside
+    thread that swapped the module in for the plain one put numba.cuda back while others wait inside
     block_reduce: a simulated APGD solve failed so ("module 'numba.cuda' has no attribute
     'syncthreads'"), where the projection kernel calls wrench_on_device and then block_reduce.
     The race is rare: without the counted swap this test failed once in 19 runs here (2-core AMD
@@ -60,7 +61,7 @@ def test_a_device_function_of_another_module_sees_the_simulator_in_every_thread(
         values = np.arange(THREADS, dtype=np.float64)
         for _ in range(5):
             out = np.zeros(4)
-            _four_sums[1, THREADS](values, out)
+            _four_sums[1, THREADS](np.repeat(values, 5), out)
             np.testing.assert_array_equal(out, values.sum() * np.arange(1, 5))
     finally:
         sys.setswitchinterval(before)
@@ -68,16 +69,16 @@ def test_a_device_function_of_another_module_sees_the_simulator_in_every_thread(
 
 @cuda.jit
 def _four_sums(values, out):
-    """out[r] = (r + 1) sum(values), r = 0..3, by block_reduce in one block of THREADS threads, twice a
-    round back to back (the second sum's cache is thread t's value again), each thread first reading
-    its value through _entry t % 5 + 1 times."""
+    """out[r] = (r + 1) sum(values[::5]), r = 0..3, by block_reduce in one block of THREADS threads, twice
+    a round back to back (the second sum's cache is thread t's value again), each thread first reading
+    its value values[5 t] through _extrapolated (beta 0) t % 5 + 1 times."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
     again = cuda.shared.array(THREADS, dtype=np.float64)
     t = cuda.threadIdx.x
     for r in range(4):
         value = 0.0
         for _ in range(t % 5 + 1):
-            value = _entry(values, values, 0.0, False, t)
+            value = _extrapolated(values, values, 5 * t, 0.0)[0]
         cache[t] = value * (r + 1)
         again[t] = value * (r + 1)
         block_reduce(cache, t, False)

@@ -10,10 +10,17 @@ import pytest
 from colsim.engine.contacts import detect, swept_midpoints
 from colsim.engine.program import assemble
 from colsim.engine.state import ContactLaw, StepSettings, Walls
-from colsim.engine.stepper import advance, predicted_displacement
+from colsim.engine.backend import advance, predicted_displacement
 from colsim.stages.pack import starting_cloud
 
 cuda_state = pytest.importorskip("colsim.engine.cuda_state", reason="numba.cuda is not importable")
+
+from colsim.engine.backend import HOST  # noqa: E402
+from colsim.engine.backends import make_backend  # noqa: E402
+
+#: the GPU's back-end (numba's simulator here), and both by device
+CUDA = make_backend("cuda")
+BACKENDS = {"cuda": CUDA, "cpu": HOST}
 
 
 def _moving_cloud(seed: int):
@@ -82,13 +89,13 @@ def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
 
     state = _moving_cloud(seed=8)
     settings = StepSettings(dt=0.0137, gravity=(0.31, -0.17, -9.81), walls=Walls(floor=True, cylinder_radius=1.0))
-    predicted = predicted_displacement(state, settings, "cuda")
+    predicted = CUDA.predicted(state, settings)
     assert isinstance(predicted, cuda_state.DeviceParticleArray)
     np.testing.assert_array_equal(np.asarray(predicted), state.velocity * settings.dt
                                   + np.asarray(settings.gravity) * settings.dt**2)
     np.testing.assert_array_equal(_kept(np.asarray(predicted)), np.asarray(predicted))
     contacts = detect(state, settings.walls, ContactLaw.uniform(0.5, 0.1), predicted, 0.05)
-    program = assemble(state, contacts, settings.dt, settings.gravity, "cuda")
+    program = CUDA.assemble(state, contacts, settings.dt, settings.gravity)
     assert isinstance(program, cuda_state.DeviceProgram) and not {"mass", "fbar"} & set(vars(program))
     on_host = assemble(state, contacts, settings.dt, settings.gravity)
     for name in ("mass", "fbar"):
@@ -98,7 +105,7 @@ def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
     hx = np.random.default_rng(9).normal(scale=50.0, size=6 * state.n)
     u = cuda_state.increments_on_device(program, cuda.to_device(hx))
     np.testing.assert_array_equal(u.copy_to_host(), (program.fbar + hx) / program.mass)
-    moved = advance(state, u, settings.dt, "cuda")
+    moved = CUDA.advance(state, u, settings.dt)
     expected = advance(state, u.copy_to_host(), settings.dt)
     assert isinstance(moved, cuda_state.DeviceState) and not set(cuda_state.MOVING) & set(vars(moved))
     assert moved.time == expected.time
@@ -109,8 +116,8 @@ def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
         moved.position[0, 0] = 0.0   # its device copy would not follow: a change fails loudly
 
     copied = _copies_to_device(monkeypatch)
-    following = predicted_displacement(moved, settings, "cuda")
-    next_program = assemble(moved, contacts, settings.dt, settings.gravity, "cuda")
+    following = CUDA.predicted(moved, settings)
+    next_program = CUDA.assemble(moved, contacts, settings.dt, settings.gravity)
     monkeypatch.undo()
     assert [size for size, _ in copied] == []
     np.testing.assert_array_equal(np.asarray(following), predicted_displacement(moved, settings))
@@ -131,7 +138,6 @@ def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
     from numba import cuda
 
     from colsim.engine.cones import force_floor, length_scale, mean_diameter
-    from colsim.engine.contacts import overlaps
 
     state = starting_cloud(700, 3.0, seed=11)
     rng = np.random.default_rng(12)
@@ -140,7 +146,7 @@ def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
     state.position[:5, 2] = state.radius[:5] - 0.003   # 0.003 into the floor
     walls = Walls(floor=True, cylinder_radius=float((np.hypot(*state.position[:, :2].T) + state.radius).max()) - 0.004)
     settings = StepSettings(dt=0.0137, walls=walls)
-    moved = advance(state, cuda.to_device(np.zeros(6 * state.n)), settings.dt, "cuda")   # on the device alone
+    moved = CUDA.advance(state, cuda.to_device(np.zeros(6 * state.n)), settings.dt)   # on the device alone
     on_host = advance(state, np.zeros(6 * state.n), settings.dt)
     assert isinstance(moved, cuda_state.DeviceState)
     # nothing moved: the velocities are zero; the last state's energy, measured on the device
@@ -150,13 +156,13 @@ def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
     eps = state.n * np.finfo(float).eps
     np.testing.assert_allclose(device_state.kinetic_energy(), state.kinetic_energy(), rtol=eps, atol=0)
     for tolerance in (0.01, 0.001):   # within: measured on the device; beyond: on the host, each particle's
-        gpu, cpu = (overlaps(s, walls, tolerance, "cuda" if s is moved else "cpu") for s in (moved, on_host))
+        gpu, cpu = ((CUDA if s is moved else HOST).overlaps(s, walls, tolerance) for s in (moved, on_host))
         assert (gpu.cylinder is None) == (tolerance == 0.01)
         assert gpu.largest_floor == cpu.largest_floor == pytest.approx(0.003, rel=1e-9)
         assert cpu.largest == pytest.approx(0.004, rel=1e-9)   # the cylinder's
         assert abs(gpu.largest - cpu.largest) <= 4 * np.spacing(walls.cylinder_radius)
     assert set(cuda_state.MOVING) & set(vars(moved)) == {"position"}   # read by the check beyond the tolerance
-    program = assemble(device_state, None, settings.dt, settings.gravity, "cuda")
+    program = CUDA.assemble(device_state, None, settings.dt, settings.gravity)
     host_program = assemble(state, None, settings.dt, settings.gravity)
     assert length_scale(program) == pytest.approx(length_scale(host_program), rel=eps, abs=0)
     assert mean_diameter(program) == pytest.approx(mean_diameter(host_program), rel=eps, abs=0)
@@ -189,7 +195,7 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     from colsim.solvers.apgd import ApgdSolver
 
     state, settings = _nudged_stack()
-    steps = run(state, settings, 2, ApgdSolver(tolerance=1e-4, kernel="cuda"))
+    steps = run(state, settings, 2, ApgdSolver(tolerance=1e-4, backend=CUDA), backend=CUDA)
     next(steps)
     copied = _copies_to_device(monkeypatch)
     device_array = type(cuda.device_array(1))
@@ -225,10 +231,10 @@ def test_a_gpu_run_goes_on_after_a_step_solved_on_the_cpu():
 
     state, settings = _nudged_stack()
     ends = {}
-    for kernel in ("cuda", "numba"):
-        capped = next(run(state, settings, 1, AutoSolver(max_iter=10, apgd={"kernel": kernel})))
-        after = next(run(capped.state, settings, 1, AutoSolver(apgd={"kernel": kernel}), first_step=1,
-                         carry=capped.carry))
+    for kernel, backend in (("cuda", CUDA), ("numba", HOST)):
+        capped = next(run(state, settings, 1, AutoSolver(max_iter=10, apgd={"backend": backend}), backend=backend))
+        after = next(run(capped.state, settings, 1, AutoSolver(apgd={"backend": backend}), first_step=1,
+                         carry=capped.carry, backend=backend))
         backends = [result.diagnostics.solver_backend for result in (capped, after)]
         assert backends == ["clarabel-fallback", "apgd"], backends
         ends[kernel] = after.state.position

@@ -16,9 +16,16 @@ from solver_cases import collapse_program
 
 pytest.importorskip("colsim.engine.cuda_warm_start", reason="numba.cuda is not importable")
 
+from colsim.engine.backend import HOST  # noqa: E402
+from colsim.engine.backends import make_backend  # noqa: E402
+
+#: the GPU's back-end (numba's simulator here), and both by device
+CUDA = make_backend("cuda")
+BACKENDS = {"cuda": CUDA, "cpu": HOST}
+
 
 def _both(warm: WarmStart, contacts, n: int):
-    gpu, cpu = warm.match(contacts, "cuda").copy_to_host(), warm.match(contacts)
+    gpu, cpu = CUDA.matched(warm, contacts).copy_to_host(), warm.match(contacts)
     np.testing.assert_allclose(gpu, cpu, rtol=0, atol=1e-14 * max(np.abs(cpu).max(), 1.0))
     return gpu, cpu
 
@@ -48,11 +55,11 @@ def test_the_gpu_matches_the_cpu_s_pairs_and_forces(solver_pile):
 def test_nothing_stored_or_no_contacts_give_zeros(solver_pile):
     _, found = collapse_program(solver_pile)
     empty = WarmStart(*(np.zeros(0, dtype=np.int64) for _ in range(3)), np.zeros((0, 3)), np.zeros((0, 3)))
-    assert np.all(empty.match(found, "cuda").copy_to_host() == 0.0)
+    assert np.all(CUDA.matched(empty, found).copy_to_host() == 0.0)
     none = WarmStart.from_step(found, np.ones((found.m, 5)))
     nothing = dataclasses.replace(found, **{f.name: getattr(found, f.name)[:0] for f in dataclasses.fields(found)
                                             if isinstance(getattr(found, f.name), np.ndarray)})
-    assert none.match(nothing, "cuda").copy_to_host().shape == (0, 5)
+    assert CUDA.matched(none, nothing).copy_to_host().shape == (0, 5)
 
 
 def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monkeypatch):
@@ -69,7 +76,7 @@ def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monke
     _, found = collapse_program(solver_pile)
     forces = np.random.default_rng(47).uniform(0.0, 1.0, (found.m, 5)) * [1.0, 0.8, 0.8, 0.2, 0.2]
     host = WarmStart.from_step(found, forces)
-    carried = WarmStart.from_step(found, forces, "cuda")   # the forces and frames go to the device here
+    carried = CUDA.carried(found, forces)   # the forces and frames go to the device here
     assert isinstance(carried, DeviceWarmStart) and carried.m == host.m
     largest = 4 * np.finfo(float).eps * np.abs(forces).max()
     for name in ("force", "rolling"):
@@ -79,8 +86,8 @@ def test_a_step_s_forces_stay_on_the_device_for_the_next_step(solver_pile, monke
     np.testing.assert_allclose(carried.match(found), host.match(found), rtol=0, atol=1e-14)   # on the CPU
 
     copied = _copies_to_device(monkeypatch, cuda)
-    again = WarmStart.from_step(found, forces, "cuda")      # the same arrays: nothing copied
-    first, second = (again.match(found, "cuda").copy_to_host() for _ in range(2))
+    again = CUDA.carried(found, forces)      # the same arrays: nothing copied
+    first, second = (CUDA.matched(again, found).copy_to_host() for _ in range(2))
     monkeypatch.undo()
     assert copied == [8 * found.m, 16 * found.m]
     expected = host.match(found)
@@ -98,12 +105,12 @@ def test_contacts_detected_on_the_gpu_are_matched_with_no_copy_and_no_host_array
     from colsim.engine.contacts import DEVICE_ARRAYS
     from colsim.engine.cuda_contacts import DeviceContacts
 
-    _, found = collapse_program(solver_pile, device="cuda")
-    _, later = collapse_program(solver_pile, device="cuda")   # the next step's: a new set, the same pairs
+    _, found = collapse_program(solver_pile, backend=CUDA)
+    _, later = collapse_program(solver_pile, backend=CUDA)   # the next step's: a new set, the same pairs
     assert isinstance(found, DeviceContacts) and isinstance(later, DeviceContacts)
     forces = np.random.default_rng(48).uniform(0.0, 1.0, (found.m, 5)) * [1.0, 0.8, 0.8, 0.2, 0.2]
     copied = _copies_to_device(monkeypatch, cuda)
-    matched = WarmStart.from_step(found, forces, "cuda").match(later, "cuda").copy_to_host()
+    matched = CUDA.matched(CUDA.carried(found, forces), later).copy_to_host()
     monkeypatch.undo()
     assert copied == [40 * found.m]   # the forces (m, 5): on a step's GPU solve, its own device copy
     for contacts in (found, later):

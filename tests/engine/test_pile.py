@@ -9,7 +9,8 @@ from colsim.engine.contacts import detect, overlaps
 from colsim.engine.program import assemble, cone_violation
 from colsim.solvers import ClarabelSolver
 from colsim.engine.state import FLOOR, PARTICLE, FixedSpheres, ParticleState, StepSettings, Walls
-from colsim.engine.stepper import base_margin, next_margin, predicted_displacement, run, step
+from colsim.engine.backend import predicted_displacement
+from colsim.engine.stepper import base_margin, next_margin, run, step
 from colsim.engine.warm_start import WarmStart
 
 from helpers import COLLAPSE_LAW, DT, G, max_speed

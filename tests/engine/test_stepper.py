@@ -132,10 +132,12 @@ def test_a_redo_on_the_gpu_takes_the_cpu_s_step():
     stop at the same iteration; the positions agree to 1e-12 of the step's largest displacement, the
     rounding of a GPU's fused multiply-adds over some hundreds of iterations."""
     pytest.importorskip("colsim.engine.cuda_contacts", reason="numba.cuda is not importable")
+    from colsim.engine.backends import make_backend
     from colsim.engine.cuda_contacts import DeviceContacts
 
     state, settings = _train(max_redo=3)
-    gpu = step(state, settings, ApgdSolver(tolerance=1e-8, kernel="cuda"), step_number=5)
+    cuda = make_backend("cuda")
+    gpu = step(state, settings, ApgdSolver(tolerance=1e-8, backend=cuda), step_number=5, backend=cuda)
     cpu = step(state, settings, ApgdSolver(tolerance=1e-8), step_number=5)
     assert gpu.diagnostics.redone == cpu.diagnostics.redone >= 1
     assert gpu.diagnostics.solver_iterations == cpu.diagnostics.solver_iterations

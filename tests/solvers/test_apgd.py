@@ -8,6 +8,9 @@ from colsim.solvers import ClarabelSolver, SolverError, WarmStart, make_solver
 from colsim.engine.state import StepSettings
 from colsim.engine.stepper import run
 from solver_cases import COLLAPSE, against_clarabel, collapse_program, mid_collapse
+from apgd_oracle import NumpyBackend
+
+BACKENDS = {"numba": None, "numpy": NumpyBackend()}
 
 
 @pytest.mark.parametrize("stage", ["release", "mid-collapse"])
@@ -35,7 +38,7 @@ def test_numba_and_numpy_kernels_agree(solver_pile):
     stopping check lands at a different point below the tolerance when rounding differs.)"""
     pytest.importorskip("numba")
     for kernel in ("numba", "numpy"):
-        _, sol, du, net_error = against_clarabel(ApgdSolver(kernel=kernel), solver_pile)
+        _, sol, du, net_error = against_clarabel(ApgdSolver(backend=BACKENDS[kernel]), solver_pile)
         assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5, kernel
         assert du <= 1e-3 and net_error <= 1e-3, (kernel, du, net_error)
 
@@ -46,7 +49,7 @@ def test_the_iterations_carry_their_momentum_from_one_call_to_the_next(solver_pi
     numpy kernel's iterate (matrices, other sums) to rounding (1e-9 of the largest force)."""
     pytest.importorskip("numba")
     program, _ = collapse_program(mid_collapse(solver_pile))
-    runs = {name: ApgdSolver(kernel=kernel).prepare(program)
+    runs = {name: ApgdSolver(backend=BACKENDS[kernel]).prepare(program)
             for name, kernel in (("whole", "numba"), ("parts", "numba"), ("numpy", "numpy"))}
     runs["whole"].iterate(40)
     for n in (7, 13, 20):
@@ -126,7 +129,7 @@ def test_overlap_tolerance_bounds_the_largest_violation_in_diameters(solver_pile
 def test_the_power_iterations_start_is_the_same_whatever_was_asked_before():
     """power_start keeps its longest draw and hands out prefixes: each equals a fresh draw of its
     size (numpy's generator fills in sequence), whatever sizes came before, and is the caller's own."""
-    from colsim.solvers.apgd import power_start
+    from colsim.engine.apgd_iteration import power_start
 
     for size in (7, 3, 5000, 12, 20001, 1):
         start = power_start(size)

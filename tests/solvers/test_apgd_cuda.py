@@ -1,5 +1,5 @@
-"""APGD's iterations on the GPU (colsim.solvers.apgd_cuda, issue 46): the CPU's decisions
-(colsim.solvers.apgd.decide), made on the device between the CUDA kernels, follow the CPU's, and a
+"""APGD's iterations on the GPU (colsim.engine.cuda_apgd): the CPU's decisions
+(colsim.engine.apgd_iteration.decide), made on the device between the CUDA kernels, follow the CPU's, and a
 solve on the device meets Clarabel as the CPU's does. They run on numba's CUDA simulator here (conftest sets
 NUMBA_ENABLE_CUDASIM=1 unless told otherwise), on a GPU where there is one.
 
@@ -14,11 +14,16 @@ import numpy as np
 import pytest
 
 from colsim.solvers import AutoSolver, ClarabelSolver, defaults
-from colsim.solvers.apgd import ApgdSolver, _trial_step
+from colsim.engine.apgd_iteration import _trial_step
+from colsim.solvers.apgd import ApgdSolver
 from solver_cases import collapse_program, mid_collapse
 
-apgd_cuda = pytest.importorskip("colsim.solvers.apgd_cuda", reason="numba.cuda is not importable")
+apgd_cuda = pytest.importorskip("colsim.engine.cuda_apgd", reason="numba.cuda is not importable")
 cuda = pytest.importorskip("numba").cuda
+from colsim.engine.backends import make_backend  # noqa: E402 (after the skip)
+
+#: the GPU's back-end (numba's simulator here)
+CUDA = make_backend("cuda")
 
 #: spheres of the program: the simulator runs every thread of a block (128) as a Python thread, about
 #: 1 s an iteration at this size, 3.4 s at the whole pile's 90 spheres
@@ -44,9 +49,9 @@ def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
     zero), T x and the Lipschitz estimate (12 power iterations on the kernels): the CPU's to 1e-12
     (sums in another order); the forces S z to 1e-12 too. (The gradient at y is taken by each trial
     step on the device: the next test's x_new shows it.)"""
-    warm = ApgdSolver(kernel="numba").solve(program).forces if start == "warm" else None
-    cpu = ApgdSolver(kernel="numba").prepare(program, warm)
-    gpu = ApgdSolver(kernel="cuda").prepare(program, warm)
+    warm = ApgdSolver().solve(program).forces if start == "warm" else None
+    cpu = ApgdSolver().prepare(program, warm)
+    gpu = ApgdSolver(backend=CUDA).prepare(program, warm)
     assert gpu.is_warm() == cpu.is_warm() == (start == "warm")
     assert gpu.lip == pytest.approx(cpu.lip, rel=1e-12) and (gpu.theta, gpu.beta) == (cpu.theta, cpu.beta)
     for device, host in ((gpu.geometry.s, cpu.scaling.ravel()), (gpu.mu_s, cpu.mu_s), (gpu.mu_r_s, cpu.mu_r_s),
@@ -56,8 +61,8 @@ def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
 
 
 def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
-    cpu = ApgdSolver(kernel="numba").prepare(program)
-    gpu = ApgdSolver(kernel="cuda").prepare(program)
+    cpu = ApgdSolver().prepare(program)
+    gpu = ApgdSolver(backend=CUDA).prepare(program)
     x_new, h_new = np.empty_like(cpu.x), np.empty_like(cpu.hx)
     apgd_cuda.trial_step(gpu.x_slots, gpu.h_slots, gpu.control, gpu.c, gpu.geometry, gpu.mu_s, gpu.mu_r_s,
                          gpu.inv_mass, gpu.parts)   # its gradient at y = x taken on the device
@@ -78,8 +83,8 @@ def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
 def test_thirty_iterations_follow_the_cpu_s(program):
     """The same control flow on both kernel sets: the same restarts and backtracks, the same
     Lipschitz estimate and momentum, and the iterate to rounding."""
-    cpu = ApgdSolver(kernel="numba").prepare(program)
-    gpu = ApgdSolver(kernel="cuda").prepare(program)
+    cpu = ApgdSolver().prepare(program)
+    gpu = ApgdSolver(backend=CUDA).prepare(program)
     for run in (cpu, gpu):
         run.iterate(10)
         run.iterate(20)   # the momentum carried from one call to the next
@@ -117,14 +122,14 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     """The device's solve, its stopping check included, warm-started from the CPU's answer (a cold
     solve takes hundreds of iterations, minutes on the simulator): it stops at its first check, and
     meets Clarabel (at 1e-10) within test_apgd's bounds, 1e-3 on the velocities and the net forces."""
-    warm = ApgdSolver(kernel="numba").solve(program).forces
-    sol = ApgdSolver(kernel="cuda").solve(program, warm_start=warm)
+    warm = ApgdSolver().solve(program).forces
+    sol = ApgdSolver(backend=CUDA).solve(program, warm_start=warm)
     assert sol.info["kernel"] == "cuda" and sol.info["start"] == "warm" and sol.iterations == 10
     # the forces stay on the device until read: the step's warm start takes them there
-    assert "forces" not in vars(sol) and sol.forces_for("cuda") is sol.on_device
+    assert "forces" not in vars(sol) and sol.resident_forces() is sol.on_device
     from colsim.engine.cuda_operator import kept_device_copy
 
-    assert kept_device_copy(sol.forces) is sol.on_device and sol.forces_for("cpu") is sol.forces
+    assert kept_device_copy(sol.forces) is sol.on_device
     assert sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
     expected = program.increments(sol.forces)   # the device's hx, B' lam, is the host's product
     np.testing.assert_allclose(sol.increments, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
@@ -139,8 +144,8 @@ def test_float32_storage_holds_the_nearest_float32_and_checks_in_float64(program
     hold the float64 ones' nearest float32, the check's stay float64. After ten iterations the iterate
     it gives (x, widened) is the stored one exactly, hx its T x and the residuals the CPU's at it, to
     the bounds above (1e-12: sums in another order): the check is float64's, only the iterate rounds."""
-    cpu = ApgdSolver(kernel="numba").prepare(program, ApgdSolver(kernel="numba").solve(program).forces)
-    gpu = ApgdSolver(kernel="cuda", storage="float32").prepare(program, cpu.forces())
+    cpu = ApgdSolver().prepare(program, ApgdSolver().solve(program).forces)
+    gpu = ApgdSolver(backend=CUDA, storage="float32").prepare(program, cpu.forces())
     for name in (*apgd_cuda.NARROW_GEOMETRY, "work"):
         stored, wide = getattr(gpu.trial_geometry, name), getattr(gpu.geometry, name)
         assert (stored.dtype, wide.dtype) == (np.float32, np.float64), name
@@ -162,8 +167,8 @@ def test_float32_storage_holds_the_nearest_float32_and_checks_in_float64(program
 def test_a_solve_stored_in_float32_agrees_with_clarabel(program):
     """The float32-stored solve, warm-started as the float64 one above: it stops on its float64 check
     within the same bounds of Clarabel (1e-3), its increments B' lam of its own forces to 1e-12."""
-    warm = ApgdSolver(kernel="numba").solve(program).forces
-    sol = ApgdSolver(kernel="cuda", storage="float32").solve(program, warm_start=warm)
+    warm = ApgdSolver().solve(program).forces
+    sol = ApgdSolver(backend=CUDA, storage="float32").solve(program, warm_start=warm)
     assert sol.info["storage"] == "float32" and sol.info["primal"] <= 1e-5 and sol.info["complementarity"] <= 1e-5
     expected = program.increments(sol.forces)
     np.testing.assert_allclose(sol.increments, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
@@ -179,7 +184,7 @@ def test_a_float32_solve_that_reaches_its_cap_is_made_again_in_float64(program, 
     solver's (SolverError, for auto's Clarabel)."""
     from colsim.engine.solver_contract import SolverError
 
-    warm = ApgdSolver(kernel="numba").solve(program).forces
+    warm = ApgdSolver().solve(program).forces
     solve, storages = ApgdSolver._solve, []
 
     def failing_in_float32(self, program, warm_start, step, max_iter, storage):
@@ -189,22 +194,22 @@ def test_a_float32_solve_that_reaches_its_cap_is_made_again_in_float64(program, 
         return solve(self, program, warm_start, step, max_iter, storage)
 
     monkeypatch.setattr(ApgdSolver, "_solve", failing_in_float32)
-    sol = ApgdSolver(kernel="cuda", storage="float32").solve(program, warm_start=warm)
+    sol = ApgdSolver(backend=CUDA, storage="float32").solve(program, warm_start=warm)
     assert storages == ["float32", "float64"] and sol.info["storage"] == "float64" and sol.info["primal"] <= 1e-5
     assert sol.backend == defaults.FLOAT64_FALLBACK   # the step's record names the retry, under auto too
-    auto = AutoSolver(apgd={"kernel": "cuda", "storage": "float32"}).solve(program, warm_start=warm)
+    auto = AutoSolver(apgd={"backend": CUDA, "storage": "float32"}).solve(program, warm_start=warm)
     assert auto.backend == defaults.FLOAT64_FALLBACK and auto.info["storage"] == "float64"
     with pytest.raises(SolverError, match="did not converge"):
-        ApgdSolver(kernel="cuda", storage="float32", max_iter=1).solve(program)
+        ApgdSolver(backend=CUDA, storage="float32", max_iter=1).solve(program)
 
 
 def test_float32_storage_is_the_gpu_s_and_recorded_only_when_chosen():
     with pytest.raises(ValueError, match="float32 storage is the GPU's"):
-        ApgdSolver(kernel="numba", storage="float32")
+        ApgdSolver(storage="float32")
     with pytest.raises(ValueError, match="float64, float32"):
-        ApgdSolver(kernel="cuda", storage="float16")
-    assert "storage" not in ApgdSolver(kernel="cuda").describe()
-    assert ApgdSolver(kernel="cuda", storage="float32").describe()["storage"] == "float32"
+        ApgdSolver(backend=CUDA, storage="float16")
+    assert "storage" not in ApgdSolver(backend=CUDA).describe()
+    assert ApgdSolver(backend=CUDA, storage="float32").describe()["storage"] == "float32"
 
 
 @pytest.mark.parametrize("largest", [1.0, -1.0], ids=["pushing", "none-pushing"])
@@ -231,13 +236,13 @@ def test_the_active_contacts_counted_on_the_device_are_the_host_s(largest):
 def test_cuda_without_a_gpu_or_the_simulator_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(cuda, "is_available", lambda: False)
     with pytest.raises(ValueError, match="needs a CUDA GPU"):
-        ApgdSolver(kernel="cuda")
+        make_backend("cuda")
 
 
 def test_the_power_iteration_starts_from_the_cpu_s_numbers_at_any_size():
     """The device's start vector is power_start's, copied on the device from its longest draw: the same
     numbers whether the sizes grow or shrink."""
-    from colsim.solvers.apgd import power_start
+    from colsim.engine.apgd_iteration import power_start
 
     for size in (10, 700, 50, 5000, 700):
         out = cuda.device_array(size)

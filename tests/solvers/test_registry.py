@@ -95,24 +95,3 @@ def test_auto_loosens_only_the_collapse_primal_by_its_overlap_tolerance():
     assert _solver(collapse_args, 0.004).describe()["apgd"]["overlap_tolerance"] == 1e-4
     chosen = _solver_settings(parser, ["pack", "--height", "2", "--output", "p.nc", "--solver-overlap-tolerance", "1e-5"])
     assert _pack_solver(chosen).apgd.overlap_tolerance == 1e-5
-
-
-def test_device_auto_takes_a_visible_gpu_for_large_columns_only(monkeypatch):
-    """device_for (issue 46.5): cpu and cuda stay as given; auto takes the GPU only where APGD solves,
-    one is visible and the column holds GPU_FROM_SPHERES spheres or more. numba's simulator (conftest)
-    is no GPU."""
-    from numba.core import config as numba_config
-
-    from colsim.solvers import registry
-    from colsim.solvers.defaults import GPU_FROM_SPHERES
-
-    assert registry.device_for("cpu", 10**7) == "cpu" and registry.device_for("cuda", 10) == "cuda"
-    if numba_config.ENABLE_CUDASIM:
-        assert not registry.gpu_visible()
-    monkeypatch.setattr(registry, "gpu_visible", lambda: False)   # a machine without a GPU
-    assert registry.device_for("auto", 10**7) == "cpu"
-    monkeypatch.setattr(registry, "gpu_visible", lambda: True)   # a machine with a GPU
-    assert registry.device_for("auto", GPU_FROM_SPHERES) == "cuda"
-    assert registry.device_for("auto", GPU_FROM_SPHERES, "apgd") == "cuda"
-    assert registry.device_for("auto", GPU_FROM_SPHERES - 1) == "cpu"
-    assert registry.device_for("auto", 10**7, "clarabel") == "cpu"   # APGD's device only

@@ -150,15 +150,17 @@ def test_a_pour_on_the_gpu_takes_the_cpu_s_steps():
     CPU kernels, with the CLI's settings (auto, the packing's tolerance). The rest of a step is the
     CPU's, so both take the same steps: the same iterations a step, and positions within 1e-9 of a
     diameter (the GPU's sums differ from the CPU's by rounding only). max_steps stops the pour there."""
-    from colsim.cli.commands import _pack_solver
+    from colsim.cli.commands import _backend, _pack_solver
     from colsim.stages.settings import SolverSettings
 
     settings = PackSettings(r0=0.8, height=0.8, max_steps=9)
     runs = {}
     for device in ("cpu", "cuda"):
         steps = []
+        solving = SolverSettings(device=device)
+        backend = _backend(solving)
         with pytest.raises(RuntimeError, match="not at rest after 9 steps"):
-            pack(settings, np.random.default_rng([1, 2024]), _pack_solver(SolverSettings(device=device)),
+            pack(settings, np.random.default_rng([1, 2024]), _pack_solver(solving, backend), backend=backend,
                  progress=lambda diagnostics, state: steps.append((diagnostics, state.position.copy())))
         runs[device] = steps
     cpu, gpu = runs["cpu"], runs["cuda"]

@@ -17,7 +17,10 @@ from ..io.checkpoint import check_checkpoint_path, remove_checkpoint
 from ..io.steps import step_variables
 from ..io.trajectory import trajectory_dataset
 from ..solvers import defaults
-from ..solvers.registry import device_for, make_solver
+from ..engine.backend import HOST
+from ..engine.backends import make_backend
+from ..solvers.registry import make_solver
+from ..stages.devices import device_for
 from ..stages.collapse import collapse as run_collapse
 from ..stages import pack as packing
 from ..stages.pour_geometry import expected_spheres, solid_fraction
@@ -88,11 +91,13 @@ def _recorded(args, *stage_settings) -> dict:
     return recorded
 
 
-def _apgd_options(solver: SolverSettings, tolerance=None) -> dict:
+def _apgd_options(solver: SolverSettings, backend, tolerance=None) -> dict:
     """APGD's options the settings set (solver_tolerance, else `tolerance` when given;
-    solver_length_floor, solver_overlap_tolerance, the device and on a GPU its storage); the rest keep
-    the back-end's defaults."""
-    options = {"kernel": "cuda", "storage": solver.gpu_storage} if solver.device == "cuda" else {}
+    solver_length_floor, solver_overlap_tolerance, and on a back-end with a choice of storage the
+    settings' gpu_storage) and the back-end its iterations run on; the rest keep the defaults."""
+    options = {"backend": backend}
+    if len(backend.storages) > 1:
+        options["storage"] = solver.gpu_storage
     if solver.solver_tolerance is not None or tolerance is not None:
         options["tolerance"] = tolerance if solver.solver_tolerance is None else solver.solver_tolerance
     if solver.solver_length_floor is not None:
@@ -102,13 +107,17 @@ def _apgd_options(solver: SolverSettings, tolerance=None) -> dict:
     return options
 
 
-def _solver(solver: SolverSettings, scaled_time_step: float):
-    """The back-end the settings name; scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'.
-    APGD's own options given to another back-end are refused: it would ignore them, yet the file
-    would record them."""
-    if solver.solver in ("auto", "apgd"):
-        options = _apgd_options(solver)
-    else:
+def _backend(solver: SolverSettings):
+    """The step's back-end (:mod:`colsim.engine.backend`) of the settings' device: APGD's (solver auto
+    or apgd); the other solvers' steps run on the host (and :func:`_solver` refuses a device given them)."""
+    return make_backend(solver.device if solver.solver in ("auto", "apgd") else "cpu")
+
+
+def _solver(solver: SolverSettings, scaled_time_step: float, backend=HOST):
+    """The back-end of a step's cone program the settings name, its APGD on `backend` (the step's);
+    scaled_time_step: the stage's dt / sqrt(h0/g), for 'auto'. APGD's own options given to another
+    back-end are refused: it would ignore them, yet the file would record them."""
+    if solver.solver not in ("auto", "apgd"):
         ignored = [flag for flag, value in (("--solver-length-floor", solver.solver_length_floor),
                                             ("--solver-overlap-tolerance", solver.solver_overlap_tolerance))
                    if value is not None]
@@ -119,21 +128,24 @@ def _solver(solver: SolverSettings, scaled_time_step: float):
         if ignored:
             raise io.InputError(f"{' and '.join(ignored)} {'are' if len(ignored) > 1 else 'is'} APGD's"
                                 f" (--solver auto or apgd); --solver {solver.solver} would ignore it")
-        options = {} if solver.solver_tolerance is None else {"tolerance": solver.solver_tolerance}
+        return make_solver(solver.solver, **({} if solver.solver_tolerance is None
+                                             else {"tolerance": solver.solver_tolerance}))
+    options = _apgd_options(solver, backend)
     if solver.solver == "auto":   # the tolerance is APGD's; Clarabel keeps its own
         options = {"scaled_time_step": scaled_time_step, "apgd": options}
     return make_solver(solver.solver, **options)
 
 
-def _pack_solver(solver: SolverSettings):
-    """The packing's back-end: under auto, APGD for every step at the packing's own tolerance
-    (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or solver_tolerance), Clarabel where APGD
-    reaches its cap; no overlap tolerance unless asked for (the packing's tolerance is already as loose)."""
+def _pack_solver(solver: SolverSettings, backend=HOST):
+    """The packing's back-end, its APGD on `backend`: under auto, APGD for every step at the packing's
+    own tolerance (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or solver_tolerance), Clarabel
+    where APGD reaches its cap; no overlap tolerance unless asked for (the packing's tolerance is
+    already as loose)."""
     if solver.solver != "auto":
-        return _solver(solver, scaled_time_step=None)
+        return _solver(solver, None, backend)
     return make_solver("auto", scaled_time_step=None,
                        apgd={"overlap_tolerance": defaults.PACK_APGD_OVERLAP_TOLERANCE,
-                             **_apgd_options(solver, defaults.PACK_APGD_TOLERANCE)})
+                             **_apgd_options(solver, backend, defaults.PACK_APGD_TOLERANCE)})
 
 
 def pack(args):
@@ -142,9 +154,10 @@ def pack(args):
     solving = replace(solving, device=device_for(solving.device, spheres, solving.solver))   # auto: which
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
-    solver = _pack_solver(solving)
+    backend = _backend(solving)
+    solver = _pack_solver(solving, backend)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
-    result = packing.pack(settings, rng, solver, checkpoint=checkpoint)
+    result = packing.pack(settings, rng, solver, checkpoint=checkpoint, backend=backend)
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_recorded(args, settings, solving), "solver_settings": solver.describe()},
                                  settings.seed)
@@ -196,10 +209,11 @@ def collapse(args):
     law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"
     progress = progress_bar(settings.max_steps,
                             f"collapse a={source.attrs['aspect_ratio']:g} mu_r={settings.mu_r:g}{law}")
-    solver = _solver(solving, settings.scaled_step)
+    backend = _backend(solving)
+    solver = _solver(solving, settings.scaled_step, backend)
     try:
         run = run_collapse(column, h0, settings, solver, io.contact_forces_of(source),
-                           checkpoint=checkpoint, progress=progress)
+                           checkpoint=checkpoint, progress=progress, backend=backend)
     finally:
         progress.close()
     # the back-end's settings in full (defaults included), so that a summary never mixes runs

@@ -1,5 +1,4 @@
-"""numba where it is installed (a dependency; the kernels fall back to plain Python loops without it):
-HAVE_NUMBA, the module itself or None, and prange (numba's parallel range, or range).
+"""numba (a dependency) for the kernels' modules: the module itself and prange, its parallel range.
 
 The threading layer is chosen here, on import, before numba can start its threads: OpenMP where
 numba has it, else its own workqueue, and Intel TBB last (LAYER_PRIORITY). numba's own order puts TBB
@@ -12,18 +11,14 @@ from __future__ import annotations
 
 import os
 
-try:
-    import numba
-except ImportError:  # pragma: no cover - numba is a dependency
-    numba = None
+import numba
 
-HAVE_NUMBA = numba is not None
-prange = numba.prange if HAVE_NUMBA else range
+prange = numba.prange
 
 #: numba's threading layers in colsim's order of preference
 LAYER_PRIORITY = ("omp", "workqueue", "tbb")
 #: the environment variables with which a user chooses the layer instead
 USER_LAYER_SETTINGS = ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")
 
-if HAVE_NUMBA and not any(name in os.environ for name in USER_LAYER_SETTINGS):
+if not any(name in os.environ for name in USER_LAYER_SETTINGS):
     numba.config.THREADING_LAYER_PRIORITY = list(LAYER_PRIORITY)

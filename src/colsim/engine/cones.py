@@ -20,7 +20,7 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import HAVE_NUMBA, numba, prange
+from .compiled import numba, prange
 from .program import ROWS_PER_CONTACT, ConeProgram
 from .threads import threads
 
@@ -75,7 +75,7 @@ def project_coupled_cone(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> n
 
 def project_point(p0, q1, q2, r1, r2, mu, mu_r):
     """:func:`project_coupled_cone` of one point onto {||q|| <= mu p, ||r|| <= mu_r p} (scalar code:
-    compiled by numba when installed, and for the GPU by numba.cuda)."""
+    compiled by numba, and for the GPU by numba.cuda)."""
     nq = math.sqrt(q1 * q1 + q2 * q2)
     nr = math.sqrt(r1 * r1 + r2 * r2)
     if p0 >= 0.0 and nq <= mu * p0 and nr <= mu_r * p0:  # inside (0 <= 0 * p0 holds for p0 < 0 too)
@@ -108,15 +108,12 @@ def _project_rows(lam, a, b):
     return out
 
 
-if HAVE_NUMBA:
-    project_point = numba.njit(cache=True, inline="always")(project_point)
-    _project_rows = numba.njit(cache=True)(_project_rows)
+project_point = numba.njit(cache=True, inline="always")(project_point)
+_project_rows = numba.njit(cache=True)(_project_rows)
 
 
 def project_compiled(lam: np.ndarray, mu: np.ndarray, mu_r: np.ndarray) -> np.ndarray:
-    """:func:`project_coupled_cone` by the scalar kernel, compiled (numpy without numba)."""
-    if not HAVE_NUMBA:
-        return project_coupled_cone(lam, mu, mu_r)
+    """:func:`project_coupled_cone` by the scalar kernel, compiled."""
     return _project_rows(np.ascontiguousarray(lam, dtype=float), np.ascontiguousarray(mu, dtype=float),
                          np.ascontiguousarray(mu_r, dtype=float))
 
@@ -199,6 +196,21 @@ def combine_residuals(primal: float, dual: float, total: float, comp: float, m: 
             "complementarity": comp / ((total + m * floor) * scale)}
 
 
+def contact_residuals(k, g0, g1, g2, g3, g4, x, s, mu, mu_r):
+    """Contact k's parts of :func:`combine_residuals` from its scaled gaps g0..g4 and the scaled
+    forces x, s their scaling ((5m,) each): its cone violation of the gaps y = g / s, of the forces
+    lam = s x, its positive normal force and |lam_k . y_k| (scalar code: compiled by numba, and for
+    the GPU by numba.cuda, :mod:`colsim.engine.cuda_apgd`)."""
+    o = 5 * k
+    y0, y1, y2 = g0 / s[o], g1 / s[o + 1], g2 / s[o + 2]
+    y3, y4 = g3 / s[o + 3], g4 / s[o + 4]
+    p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
+    r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
+    primal = mu[k] * math.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * math.sqrt(y3 * y3 + y4 * y4) - y0
+    dual = max(math.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, math.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
+    return primal, dual, max(p, 0.0), abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
+
+
 def _residual_parts(g, x, s, mu, mu_r, blocks):
     """(primal, dual, total, comp) of :func:`combine_residuals` for the end-of-step gaps y = g / s
     and the forces lam = s x ((5m,) each), in one sweep over the contacts split into `blocks` fixed
@@ -211,14 +223,12 @@ def _residual_parts(g, x, s, mu, mu_r, blocks):
         total = comp = 0.0
         for k in range(block * m // blocks, (block + 1) * m // blocks):
             o = 5 * k
-            y0, y1, y2 = g[o] / s[o], g[o + 1] / s[o + 1], g[o + 2] / s[o + 2]
-            y3, y4 = g[o + 3] / s[o + 3], g[o + 4] / s[o + 4]
-            p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
-            r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
-            primal = max(primal, mu[k] * np.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * np.sqrt(y3 * y3 + y4 * y4) - y0)
-            dual = max(dual, np.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, np.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
-            total += max(p, 0.0)
-            comp += abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
+            primal_k, dual_k, pushing, product = contact_residuals(k, g[o], g[o + 1], g[o + 2], g[o + 3], g[o + 4],
+                                                                   x, s, mu, mu_r)
+            primal = max(primal, primal_k)
+            dual = max(dual, dual_k)
+            total += pushing
+            comp += product
         parts[block, 0], parts[block, 1], parts[block, 2], parts[block, 3] = primal, dual, total, comp
     primal = dual = total = comp = 0.0
     for block in range(blocks):
@@ -229,17 +239,14 @@ def _residual_parts(g, x, s, mu, mu_r, blocks):
     return primal, dual, total, comp
 
 
-if HAVE_NUMBA:
-    _residual_parts = numba.njit(cache=True, parallel=True)(_residual_parts)
+contact_residuals = numba.njit(cache=True, inline="always")(contact_residuals)
+_residual_parts = numba.njit(cache=True, parallel=True)(_residual_parts)
 
 
 def scaled_residuals(g: np.ndarray, x: np.ndarray, s: np.ndarray, mu, mu_r, scale: float,
                      floor: float) -> dict[str, float]:
     """:func:`relative_residuals` of the gaps y = g / s and forces lam = s x given scaled and flat
-    ((5m,) each, as the iterative back-ends hold them): one compiled sweep (numpy without numba)."""
-    if not HAVE_NUMBA:
-        m = len(g) // ROWS_PER_CONTACT
-        return relative_residuals((g / s).reshape(m, 5), (s * x).reshape(m, 5), mu, mu_r, scale, floor)
+    ((5m,) each, as the iterative back-ends hold them): one compiled sweep."""
     return combine_residuals(*_residual_parts(g, x, s, np.ascontiguousarray(mu, dtype=float),
                                               np.ascontiguousarray(mu_r, dtype=float), threads()),
                              len(g) // ROWS_PER_CONTACT, scale, floor)

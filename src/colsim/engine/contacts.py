@@ -16,7 +16,7 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .compiled import HAVE_NUMBA, numba, prange
+from .compiled import numba, prange
 from .state import (CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, pair_keys,
                     rolling_lever)
 
@@ -152,8 +152,8 @@ def swept_midpoints(state: ParticleState, predicted: np.ndarray, margin: float, 
 
 def swept_close(position, predicted, radius, a, b, margin, slack):
     """Whether the pair (a, b) comes within margin + slack |u_b - u_a| of contact (length) as its
-    relative segment d0 + tau (u_b - u_a), tau in [0, 1], is swept (scalar code: compiled by numba
-    when installed, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
+    relative segment d0 + tau (u_b - u_a), tau in [0, 1], is swept (scalar code: compiled by numba,
+    and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
     d0u = du2 = 0.0
     for d in range(3):
         du = predicted[b, d] - predicted[a, d]
@@ -170,7 +170,7 @@ def swept_close(position, predicted, radius, a, b, margin, slack):
 def _swept_keep(i, j, position, predicted, radius, margin, slack, keep):
     """keep[k] (bool (m,), out) = :func:`swept_close` of candidate pair (i[k], j[k]). A loop over the
     candidates (a million a step in a pour's impacts, and in numpy the detection's largest cost), on
-    numba's threads where it is installed."""
+    numba's threads."""
     for k in prange(len(i)):
         keep[k] = swept_close(position, predicted, radius, i[k], j[k], margin, slack)
 
@@ -200,11 +200,10 @@ def contact_levers(radius_i: np.ndarray, radius_j: np.ndarray, lever: str) -> np
     return out
 
 
-if HAVE_NUMBA:
-    swept_close = numba.njit(cache=True, inline="always")(swept_close)
-    _swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
-    lever_of = numba.njit(cache=True, inline="always")(lever_of)
-    _levers = numba.njit(cache=True, parallel=True)(_levers)
+swept_close = numba.njit(cache=True, inline="always")(swept_close)
+_swept_keep = numba.njit(cache=True, parallel=True)(_swept_keep)
+lever_of = numba.njit(cache=True, inline="always")(lever_of)
+_levers = numba.njit(cache=True, parallel=True)(_levers)
 
 
 def recovery_relaxation(true_gap: np.ndarray, most_recovered: float) -> np.ndarray:
@@ -281,9 +280,8 @@ def pair_frames(state: ParticleState, i: np.ndarray, j: np.ndarray, normal: np.n
 
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
-           most_recovered: float = np.inf, device: str = "cpu") -> Contacts:
-    """Potential contacts of a step in which the particles are predicted to move predicted (n, 3)
-    (a host array, or on device 'cuda' one made there: :func:`colsim.engine.stepper.predicted_displacement`).
+           most_recovered: float = np.inf) -> Contacts:
+    """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
 
     margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
     particle's, for walls) predicted displacement added to it, for the velocity changes of the step.
@@ -296,55 +294,42 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     most_recovered (length): the most of an overlap present at the start that the step removes; the
     gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
-    device: where the swept pairs and their normals, tangents and gaps are found, 'cpu' (a k-d tree,
-    :func:`pair_frames`) or 'cuda' (a grid on the GPU: the same pairs, the same arithmetic). On the
-    GPU the contacts stay there (:func:`colsim.engine.cuda_contacts.swept_contacts`: the floor's and the
-    cylinder's rows made there too, unless a cylinder margin is given (a redo's, then on the host), the
-    fixed spheres' found on the host and joined there; a redo's given pairs made on the host and joined
-    there by :func:`colsim.engine.cuda_contacts.join_given_pairs`), and their host arrays are copied only
-    when read.
+    The swept pairs come from a k-d tree (:func:`swept_pairs`) and their frames from
+    :func:`pair_frames`; a back-end may find them elsewhere (:mod:`colsim.engine.backend`).
     """
-    def others_of(walls_here):
-        """The contacts with walls_here's walls and fixed spheres, made on the host."""
-        fixed = walls_here.fixed is not None and walls_here.fixed.n > 0
-        if walls_here.floor or walls_here.cylinder_radius is not None or fixed:
-            reach = margin + (1.0 + slack) * row_lengths(np.asarray(predicted))
-        else:
-            reach = np.zeros(state.n)   # no wall: none asked
-        return _other_contacts(state, walls_here, law, reach, cylinder_margin, most_recovered)
-
-    given = None if renormal is None else pair_rows(state, law, renormal[0], renormal[1], pair_frames(
-        state, renormal[0], renormal[1], renormal[2], most_recovered))
-    largest_pair_overlap = None   # the largest pair overlap: measured by the GPU's detection
-    if device == "cuda":
-        from .cuda_contacts import join_given_pairs, swept_contacts
-
-        # the floor and the cylinder on the device too, where no cylinder margin is asked for (a first
-        # attempt's); the fixed spheres on the host
-        has_walls = walls.floor or walls.cylinder_radius is not None
-        on_device = walls if has_walls and not np.any(cylinder_margin) else None
-        found = swept_contacts(state, predicted, margin, slack, most_recovered,
-                               others_of(Walls(floor=False, fixed=walls.fixed) if on_device else walls), law,
-                               on_device)
-        if found is not None:
-            if given is None or not len(given["i"]):
-                return found
-            return join_given_pairs(found, given, state.n, law.rolling_lever)
-        largest_pair_overlap = -np.inf   # fewer than two particles or no contacts: nothing to keep there
-    others = others_of(walls)
-    predicted = np.asarray(predicted)   # made on the device: its host copy
+    others = other_rows(state, walls, law, predicted, margin, slack, cylinder_margin, most_recovered)
+    given = given_rows(state, law, renormal, most_recovered)
+    predicted = np.asarray(predicted)   # a predicted motion made elsewhere: its host copy
     pi, pj = swept_pairs(state, predicted, margin, slack)
     pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered))
     parts = [pairs, others]
     if given is not None:   # these pairs, with the normals given, replace those found and go last
-        largest_pair_overlap = None   # of the pairs found, not of these
         keep = ~np.isin(pi.astype(np.int64) * state.n + pj, given["i"].astype(np.int64) * state.n + given["j"])
         parts = [{name: values[keep] for name, values in pairs.items()}, given, others]
     arrays = {name: np.concatenate([part[name] for part in parts]) for name in pairs}
     for name in ("i", "j", "family"):
         arrays[name] = arrays[name].astype(np.int64)
     arrays["lever"] = contact_levers(arrays["radius_i"], arrays["radius_j"], law.rolling_lever)
-    return Contacts(**arrays, largest_pair_overlap=largest_pair_overlap)
+    return Contacts(**arrays)
+
+
+def other_rows(state: ParticleState, walls: Walls, law: ContactLaw, predicted, margin: float, slack: float,
+               cylinder_margin, most_recovered: float) -> dict:
+    """The contacts of :func:`detect` with `walls`' walls and fixed spheres, by name (:func:`_other_contacts`)."""
+    fixed = walls.fixed is not None and walls.fixed.n > 0
+    if walls.floor or walls.cylinder_radius is not None or fixed:
+        reach = margin + (1.0 + slack) * row_lengths(np.asarray(predicted))
+    else:
+        reach = np.zeros(state.n)   # no wall: none asked
+    return _other_contacts(state, walls, law, reach, cylinder_margin, most_recovered)
+
+
+def given_rows(state: ParticleState, law: ContactLaw, renormal, most_recovered: float) -> dict | None:
+    """The rows of :func:`detect`'s pairs with given normals (`renormal`: (i, j, normal), or None)."""
+    if renormal is None:
+        return None
+    return pair_rows(state, law, renormal[0], renormal[1],
+                     pair_frames(state, renormal[0], renormal[1], renormal[2], most_recovered))
 
 
 def pair_rows(state: ParticleState, law: ContactLaw, i: np.ndarray, j: np.ndarray, frames) -> dict:
@@ -359,8 +344,7 @@ def pair_rows(state: ParticleState, law: ContactLaw, i: np.ndarray, j: np.ndarra
             "tangent1": tangent1.reshape(-1, 3), "tangent2": tangent2.reshape(-1, 3)}
 
 
-#: the arrays of every contact that the GPU's detection makes on the device, by name
-#: (:class:`colsim.engine.cuda_contacts.DeviceContacts`)
+#: the arrays of every contact, by name, that a back-end's detection may hold elsewhere than the host
 DEVICE_ARRAYS = ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever", "mu",
                  "mu_r", "keys")
 
@@ -408,39 +392,31 @@ class Overlaps:
         return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder)
 
 
-def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0, device: str = "cpu",
+def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0,
              detected: Contacts | None = None) -> Overlaps:
-    """Measure every overlap of `state` (see :class:`Overlaps`). device 'cuda': the overlapping
-    pairs found on the GPU (:func:`colsim.engine.cuda_contacts.swept_pairs_on_device` at rest with
-    no margin: the same pairs, sorted by (i, j)). detected: a detection at `state`, whose swept pairs
-    hold every pair that overlaps there (the stepper's check): its particle pairs are measured instead
-    of searching, or not at all when it measured their largest overlap and that is within the
-    tolerance (the GPU's detection: :attr:`Contacts.largest_pair_overlap`; no pair to report then).
-    A state made on the device (:class:`colsim.engine.cuda_state.DeviceState`) has the floor's and the
-    cylinder's largest overlaps measured there; only where an overlap exceeds the tolerance (a redo,
-    which needs each particle's) are its positions copied to the host and measured here."""
-    measured = None if detected is None else detected.largest_pair_overlap
-    if measured is not None and measured <= tolerance:
-        largest_pair, pairs = measured, (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
-    elif detected is not None:
-        largest_pair, pairs = detected.overlapping_pairs(state, tolerance)
-    elif device == "cuda":
-        from .cuda_contacts import swept_pairs_on_device
-
-        pi, pj = swept_pairs_on_device(state, np.zeros_like(state.position), 0.0, 0.0)
-        largest_pair, pairs = pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi], tolerance)
+    """Measure every overlap of `state` (see :class:`Overlaps`). detected: a detection at `state`,
+    whose swept pairs hold every pair that overlaps there (the stepper's check): its particle pairs
+    are measured instead of searching (:func:`detected_overlaps`)."""
+    if detected is not None:
+        largest_pair, pairs = detected_overlaps(detected, state, tolerance)
     else:
         largest_pair, pairs = pair_overlaps(state, *particle_pairs(state, 0.0), tolerance)
-    if device == "cuda" and (walls.fixed is None or walls.fixed.n == 0):
-        from .cuda_state import measured_on_device
+    return wall_overlaps(state, walls, largest_pair, pairs)
 
-        extents = measured_on_device(state)   # a state made on the device: the walls measured there
-        if extents is not None:
-            largest_floor = max(0.0, extents[2]) if walls.floor else 0.0
-            largest_cylinder = (max(0.0, extents[3] - walls.cylinder_radius) if walls.cylinder_radius is not None
-                                else 0.0)
-            if max(largest_pair, largest_floor, largest_cylinder) <= tolerance:   # no redo: no (n,) array
-                return Overlaps(pairs, max(0.0, largest_pair), largest_floor, None, 0.0, largest_cylinder)
+
+def detected_overlaps(detected: Contacts, state: ParticleState, tolerance: float) -> tuple:
+    """(largest overlap, (i, j, normal)) of the particle pairs of `detected`, a detection at `state`
+    (:meth:`Contacts.overlapping_pairs`), or none at all to report when the detection measured
+    their largest overlap and that is within the tolerance (:attr:`Contacts.largest_pair_overlap`)."""
+    measured = detected.largest_pair_overlap
+    if measured is not None and measured <= tolerance:
+        return measured, (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    return detected.overlapping_pairs(state, tolerance)
+
+
+def wall_overlaps(state: ParticleState, walls: Walls, largest_pair: float, pairs: tuple) -> Overlaps:
+    """The :class:`Overlaps` of `state` with its particle pairs' (largest_pair, pairs) given: the
+    floor's, each particle's with the cylinder and the fixed spheres' measured here."""
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))

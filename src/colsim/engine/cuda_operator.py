@@ -11,9 +11,9 @@ summed in a fixed order.
 - a . b: each block sums its slice in shared memory by a fixed tree, then the host adds the blocks'
   sums in block order (:func:`dot`): the same bits every run on one device, for one block size.
 
-Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, set by the tests),
-which is how CI checks them against the CPU kernels. APGD's iterations on the GPU use them
-(:mod:`colsim.solvers.apgd_cuda`); detection and the warm start follow (docs/performance.md, "One GPU").
+Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), which is how the
+tests check them against the CPU kernels (tests/cuda_simulator.py sets the simulator up for that). APGD's iterations on the GPU use them
+(:mod:`colsim.engine.cuda_apgd`); detection and the warm start follow (docs/performance.md, "One GPU").
 """
 from __future__ import annotations
 
@@ -29,18 +29,13 @@ if not hasattr(np, "row_stack"):   # numba-cuda 0.30.4 calls np.row_stack, which
 from numba import config as numba_config  # noqa: E402
 from numba import cuda  # noqa: E402 (after the alias)
 
-from . import cuda_simulator
 from .cones import project_point
 from .cuda_launch import launch
-from .operator import ContactGeometry
-
-if numba_config.ENABLE_CUDASIM:   # faster, and its shared arrays made under a lock
-    cuda_simulator.use()
+from .operator import ContactGeometry, body_sums, contact_wrench, diagonal_row, gradient_values
 
 #: numba-cuda warns of every grid under 128 blocks ("will likely result in GPU under-utilization"),
 #: once for each size. colsim's one-block launches (a decision, a scan) are small by design, and its
-#: small columns' contacts fill fewer blocks: the fifth sitting's r0 = 6 pour log held 207 of them (two
-#: lines each), its collapse's 35. Off unless the environment sets NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS
+#: small columns' contacts fill fewer blocks: an r0 = 6 pour's log held hundreds of them. Off unless the environment sets NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS
 #: (set here too, so that numba's reload of its configuration keeps it).
 LOW_OCCUPANCY_WARNINGS = "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"
 if LOW_OCCUPANCY_WARNINGS not in os.environ:
@@ -132,60 +127,17 @@ def _gradient_kernel(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out)
 
 
 @cuda.jit(device=True)
-def _entry(h, h_prev, beta, extrapolate, i):
-    """h[i], or h[i] + beta (h[i] - h_prev[i]) where `extrapolate` (T y of y = x + beta (x - x_prev)
-    from h = T x and h_prev = T x_prev, as the CPU's extrapolation makes it)."""
-    if extrapolate:
-        return h[i] + beta * (h[i] - h_prev[i])
-    return h[i]
-
-
-@cuda.jit(device=True)
 def gradient_row(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
-    """out[5k:5k + 5] = contact k's rows of S B Mbar^-1 h + c (h's entries by :func:`_entry`)."""
+    """out[5k:5k + 5] = contact k's rows of S B Mbar^-1 h + c (of h + beta (h - h_prev) where `extrapolate`)."""
     o = 5 * k
     out[o], out[o + 1], out[o + 2], out[o + 3], out[o + 4] = gradient_values(
         k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c)
 
 
-@cuda.jit(device=True)
-def gradient_values(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c):
-    """Contact k's five rows of S B Mbar^-1 h + c (h's entries by :func:`_entry`), returned: the
-    caller keeps them in registers (APGD's trial step) or stores them (:func:`gradient_row`)."""
-    rot = h.shape[0] // 2
-    first, second = ci[k], cj[k]
-    un = ut1 = ut2 = ur1 = ur2 = 0.0
-    for d in range(3):
-        dx = -_entry(h, h_prev, beta, extrapolate, 3 * first + d) * inv_mass[3 * first + d]
-        w = _entry(h, h_prev, beta, extrapolate, rot + 3 * first + d) * inv_mass[rot + 3 * first + d]
-        un += nrm[k, d] * dx
-        ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
-        ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
-        ur1 -= lever[k] * t1[k, d] * w
-        ur2 -= lever[k] * t2[k, d] * w
-        if second >= 0:
-            dx = _entry(h, h_prev, beta, extrapolate, 3 * second + d) * inv_mass[3 * second + d]
-            w = _entry(h, h_prev, beta, extrapolate, rot + 3 * second + d) * inv_mass[rot + 3 * second + d]
-            un += nrm[k, d] * dx
-            ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
-            ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
-            ur1 += lever[k] * t1[k, d] * w
-            ur2 += lever[k] * t2[k, d] * w
-    o = 5 * k
-    return (s[o] * un + c[o], s[o + 1] * ut1 + c[o + 1], s[o + 2] * ut2 + c[o + 2], s[o + 3] * ur1 + c[o + 3],
-            s[o + 4] * ur2 + c[o + 4])
-
-
-@cuda.jit(device=True)
-def wrench_on_device(k, p, q1, q2, r1, r2, nrm, t1, t2, ri, rj, lever, work):
-    """work[k] (9,): contact k's force on its second body, its moment on the first and on the second,
-    from its force p (normal), q1, q2 (sliding), r1, r2 (rolling)."""
-    for d in range(3):
-        sliding = q2 * t1[k, d] - q1 * t2[k, d]
-        rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
-        work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
-        work[k, 3 + d] = ri[k] * sliding - rolling
-        work[k, 6 + d] = rj[k] * sliding + rolling
+#: contact k's five rows of S B Mbar^-1 h + c (the CPU's scalar code, compiled for the GPU)
+gradient_values = cuda.jit(device=True)(getattr(gradient_values, "py_func", gradient_values))
+#: contact k's wrench from its force (the CPU's scalar code, compiled for the GPU)
+wrench_on_device = cuda.jit(device=True)(getattr(contact_wrench, "py_func", contact_wrench))
 
 
 @cuda.jit
@@ -199,24 +151,8 @@ def _wrench_kernel(z, s, nrm, t1, t2, ri, rj, lever, work):
                      s[o + 4] * z[o + 4], nrm, t1, t2, ri, rj, lever, work)
 
 
-@cuda.jit(device=True)
-def body_sums_on_device(body, work, start, entry, out):
-    """out's entries of `body` (force 3 body + d, moment 3 n + 3 body + d) = the sums of its contacts'
-    wrenches (work (m, 9)) in contact order."""
-    n = start.shape[0] - 1
-    for d in range(3):
-        force = 0.0
-        moment = 0.0
-        for e in range(start[body], start[body + 1]):
-            k = entry[e] // 2
-            if entry[e] % 2 == 1:
-                force += work[k, d]
-                moment += work[k, 6 + d]
-            else:
-                force -= work[k, d]
-                moment += work[k, 3 + d]
-        out[3 * body + d] = force
-        out[3 * n + 3 * body + d] = moment
+#: one body's sums of its contacts' wrenches (the CPU's scalar code, compiled for the GPU)
+body_sums_on_device = cuda.jit(device=True)(getattr(body_sums, "py_func", body_sums))
 
 
 @cuda.jit
@@ -227,28 +163,16 @@ def _transpose_kernel(work, start, entry, out):
         body_sums_on_device(body, work, start, entry, out)
 
 
+#: one contact's rows of the diagonal of B Mbar^-1 B' (the CPU's scalar code, compiled for the GPU)
+_diagonal_row = cuda.jit(device=True)(getattr(diagonal_row, "py_func", diagonal_row))
+
+
 @cuda.jit
 def _diagonal_kernel(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
-    """out (m, 5) = the diagonal of B Mbar^-1 B' (colsim.engine.operator.jacobian_diagonal)."""
+    """out (m, 5) = the diagonal of B Mbar^-1 B' (colsim.engine.operator.jacobian_diagonal), a contact a thread."""
     k = cuda.grid(1)
-    if k >= ci.shape[0]:
-        return
-    rot = inv_mass.shape[0] // 2
-    for row in range(5):
-        out[k, row] = 0.0
-    for side in range(2):
-        body = ci[k] if side == 0 else cj[k]
-        if body < 0:
-            continue
-        radius = ri[k] if side == 0 else rj[k]
-        for d in range(3):
-            lin = inv_mass[3 * body + d]
-            ang = inv_mass[rot + 3 * body + d]
-            out[k, 0] += nrm[k, d] ** 2 * lin
-            out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
-            out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
-            out[k, 3] += (lever[k] * t1[k, d]) ** 2 * ang
-            out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
+    if k < ci.shape[0]:
+        _diagonal_row(k, inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out)
 
 
 @cuda.jit
@@ -313,6 +237,19 @@ def block_reduce(cache, t, largest):
             cache[t] = max(cache[t], cache[t + half]) if largest else cache[t] + cache[t + half]
         cuda.syncthreads()
         half //= 2
+
+
+@cuda.jit(device=True)
+def four_block_results(parts, t, first, second, third, fourth, largest_1, largest_2, largest_3, largest_4):
+    """Reduce a block's four shared arrays (:func:`block_reduce`: the largest where largest_r, else the
+    sum) and write their results to parts[0..3, block] (thread 0). Every thread of the block calls it."""
+    block_reduce(first, t, largest_1)
+    block_reduce(second, t, largest_2)
+    block_reduce(third, t, largest_3)
+    block_reduce(fourth, t, largest_4)
+    if t == 0:
+        b = cuda.blockIdx.x
+        parts[0, b], parts[1, b], parts[2, b], parts[3, b] = first[0], second[0], third[0], fourth[0]
 
 
 @cuda.jit

@@ -38,8 +38,8 @@ import weakref
 import numpy as np
 
 from .cuda_launch import launch
-from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, keep_device_copy,
-                            kept_device_copy)
+from .cuda_operator import (THREADS, block_reduce, blocks_for, cuda, device_copy_of, four_block_results,
+                            keep_device_copy, kept_device_copy)
 from .program import ConeProgram
 from .state import ParticleState
 
@@ -418,13 +418,7 @@ def _measures_kernel(position, velocity, angular, radius, mass, inertia, parts):
         rot[t] = inertia[i] * w
         sunk[t] = radius[i] - position[i, 2]
         out[t] = axis_distance(position, i) + radius[i]
-    block_reduce(trans, t, False)
-    block_reduce(rot, t, False)
-    block_reduce(sunk, t, True)
-    block_reduce(out, t, True)
-    if t == 0:
-        b = cuda.blockIdx.x
-        parts[0, b], parts[1, b], parts[2, b], parts[3, b] = trans[0], rot[0], sunk[0], out[0]
+    four_block_results(parts, t, trans, rot, sunk, out, False, False, True, True)
 
 
 @cuda.jit

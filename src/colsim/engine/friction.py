@@ -74,7 +74,7 @@ def solve_step(program: ConeProgram, solver: Solver, law: FrictionLaw, mean_diam
             break
         correction = accelerate(correction, residual)
         solution = solver.solve(replace(program, gap_shift=correction),
-                                warm_start=solution.forces_for(solver.device), step=step)
+                                warm_start=solution.resident_forces(), step=step)
         iterations += solution.iterations
         setup_time += solution.setup_time
         solve_time += solution.solve_time

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .compiled import HAVE_NUMBA, numba, prange
+from .compiled import numba, prange
 
 
 def body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -25,8 +25,6 @@ def body_contacts(first: np.ndarray, second: np.ndarray, n: int) -> tuple[np.nda
     bodies = bodies[entry]
     start = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(bodies, minlength=n), out=start[1:])
-    if not HAVE_NUMBA:   # the counting sort's loop is for the compiler only
-        return start, entry[np.argsort(bodies, kind="stable")]
     return start, _by_body(entry, bodies, start)
 
 
@@ -43,18 +41,23 @@ def _by_body(entry, bodies, start):
 
 
 def _contact_wrenches(z, s, nrm, t1, t2, ri, rj, lever, work):
-    """work (m, 9): contact k's force on its second body (minus that on its first), its moment on
-    the first body and on the second, from scaled forces z (5m,)."""
+    """work (m, 9): each contact's wrench (:func:`contact_wrench`) from scaled forces z (5m,)."""
     for k in prange(len(ri)):
         o = 5 * k
-        p, q1, q2 = s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2]
-        r1, r2 = s[o + 3] * z[o + 3], s[o + 4] * z[o + 4]
-        for d in range(3):
-            sliding = q2 * t1[k, d] - q1 * t2[k, d]
-            rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
-            work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
-            work[k, 3 + d] = ri[k] * sliding - rolling
-            work[k, 6 + d] = rj[k] * sliding + rolling
+        contact_wrench(k, s[o] * z[o], s[o + 1] * z[o + 1], s[o + 2] * z[o + 2], s[o + 3] * z[o + 3],
+                       s[o + 4] * z[o + 4], nrm, t1, t2, ri, rj, lever, work)
+
+
+def contact_wrench(k, p, q1, q2, r1, r2, nrm, t1, t2, ri, rj, lever, work):
+    """work[k] (9,): contact k's force on its second body (minus that on its first), its moment on
+    the first body and on the second, from its force p (normal), q1, q2 (sliding), r1, r2 (rolling)
+    (scalar code: compiled by numba, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_operator`)."""
+    for d in range(3):
+        sliding = q2 * t1[k, d] - q1 * t2[k, d]
+        rolling = lever[k] * (r1 * t1[k, d] + r2 * t2[k, d])
+        work[k, d] = p * nrm[k, d] + q1 * t1[k, d] + q2 * t2[k, d]
+        work[k, 3 + d] = ri[k] * sliding - rolling
+        work[k, 6 + d] = rj[k] * sliding + rolling
 
 
 def global_force_row(k, forces, nrm, t1, t2, force, rolling):
@@ -78,84 +81,110 @@ def apply_transpose(z, s, nrm, t1, t2, ri, rj, lever, start, entry, work, out):
     (:func:`_contact_wrenches`) in contact order, so the sums are the same on any number of
     threads; work: (m, 9) scratch."""
     _contact_wrenches(z, s, nrm, t1, t2, ri, rj, lever, work)
-    n = len(start) - 1
-    for body in prange(n):
-        for d in range(3):
-            force = 0.0
-            moment = 0.0
-            for e in range(start[body], start[body + 1]):
-                k = entry[e] // 2
-                if entry[e] % 2 == 1:
-                    force += work[k, d]
-                    moment += work[k, 6 + d]
-                else:
-                    force -= work[k, d]
-                    moment += work[k, 3 + d]
-            out[3 * body + d] = force
-            out[3 * n + 3 * body + d] = moment
+    for body in prange(len(start) - 1):
+        body_sums(body, work, start, entry, out)
+
+
+def body_sums(body, work, start, entry, out):
+    """out's entries of `body` (force 3 body + d, moment 3 n + 3 body + d) = the sums of its contacts'
+    wrenches (work (m, 9)) in contact order (scalar code: compiled by numba, and for the GPU by
+    numba.cuda, :mod:`colsim.engine.cuda_operator`)."""
+    n = start.shape[0] - 1
+    for d in range(3):
+        force = 0.0
+        moment = 0.0
+        for e in range(start[body], start[body + 1]):
+            k = entry[e] // 2
+            if entry[e] % 2 == 1:
+                force += work[k, d]
+                moment += work[k, 6 + d]
+            else:
+                force -= work[k, d]
+                moment += work[k, 3 + d]
+        out[3 * body + d] = force
+        out[3 * n + 3 * body + d] = moment
 
 
 def apply_gradient(h, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c, out):
-    """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion."""
-    rot = len(h) // 2
+    """out (5m,) = S B Mbar^-1 h + c without forming B: each contact's relative motion
+    (:func:`gradient_values`, a contact a thread)."""
     for k in prange(len(ci)):
-        a, b = ci[k], cj[k]
-        un = ut1 = ut2 = ur1 = ur2 = 0.0
-        for d in range(3):
-            dx = -h[3 * a + d] * inv_mass[3 * a + d]
-            w = h[rot + 3 * a + d] * inv_mass[rot + 3 * a + d]
-            un += nrm[k, d] * dx
-            ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
-            ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
-            ur1 -= lever[k] * t1[k, d] * w
-            ur2 -= lever[k] * t2[k, d] * w
-            if b >= 0:
-                dx = h[3 * b + d] * inv_mass[3 * b + d]
-                w = h[rot + 3 * b + d] * inv_mass[rot + 3 * b + d]
-                un += nrm[k, d] * dx
-                ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
-                ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
-                ur1 += lever[k] * t1[k, d] * w
-                ur2 += lever[k] * t2[k, d] * w
         o = 5 * k
-        out[o] = s[o] * un + c[o]
-        out[o + 1] = s[o + 1] * ut1 + c[o + 1]
-        out[o + 2] = s[o + 2] * ut2 + c[o + 2]
-        out[o + 3] = s[o + 3] * ur1 + c[o + 3]
-        out[o + 4] = s[o + 4] * ur2 + c[o + 4]
+        out[o], out[o + 1], out[o + 2], out[o + 3], out[o + 4] = gradient_values(
+            k, h, h, 0.0, False, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c)
+
+
+def gradient_values(k, h, h_prev, beta, extrapolate, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c):
+    """Contact k's five rows of S B Mbar^-1 h + c, returned; where `extrapolate`, of h + beta (h - h_prev)
+    instead (T y of y = x + beta (x - x_prev) from h = T x and h_prev = T x_prev, as APGD extrapolates).
+    Scalar code: compiled by numba, and for the GPU by numba.cuda (:mod:`colsim.engine.cuda_operator`),
+    whose trial step keeps the rows in registers."""
+    rot = h.shape[0] // 2
+    first, second = ci[k], cj[k]
+    un = ut1 = ut2 = ur1 = ur2 = 0.0
+    for d in range(3):
+        a, b = 3 * first + d, rot + 3 * first + d
+        dx = -(h[a] + beta * (h[a] - h_prev[a]) if extrapolate else h[a]) * inv_mass[a]
+        w = (h[b] + beta * (h[b] - h_prev[b]) if extrapolate else h[b]) * inv_mass[b]
+        un += nrm[k, d] * dx
+        ut1 += t1[k, d] * dx - ri[k] * t2[k, d] * w
+        ut2 += t2[k, d] * dx + ri[k] * t1[k, d] * w
+        ur1 -= lever[k] * t1[k, d] * w
+        ur2 -= lever[k] * t2[k, d] * w
+        if second >= 0:
+            a, b = 3 * second + d, rot + 3 * second + d
+            dx = (h[a] + beta * (h[a] - h_prev[a]) if extrapolate else h[a]) * inv_mass[a]
+            w = (h[b] + beta * (h[b] - h_prev[b]) if extrapolate else h[b]) * inv_mass[b]
+            un += nrm[k, d] * dx
+            ut1 += t1[k, d] * dx - rj[k] * t2[k, d] * w
+            ut2 += t2[k, d] * dx + rj[k] * t1[k, d] * w
+            ur1 += lever[k] * t1[k, d] * w
+            ur2 += lever[k] * t2[k, d] * w
+    o = 5 * k
+    return (s[o] * un + c[o], s[o + 1] * ut1 + c[o + 1], s[o + 2] * ut2 + c[o + 2], s[o + 3] * ur1 + c[o + 3],
+            s[o + 4] * ur2 + c[o + 4])
+
+
+def diagonal_row(k, inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
+    """out[k] (5,) = contact k's rows of the diagonal of B Mbar^-1 B': each row's squared entries
+    weighted by the inverse masses and inertias of the body they act on (scalar code: compiled by
+    numba, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_operator`)."""
+    rot = inv_mass.shape[0] // 2
+    for row in range(5):
+        out[k, row] = 0.0
+    for side in range(2):
+        body = ci[k] if side == 0 else cj[k]
+        if body < 0:
+            continue
+        radius = ri[k] if side == 0 else rj[k]
+        for d in range(3):
+            lin = inv_mass[3 * body + d]
+            ang = inv_mass[rot + 3 * body + d]
+            out[k, 0] += nrm[k, d] ** 2 * lin
+            out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
+            out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
+            out[k, 3] += (lever[k] * t1[k, d]) ** 2 * ang
+            out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
 
 
 def jacobian_diagonal(inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out):
-    """out (m, 5) = the diagonal of B Mbar^-1 B': for each row of B, its squared entries weighted by
-    the inverse masses and inertias of the body they act on."""
-    rot = len(inv_mass) // 2
+    """out (m, 5) = the diagonal of B Mbar^-1 B' (:func:`diagonal_row`, a contact a thread)."""
     for k in prange(len(ci)):
-        for row in range(5):
-            out[k, row] = 0.0
-        for side in range(2):
-            body = ci[k] if side == 0 else cj[k]
-            if body < 0:
-                continue
-            radius = ri[k] if side == 0 else rj[k]
-            for d in range(3):
-                lin = inv_mass[3 * body + d]
-                ang = inv_mass[rot + 3 * body + d]
-                out[k, 0] += nrm[k, d] ** 2 * lin
-                out[k, 1] += t1[k, d] ** 2 * lin + (radius * t2[k, d]) ** 2 * ang
-                out[k, 2] += t2[k, d] ** 2 * lin + (radius * t1[k, d]) ** 2 * ang
-                out[k, 3] += (lever[k] * t1[k, d]) ** 2 * ang
-                out[k, 4] += (lever[k] * t2[k, d]) ** 2 * ang
+        diagonal_row(k, inv_mass, ci, cj, nrm, t1, t2, ri, rj, lever, out)
 
 
-if HAVE_NUMBA:
-    _by_body = numba.njit(cache=True)(_by_body)
-    _parallel = numba.njit(cache=True, parallel=True)
-    _contact_wrenches = _parallel(_contact_wrenches)
-    apply_transpose = _parallel(apply_transpose)
-    apply_gradient = _parallel(apply_gradient)
-    jacobian_diagonal = _parallel(jacobian_diagonal)
-    global_force_row = numba.njit(cache=True, inline="always")(global_force_row)
-    global_forces = _parallel(global_forces)
+_by_body = numba.njit(cache=True)(_by_body)
+diagonal_row = numba.njit(cache=True, inline="always")(diagonal_row)
+body_sums = numba.njit(cache=True, inline="always")(body_sums)
+contact_wrench = numba.njit(cache=True, inline="always")(contact_wrench)
+gradient_values = numba.njit(cache=True, inline="always")(gradient_values)
+_parallel = numba.njit(cache=True, parallel=True)
+_contact_wrenches = _parallel(_contact_wrenches)
+apply_transpose = _parallel(apply_transpose)
+apply_gradient = _parallel(apply_gradient)
+jacobian_diagonal = _parallel(jacobian_diagonal)
+global_force_row = numba.njit(cache=True, inline="always")(global_force_row)
+global_forces = _parallel(global_forces)
 
 
 class ContactGeometry(NamedTuple):
@@ -194,9 +223,8 @@ def gradient_of(geometry: ContactGeometry, h: np.ndarray, inv_mass: np.ndarray, 
                    c, out)
 
 
-if HAVE_NUMBA:
-    transpose_of = numba.njit(cache=True)(transpose_of)
-    gradient_of = numba.njit(cache=True)(gradient_of)
+transpose_of = numba.njit(cache=True)(transpose_of)
+gradient_of = numba.njit(cache=True)(gradient_of)
 
 
 class ContactOperator:

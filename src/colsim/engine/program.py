@@ -31,7 +31,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from .compiled import HAVE_NUMBA, numba, prange
+from .compiled import numba, prange
 from .contacts import Contacts
 from .operator import ContactOperator
 from .state import ParticleState
@@ -86,8 +86,8 @@ class ConeProgram:
 
     @property
     def operator(self) -> ContactOperator | None:
-        """B applied from the contacts' frames (None without contacts or without numba)."""
-        if self._operator is None and HAVE_NUMBA:
+        """B applied from the contacts' frames, made when first asked for."""
+        if self._operator is None:
             self._operator = ContactOperator(self.contacts, self.n_unknowns // 6)
         return self._operator
 
@@ -200,20 +200,13 @@ def _fill_program(m_i, inertia, velocity, angular_velocity, dt, dt2, gravity, ma
             fbar[3 * n + 3 * b + d] = moment / dt
 
 
-if HAVE_NUMBA:
-    _fill_program = numba.njit(cache=True, parallel=True)(_fill_program)
+_fill_program = numba.njit(cache=True, parallel=True)(_fill_program)
 
 
-def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity, device: str = "cpu") -> ConeProgram:
+def assemble(state: ParticleState, contacts: Contacts, dt: float, gravity) -> ConeProgram:
     """The cone program of one step of length dt (time) from `state` with `contacts` (B is built
-    when a back-end first asks for it: :attr:`ConeProgram.jacobian`). device 'cuda': the masses and
-    free forces are made on the GPU alone, from the state's arrays there, and copied to the host
-    when read there (:class:`colsim.engine.cuda_state.DeviceProgram`)."""
+    when a back-end first asks for it: :attr:`ConeProgram.jacobian`)."""
     n = state.n
-    if device == "cuda" and n:
-        from .cuda_state import program_on_device
-
-        return program_on_device(state, contacts, dt, gravity)
     m_i, inertia = state.mass_and_inertia()
     mass, fbar = np.empty(6 * n), np.empty(6 * n)
     gravity = np.asarray(gravity, dtype=float)

@@ -31,14 +31,14 @@ class ConeSolution:
     info: dict = field(default_factory=dict)
     backend: str = ""
 
-    def forces_for(self, device: str):
-        """The forces (m, 5) where `device` ('cpu' or 'cuda') reads them: here, the host's array (a
-        solution whose forces stay on the GPU gives its device array to 'cuda')."""
+    def resident_forces(self):
+        """The forces (m, 5) where the solver left them: here, the host's array (a solution made on a
+        GPU gives its device array, :class:`colsim.engine.cuda_apgd.DeviceSolution`)."""
         return self.forces
 
-    def increments_for(self, device: str):
-        """The increments (6n,) where `device` ('cpu' or 'cuda') reads them: here, the host's array (a
-        solution whose increments stay on the GPU gives its device array to 'cuda')."""
+    def resident_increments(self):
+        """The increments (6n,) where the solver left them: here, the host's array (see
+        :meth:`resident_forces`)."""
         return self.increments
 
     def active_contacts(self) -> int:
@@ -73,11 +73,6 @@ class Solver:
     name = "base"
     #: whether solve() uses `warm_start` (the stepper then passes the previous step's forces)
     uses_warm_start = False
-
-    @property
-    def device(self) -> str:
-        """Where the back-end's iterations run, 'cpu' or 'cuda': the step's contact detection runs there too."""
-        return "cpu"
 
     def solve(self, program: ConeProgram, warm_start: np.ndarray | None = None,
               step: int | None = None) -> ConeSolution:

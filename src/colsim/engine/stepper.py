@@ -28,14 +28,14 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Iterator
 
 import numpy as np
 
 from . import contacts as contact_detection
 from . import friction
-from .program import assemble
+from .backend import HOST, Backend
 from .records import Carry, StepDiagnostics
 from .solver_contract import ConeSolution, Solver
 from .state import ParticleState, StepSettings, recovery_speed
@@ -72,17 +72,6 @@ class StepResult:
     carry: Carry | None = None
 
 
-def predicted_displacement(state: ParticleState, settings: StepSettings, device: str = "cpu"):
-    """(n, 3) free-flight displacement v dt + g dt^2 of each particle over one step (length); on
-    device 'cuda' made there alone, from the velocities there, and copied to the host when read
-    there (:class:`colsim.engine.cuda_state.DeviceParticleArray`: ``np.asarray`` gives the host's)."""
-    if device == "cuda" and state.n:
-        from .cuda_state import predicted_on_device
-
-        return predicted_on_device(state, settings.dt, settings.gravity)
-    return state.velocity * settings.dt + np.asarray(settings.gravity) * settings.dt**2
-
-
 def base_margin(state: ParticleState, settings: StepSettings) -> float:
     """The detection margin (length) of a step with no history: detection_margin_fraction times the
     smallest diameter."""
@@ -109,23 +98,24 @@ def _next_margin(missed: int, margin: float, base: float) -> float:
     return max(base, 0.5 * margin)
 
 
-def _first_detection(state: ParticleState, settings: StepSettings, predicted: np.ndarray, margin: float,
-                     most_recovered: float, device: str) -> contact_detection.Contacts:
+def _first_detection(backend: Backend, state: ParticleState, settings: StepSettings, predicted, margin: float,
+                     most_recovered: float) -> contact_detection.Contacts:
     """The contacts of a step's first attempt (no cylinder margin, no given normals)."""
-    return contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
-                                    settings.detection_slack, np.zeros(state.n), None, most_recovered, device)
+    return backend.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
+                          np.zeros(state.n), None, most_recovered)
 
 
 def step(state: ParticleState, settings: StepSettings, solver: Solver, step_number: int = 0,
          warm_start: WarmStart | None = None, margin: float | None = None,
-         upcoming: Upcoming | None = None) -> StepResult:
+         upcoming: Upcoming | None = None, backend: Backend = HOST) -> StepResult:
     """Advance `state` by one step of settings.dt; see the module docstring for the checks.
 
     warm_start: forces by contact pair, matched to each attempt's contacts (None: a cold start).
     margin: detection margin of the first attempt (length); None: :func:`base_margin`.
     upcoming: the last step's :attr:`StepResult.upcoming`, taken as the first attempt's contacts
     when it was made for this state and margin (None, or another's: detected here), and its
-    predicted motion when made for this state."""
+    predicted motion when made for this state.
+    backend: where the step's parts run (the solver's own iterations are its own back-end's)."""
     smallest_diameter = 2.0 * float(np.min(state.radius, initial=0.5))
     mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
@@ -134,7 +124,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     margin = base if margin is None else margin
     started = time.perf_counter()
     ahead = upcoming if upcoming is not None and upcoming.state is state else None   # made for this state
-    predicted = predicted_displacement(state, settings, solver.device) if ahead is None else ahead.predicted
+    predicted = backend.predicted(state, settings) if ahead is None else ahead.predicted
     cylinder_margin = np.zeros(state.n)
     renormal, missed = None, 0
     start_from = warm_start
@@ -143,24 +133,21 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         if attempt == 0 and ahead is not None and ahead.margin == margin:
             found = ahead.contacts
         else:
-            found = contact_detection.detect(state, settings.walls, settings.law, predicted, margin,
-                                             settings.detection_slack, cylinder_margin, renormal,
-                                             most_recovered, solver.device)
+            found = backend.detect(state, settings.walls, settings.law, predicted, margin,
+                                   settings.detection_slack, cylinder_margin, renormal, most_recovered)
         t1 = time.perf_counter()
-        program = assemble(state, found, settings.dt, settings.gravity, solver.device)
+        program = backend.assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
-        guess = None if start_from is None else start_from.match(found, solver.device)
+        guess = None if start_from is None else backend.matched(start_from, found)
         t3 = time.perf_counter()
         solution = friction.solve_step(program, solver, settings.friction, mean_diameter, guess, step_number)
-        new_state = advance(state, solution.increments_for(solver.device), settings.dt, solver.device)
+        new_state = backend.advance(state, solution.resident_increments(), settings.dt)
         t4 = time.perf_counter()
         following_margin = _next_margin(missed, margin, base)   # the next step's, if this attempt holds
-        following_motion = predicted_displacement(new_state, settings, solver.device)
+        following_motion = backend.predicted(new_state, settings)
         following = Upcoming(new_state, following_margin, _first_detection(
-            new_state, settings, following_motion, following_margin, most_recovered, solver.device),
-            following_motion)
-        overlap = contact_detection.overlaps(new_state, settings.walls, tolerance, solver.device,
-                                             detected=following.contacts)
+            backend, new_state, settings, following_motion, following_margin, most_recovered), following_motion)
+        overlap = backend.overlaps(new_state, settings.walls, tolerance, detected=following.contacts)
         t5 = time.perf_counter()
         if overlap.largest <= tolerance:
             break
@@ -172,7 +159,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
         if solver.uses_warm_start:   # the redo's contacts hold the attempt's, with the missed ones added
-            start_from = WarmStart.from_step(found, solution.forces_for(solver.device), solver.device)
+            start_from = backend.carried(found, solution.resident_forces())
     else:
         raise OverlapError(
             f"step {step_number}: largest overlap {overlap.largest:.3g} exceeds the tolerance "
@@ -202,36 +189,20 @@ def _merge_pairs(old, new, n):
     return tuple(np.concatenate([a[keep], b]) for a, b in zip(old, new))
 
 
-def advance(state: ParticleState, u, dt: float, device: str = "cpu") -> ParticleState:
-    """The state after a step of dt (time) with increments u = [dx; dth] (6n,): x + dx, v = dx / dt,
-    w = dth / dt. device 'cuda' with u a device array (a solve on the GPU's): made there alone
-    (:class:`colsim.engine.cuda_state.DeviceState`, copied to the host when read there); with u a
-    host array (a solve on the CPU's), on the host, whose arrays the next step on the GPU copies."""
-    n = state.n
-    if device == "cuda" and n and not isinstance(u, np.ndarray):
-        from .cuda_state import advance_on_device
-
-        return advance_on_device(state, u, dt)
-    dx = u[:3 * n].reshape(n, 3)
-    dth = u[3 * n:].reshape(n, 3)
-    return replace(state, position=state.position + dx, velocity=dx / dt,
-                   angular_velocity=dth / dt, time=state.time + dt)
-
-
 def run(state: ParticleState, settings: StepSettings, n_steps: int, solver: Solver,
-        first_step: int = 0, carry: Carry | None = None) -> Iterator[StepResult]:
+        first_step: int = 0, carry: Carry | None = None, backend: Backend = HOST) -> Iterator[StepResult]:
     """Yield the result of each of n_steps steps from `state` (step numbers from first_step + 1).
 
     carry: what the first step starts from (a resumed run's last :attr:`StepResult.carry`, or a
-    warm start from an earlier stage); each result carries what the next step starts from."""
+    warm start from an earlier stage); each result carries what the next step starts from.
+    backend: where the steps' parts run (:func:`step`)."""
     carry = carry or Carry()
     base = base_margin(state, settings)
     upcoming = None
     for k in range(first_step + 1, first_step + n_steps + 1):
-        result = step(state, settings, solver, k, carry.warm_start, carry.margin, upcoming)
+        result = step(state, settings, solver, k, carry.warm_start, carry.margin, upcoming, backend)
         upcoming = result.upcoming
-        warm = (WarmStart.from_step(result.contacts, result.solution.forces_for(solver.device), solver.device)
-                if solver.uses_warm_start else None)
+        warm = backend.carried(result.contacts, result.solution.resident_forces()) if solver.uses_warm_start else None
         carry = result.carry = Carry(warm, next_margin(result.diagnostics, base))
         state = result.state
         yield result

@@ -19,15 +19,15 @@ from __future__ import annotations
 import logging
 import os
 
-from .compiled import HAVE_NUMBA, numba, prange   # noqa: F401 - prange for the kernels' modules
+from .compiled import numba, prange   # noqa: F401 - prange for the kernels' modules
 
 log = logging.getLogger(__name__)
 
 
 def available_threads() -> int:
     """The most threads the kernels can use in this process (numba's NUMBA_NUM_THREADS, by default
-    the machine's cores; 1 without numba)."""
-    return int(numba.config.NUMBA_NUM_THREADS) if HAVE_NUMBA else 1
+    the machine's cores)."""
+    return int(numba.config.NUMBA_NUM_THREADS)
 
 
 def pins_threads(count: int, cpus: int, environ) -> bool:
@@ -56,20 +56,17 @@ def use_threads(count: int) -> int:
     if count > most:
         log.warning("%d threads asked, %d available: using %d", count, most, most)
         count = most
-    if HAVE_NUMBA:
-        if pins_threads(count, allowed_cpus(), os.environ):
-            os.environ["OMP_PROC_BIND"] = "true"
-            log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
-        numba.set_num_threads(count)    # starts numba's threads, on the layer compiled.py chose
-        log.info("--threads %d on numba's %s threading layer", count, threading_layer())
+    if pins_threads(count, allowed_cpus(), os.environ):
+        os.environ["OMP_PROC_BIND"] = "true"
+        log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
+    numba.set_num_threads(count)    # starts numba's threads, on the layer compiled.py chose
+    log.info("--threads %d on numba's %s threading layer", count, threading_layer())
     return count
 
 
 def threading_layer() -> str:
     """The threading layer numba's threads run on ('omp', 'workqueue' or 'tbb'), 'not started'
-    before :func:`use_threads` (or a kernel) has started them, 'none' without numba."""
-    if not HAVE_NUMBA:
-        return "none"
+    before :func:`use_threads` (or a kernel) has started them."""
     try:
         return str(numba.threading_layer())
     except ValueError:   # no thread started yet
@@ -78,4 +75,4 @@ def threading_layer() -> str:
 
 def threads() -> int:
     """The thread count the kernels use now."""
-    return int(numba.get_num_threads()) if HAVE_NUMBA else 1
+    return int(numba.get_num_threads())

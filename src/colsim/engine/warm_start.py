@@ -41,15 +41,9 @@ class WarmStart:
         return len(self.i)
 
     @classmethod
-    def from_step(cls, contacts, forces: np.ndarray, device: str = "cpu") -> "WarmStart":
+    def from_step(cls, contacts, forces: np.ndarray) -> "WarmStart":
         """The forces (m, 5) = (p, q1, q2, r1, r2) of a step's `contacts`, in the global frame
-        (:func:`colsim.engine.operator.global_forces`). device 'cuda': turned on the GPU and kept
-        there for the next step's matching; the host's arrays are copied only when read
-        (:class:`colsim.engine.cuda_warm_start.DeviceWarmStart`)."""
-        if device == "cuda" and contacts.m:
-            from .cuda_warm_start import carried_on_device
-
-            return carried_on_device(contacts, forces)
+        (:func:`colsim.engine.operator.global_forces`)."""
         from .operator import global_forces
 
         m = len(forces)
@@ -62,14 +56,9 @@ class WarmStart:
         """Whether any stored pair pushes (a start worth warming from)."""
         return bool(np.any(np.einsum("ij,ij->i", self.force, self.force) > 0.0))
 
-    def match(self, contacts, device: str = "cpu"):
+    def match(self, contacts):
         """(m, 5) the stored forces of the pairs in `contacts`, in their frames, projected onto their
-        cones; zeros for new pairs. device 'cuda': matched on the GPU and left there, a device array
-        for the solver's first iterate (:mod:`colsim.engine.cuda_warm_start`)."""
-        if device == "cuda":
-            from .cuda_warm_start import match_on_device
-
-            return match_on_device(self, contacts)
+        cones; zeros for new pairs."""
         from .cones import project_coupled_cone
         from .program import ROWS_PER_CONTACT
 

@@ -25,28 +25,6 @@ SOLVERS = defaults.SOLVERS
 log = logging.getLogger(__name__)
 
 
-def device_for(device: str, spheres: float, solver: str = "auto") -> str:
-    """'cpu' or 'cuda' for a pour or collapse of about `spheres` spheres solved by `solver`: `device`
-    itself, or for 'auto' the GPU where APGD solves (auto, apgd), a GPU is visible (numba's
-    simulator is none) and spheres >= GPU_FROM_SPHERES; else the CPU."""
-    if device != "auto":
-        return device
-    if solver not in ("auto", "apgd") or spheres < defaults.GPU_FROM_SPHERES:
-        return "cpu"
-    return "cuda" if gpu_visible() else "cpu"
-
-
-def gpu_visible() -> bool:
-    """Whether numba.cuda sees a CUDA GPU (False on numba's simulator, or without numba)."""
-    try:
-        from numba.core import config
-
-        from ..engine.cuda_operator import cuda   # numba.cuda behind the numpy 2.5 guard
-    except ImportError:
-        return False
-    return not config.ENABLE_CUDASIM and cuda.is_available()
-
-
 def make_solver(name: str = "clarabel", **options) -> Solver:
     """A back-end by name (one of SOLVERS): 'clarabel' (displacement form), 'clarabel-force',
     'apgd' (first-order, :mod:`colsim.solvers.apgd`), 'admm' (operator splitting on the displacement form,
@@ -96,11 +74,6 @@ class AutoSolver(Solver):
         self.apgd = ApgdSolver(**{"max_iter": self.max_iter, "tolerance": self.APGD_TOLERANCE,
                                   "length_floor": lengths * self.APGD_LENGTH_FLOOR,
                                   "overlap_tolerance": lengths * self.APGD_OVERLAP_TOLERANCE, **(apgd or {})})
-
-    @property
-    def device(self) -> str:
-        """Its APGD's: where the steps it solves run."""
-        return self.apgd.device
 
     def length_scale(self) -> float:
         """The factor on APGD's length floor and overlap tolerance: 1 at steps of at least

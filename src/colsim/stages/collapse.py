@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..engine.records import Carry
+from ..engine.backend import HOST, Backend
 from ..engine.solver_contract import Solver
 from ..engine.state import ParticleState
 from ..engine.stepper import run
@@ -121,12 +122,13 @@ def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, s
 
 def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solver: Solver,
              warm_start: WarmStart | None = None, checkpoint: str | Path | None = None, progress=None,
-             stop_after: int | None = None) -> CollapseRun:
+             stop_after: int | None = None, backend: Backend = HOST) -> CollapseRun:
     """Release `column` (height h0) and integrate it with `solver`; see the module docstring.
 
     warm_start: the column's contact forces before release (from its packing), for the first step.
     progress: optional callable(diagnostics) after each step.
     stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
+    backend: where the steps run (:mod:`colsim.engine.backend`; the solver's must be the same).
     """
     step_settings = settings.step_settings(h0)
     fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
@@ -144,7 +146,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     history = DepositHistory()
     at_rest = None
     last = settings.max_steps
-    for result in run(state, step_settings, last - resumed_from, solver, resumed_from, carry):
+    for result in run(state, step_settings, last - resumed_from, solver, resumed_from, carry, backend):
         k, state = result.diagnostics.step, result.state
         diagnostics.append(result.diagnostics)
         is_frame = k % settings.frame_every == 0 or k in (settings.n_steps, last)

@@ -30,8 +30,8 @@ import numpy as np
 
 from ..engine.contacts import fixed_pairs
 from ..engine.records import Carry
-from ..engine.solver_contract import SolverError
-from ..engine.solver_contract import Solver
+from ..engine.backend import HOST, Backend
+from ..engine.solver_contract import Solver, SolverError
 from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
@@ -108,7 +108,7 @@ LOG_INTERVAL_S = 60.0
 
 
 def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
-         checkpoint: str | Path | None = None, progress=None) -> PackingResult:
+         checkpoint: str | Path | None = None, progress=None, backend: Backend = HOST) -> PackingResult:
     """Fill a cylinder of radius settings.r0 until the settled packing is taller than
     settings.height (length), solving each step with `solver`; `rng` places the spheres. A
     ValueError names a setting the pour cannot use, before anything is allocated (a packing
@@ -128,11 +128,12 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
     :data:`~colsim.stages.stopwatch.CHECKPOINT_INTERVAL_S` of wall time without one (atomically);
     a packing started again with the same settings and generator state resumes from it and ends
     with the same packing as one never stopped. None: no checkpoint. progress: optional
-    callable(StepDiagnostics, moving spheres' ParticleState) after each step."""
+    callable(StepDiagnostics, moving spheres' ParticleState) after each step. backend: where the
+    steps run (:mod:`colsim.engine.backend`; the solver's must be the same)."""
     _check(settings)
     fingerprint = _fingerprint(rng, solver, settings)
     saved = load_packing_checkpoint(checkpoint, fingerprint)
-    pour = _Pour(settings, solver, progress)
+    pour = _Pour(settings, solver, progress, backend)
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), settings.density)
     fixed = np.zeros(0, dtype=bool)
     steps, warm, clouds, most_fixed = 0, None, 0, 0
@@ -256,8 +257,8 @@ class _Pour:
     """What the clouds of one packing share: its settings and step, the solver, the stopwatch over all
     sittings, each step's StepDiagnostics (`history`) and the progress callback."""
 
-    def __init__(self, settings: PackSettings, solver: Solver, progress=None):
-        self.settings, self.solver, self.progress = settings, solver, progress
+    def __init__(self, settings: PackSettings, solver: Solver, progress=None, backend: Backend = HOST):
+        self.settings, self.solver, self.progress, self.backend = settings, solver, progress, backend
         self.step = StepSettings(dt=settings.dt, gravity=(0.0, 0.0, -settings.gravity),
                                  walls=Walls(cylinder_radius=settings.r0), law=ContactLaw.uniform(settings.mu, 0.0))
         self.clock, self.history = Stopwatch(), []
@@ -286,7 +287,7 @@ class _Pour:
         max_steps = self.settings.max_steps
         sub, logged = state.subset(moving), time.perf_counter()
         for result in run(sub, replace(self.step, walls=walls), max_steps - steps, self.solver,
-                          first_step=steps, carry=carry):
+                          first_step=steps, carry=carry, backend=self.backend):
             sub, steps = result.state, steps + 1
             logged = self._record(result.diagnostics, sub, steps, logged)
             if is_at_rest(result, self.settings.gravity, rest_energy):

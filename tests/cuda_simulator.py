@@ -1,5 +1,6 @@
-"""numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, CI's GPU), made faster and safe for its many
-threads; nothing here runs on a GPU.
+"""numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1, the tests' GPU), made faster and safe for its many
+threads; nothing here runs on a GPU. conftest.py applies it to the tests' process, and
+simulator_site/sitecustomize.py to the processes they start (the `colsim` command, the benchmarks).
 
 The simulator runs each GPU thread of a block as a Python thread.
 

@@ -1,12 +1,12 @@
 """APGD's iterations on one GPU (issue 46): the kernels of an iteration, its decisions made on the
 device, the residual check there, and the iteration state that stays on the device between checks.
 
-Each kernel is its CPU twin's arithmetic (colsim.solvers.apgd, colsim.engine.cones) for one contact
+Each kernel is its CPU twin's arithmetic (colsim.engine.apgd_iteration, colsim.engine.cones) for one contact
 or one body a thread. Sums over contacts or bodies are taken per block by a fixed tree in shared
 memory, then the blocks' sums in a fixed order: the same bits every run on one device (they differ
 from the CPU's sums by rounding only). A trial step (projection, B' S z, the descent test's sums) is
 followed by one block that adds its blocks' sums and decides as the CPU does, with the CPU's code
-(:func:`colsim.solvers.apgd.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
+(:func:`colsim.engine.apgd_iteration.decide`: accept or backtrack, Nesterov's momentum, the restart), on the
 iteration's scalars kept in a small device array; an accepted step then moves the iterate (the
 roles of three slots move on, nothing is copied); the next trial step takes the gradient at its y
 itself, in the projection's kernel: three launches a trial step. So the host launches trial steps
@@ -27,17 +27,16 @@ import math
 
 import numpy as np
 
-from ..engine.cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
-                                    body_sums_on_device, cast_on_device, contact_arrays_on_device,
-                                    cuda, dot, for_types, full_on_device, gradient_on_device,   # cuda: on numpy 2.5
-                                    gradient_values, kept_device_copy, normalise_on_device,
-                                    project_point_on_device, transpose_on_device, wrench_on_device)
-from ..engine.cones import combine_residuals
-from ..engine.cuda_launch import Prepared, launch
-from ..engine.cuda_state import host_copy, increments_on_device, inverses_on_device, program_array_on_device
-from ..engine.solver_contract import ACTIVE_FRACTION, ConeSolution
-from . import defaults
-from .apgd import decide, lipschitz_estimate, power_start_drawn
+from .cuda_operator import (THREADS, CudaContactOperator, block_reduce, blocks_for,   # first: numba.cuda
+                            body_sums_on_device, cast_on_device, contact_arrays_on_device,
+                            cuda, dot, for_types, four_block_results, full_on_device,   # cuda: on numpy 2.5
+                            gradient_on_device, gradient_values, kept_device_copy, normalise_on_device,
+                            project_point_on_device, transpose_on_device, wrench_on_device)
+from .cones import combine_residuals, contact_residuals
+from .cuda_launch import Prepared, launch
+from .cuda_state import host_copy, increments_on_device, inverses_on_device, program_array_on_device
+from .solver_contract import ACTIVE_FRACTION, ConeSolution
+from .apgd_iteration import decide, extrapolated, lipschitz_estimate, power_start_drawn
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
 #: estimate, Nesterov's theta and beta, lip's decay an iteration, whether the last trial step was
@@ -46,13 +45,16 @@ from .apgd import decide, lipschitz_estimate, power_start_drawn
 LIP, THETA, BETA, LIP_DECAY, ACCEPTED, SLOT, ITERATIONS, BACKTRACKS, RESTARTS = range(9)
 CONTROL_SIZE = 9
 
-#: APGD's storages on the GPU (colsim.solvers.defaults.GPU_STORAGES). float32: the iterate's three
+#: APGD's storages on the GPU, the first the default (colsim.solvers.defaults.GPU_STORAGES). float32: the iterate's three
 #: slots, the bodies' three slots of h = T x, the wrenches between them and these contact arrays, as a
 #: trial step reads them, hold float32 (half the bytes of an iteration that moves them: its time on a
 #: GPU, whose iteration is bound by memory); the kernels' arithmetic stays float64 wherever a float64
 #: takes part, and a residual check, the forces and the increments are made in float64 from the stored
 #: iterate widened (:meth:`CudaIteration._widen`) and the float64 contact arrays: the same program,
 #: checked as exactly as under float64
+STORAGES = ("float64", "float32")
+
+#: the contact arrays a float32 iteration stores narrow
 NARROW_GEOMETRY = ("s", "normal", "tangent1", "tangent2", "radius_i", "radius_j", "lever")
 
 #: where x, x_prev and x_new are among the three slots of x (and hx, hx_prev, h_new among those of
@@ -83,7 +85,7 @@ def _project_kernel(x_0, x_1, x_2, h_0, h_1, h_2, control, inv_mass, c, mu_s, mu
     the CPU's arithmetic); its wrench from the force S x_new into work (m, 9) (the first half of
     T x_new: :func:`colsim.engine.cuda_operator.wrench_on_device`, s and the frames from the contact
     geometry); parts[0] and parts[1] (per block): ||x_new - y||^2 and g . (x_new - x)
-    (colsim.solvers.apgd._project_step). A backtrack takes the same gradient again (the same y,
+    (colsim.engine.apgd_iteration._project_step). A backtrack takes the same gradient again (the same y,
     the same bits): that costs less than a kernel of its own after each accepted step, which
     wrote g for this one to read back."""
     moved = cuda.shared.array(THREADS, dtype=np.float64)
@@ -100,11 +102,7 @@ def _project_kernel(x_0, x_1, x_2, h_0, h_1, h_2, control, inv_mass, c, mu_s, mu
         g0, g1, g2, g3, g4 = gradient_values(k, _slot(h_0, h_1, h_2, control, X), _slot(h_0, h_1, h_2, control, X_PREV),
                                              beta, True, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever, c)
         o = 5 * k
-        y0 = x[o] + beta * (x[o] - x_prev[o])
-        y1 = x[o + 1] + beta * (x[o + 1] - x_prev[o + 1])
-        y2 = x[o + 2] + beta * (x[o + 2] - x_prev[o + 2])
-        y3 = x[o + 3] + beta * (x[o + 3] - x_prev[o + 3])
-        y4 = x[o + 4] + beta * (x[o + 4] - x_prev[o + 4])
+        y0, y1, y2, y3, y4 = _extrapolated(x, x_prev, o, beta)
         p, q1, q2, r1, r2 = project_point_on_device(y0 - step * g0, y1 - step * g1, y2 - step * g2, y3 - step * g3,
                                                     y4 - step * g4, mu_s[k], mu_r_s[k])
         x_new[o], x_new[o + 1], x_new[o + 2], x_new[o + 3], x_new[o + 4] = p, q1, q2, r1, r2
@@ -125,7 +123,7 @@ def _project_kernel(x_0, x_1, x_2, h_0, h_1, h_2, control, inv_mass, c, mu_s, mu
 def _transpose_change_kernel(work, start, entry, h_0, h_1, h_2, control, inv_mass, parts):
     """h_new (6n,) = T x_new from the wrenches in work (the second half of T x_new, one body a thread:
     :func:`colsim.engine.cuda_operator.body_sums_on_device`), and parts[2] (per block of bodies):
-    ||h_new - hy||^2 weighted by inv_mass (colsim.solvers.apgd._weighted_change), each body's three
+    ||h_new - hy||^2 weighted by inv_mass (colsim.engine.apgd_iteration._weighted_change), each body's three
     force entries, then its three moment entries; hx, hx_prev and h_new from the three slots of h,
     and hy = hx + beta (hx - hx_prev) made here, as the CPU's extrapolation makes it."""
     cache = cuda.shared.array(THREADS, dtype=np.float64)
@@ -158,6 +156,10 @@ def _widen_kernel(x_0, x_1, x_2, control, out):
 
 
 _decide_on_device = cuda.jit(device=True)(getattr(decide, "py_func", decide))
+#: the extrapolated point y = x + beta (x - x_prev) of one contact (the CPU's scalar code)
+_extrapolated = cuda.jit(device=True)(getattr(extrapolated, "py_func", extrapolated))
+#: one contact's parts of the residual check (the CPU's scalar code)
+_contact_residuals = cuda.jit(device=True)(getattr(contact_residuals, "py_func", contact_residuals))
 
 
 #: threads of the decision's one block, a power of two: they add the trial step's block sums (up to
@@ -173,7 +175,7 @@ FEW_DECIDE_THREADS = 32
 def _decide(parts, control, moved, uphill, change):
     """The decision's block: the trial step's sums (each row of parts, thread t adding blocks t,
     t + threads, ..., then a fixed tree in the shared arrays moved, uphill and change, one value a
-    thread) and, in thread 0, APGD's decision (:func:`colsim.solvers.apgd.decide`, the CPU's code)
+    thread) and, in thread 0, APGD's decision (:func:`colsim.engine.apgd_iteration.decide`, the CPU's code)
     into the control array; an accepted step moves the slots' roles on (x_new becomes x)."""
     t = cuda.threadIdx.x
     dd = up = dh = 0.0
@@ -245,22 +247,8 @@ def _residual_kernel(control, h_0, h_1, h_2, x_0, x_1, x_2, inv_mass, s, ci, cj,
         g0, g1, g2, g3, g4 = gradient_values(k, hx, hx, 0.0, False, inv_mass, s, ci, cj, nrm, t1, t2, ri, rj, lever,
                                              c)
         x = _slot(x_0, x_1, x_2, control, X)
-        o = 5 * k
-        y0, y1, y2 = g0 / s[o], g1 / s[o + 1], g2 / s[o + 2]
-        y3, y4 = g3 / s[o + 3], g4 / s[o + 4]
-        p, q1, q2 = s[o] * x[o], s[o + 1] * x[o + 1], s[o + 2] * x[o + 2]
-        r1, r2 = s[o + 3] * x[o + 3], s[o + 4] * x[o + 4]
-        primal[t] = mu[k] * math.sqrt(y1 * y1 + y2 * y2) + mu_r[k] * math.sqrt(y3 * y3 + y4 * y4) - y0
-        dual[t] = max(math.sqrt(q1 * q1 + q2 * q2) - mu[k] * p, math.sqrt(r1 * r1 + r2 * r2) - mu_r[k] * p, -p)
-        total[t] = max(p, 0.0)
-        comp[t] = abs(p * y0 + q1 * y1 + q2 * y2 + r1 * y3 + r2 * y4)
-    block_reduce(primal, t, True)
-    block_reduce(dual, t, True)
-    block_reduce(total, t, False)
-    block_reduce(comp, t, False)
-    if t == 0:
-        b = cuda.blockIdx.x
-        parts[0, b], parts[1, b], parts[2, b], parts[3, b] = primal[0], dual[0], total[0], comp[0]
+        primal[t], dual[t], total[t], comp[t] = _contact_residuals(k, g0, g1, g2, g3, g4, x, s, mu, mu_r)
+    four_block_results(parts, t, primal, dual, total, comp, True, True, False, False)
 
 
 # -- an iteration on the device -----------------------------------------------------------------
@@ -356,7 +344,7 @@ def _forces_kernel(s, x, forces):
         forces[i] = s[i] * x[i]
 
 
-#: :func:`colsim.solvers.apgd.power_start`'s numbers on the device (all drawn so far)
+#: :func:`colsim.engine.apgd_iteration.power_start`'s numbers on the device (all drawn so far)
 _power_start_on_device = None
 
 
@@ -385,7 +373,7 @@ def _copy(device_array):
 
 
 class CudaIteration:
-    """The APGD state on the device: the fields and methods of :class:`colsim.solvers.apgd._Iteration`,
+    """The APGD state on the device: the fields and methods of :class:`colsim.engine.apgd_iteration.CpuIteration`,
     as device arrays, from the same arguments (host or device arrays): the scaled problem (c (5m,),
     mu_s, mu_r_s (m,), inv_mass (6n,), the scaling (m, 5) or (5m,)) and the first iterate x (5m,);
     hx = T x and the Lipschitz estimate (the same power iteration,
@@ -408,9 +396,9 @@ class CudaIteration:
     read them."""
 
     def __init__(self, c, mu_s, mu_r_s, inv_mass, x, scaling, lip_decay, operator, mu, mu_r, warm=None,
-                 storage: str = defaults.DEFAULT_GPU_STORAGE):
-        if storage not in defaults.GPU_STORAGES:
-            raise ValueError(f"APGD's storage on the GPU is {' or '.join(defaults.GPU_STORAGES)}, not {storage!r}")
+                 storage: str = "float64"):
+        if storage not in STORAGES:
+            raise ValueError(f"APGD's storage on the GPU is {' or '.join(STORAGES)}, not {storage!r}")
         self.m = len(mu_s)
         device = operator if isinstance(operator, CudaContactOperator) else CudaContactOperator.from_operator(operator)
         self.geometry = device.geometry(_to_device(scaling).reshape(5 * self.m))
@@ -446,7 +434,7 @@ class CudaIteration:
 
     @classmethod
     def of_program(cls, program, warm_start, precondition: bool, lip_decay: float,
-                   storage: str = defaults.DEFAULT_GPU_STORAGE) -> "CudaIteration":
+                   storage: str = "float64") -> "CudaIteration":
         """The iteration of :meth:`colsim.solvers.apgd.ApgdSolver.prepare` for a program with m > 0
         contacts, made on the device: the row scales from the device's diagonal of B Mbar^-1 B', the
         scaled coefficients, c = S (B Mbar^-1 fbar + gap e_n) and the first iterate (the warm start's
@@ -481,7 +469,7 @@ class CudaIteration:
     @classmethod
     def like(cls, start, operator, mu, mu_r) -> "CudaIteration":
         """The device's iteration from the same arguments as the CPU's `start` (an unstarted
-        :class:`colsim.solvers.apgd._Iteration`): both begin at the same point."""
+        :class:`colsim.engine.apgd_iteration.CpuIteration`): both begin at the same point."""
         return cls(start.c, start.mu_s, start.mu_r_s, start.inv_mass, start.x, start.scaling, start.lip_decay,
                    operator, mu, mu_r)
 
@@ -511,7 +499,7 @@ class CudaIteration:
         return x, hx
 
     def _lipschitz_estimate(self) -> float:
-        """:func:`colsim.solvers.apgd.lipschitz_estimate` with the device's kernels: G T v into one of
+        """:func:`colsim.engine.apgd_iteration.lipschitz_estimate` with the device's kernels: G T v into one of
         two buffers, so that v and G T v never share one; the norms stay on the device, so the one
         copy to the host is the last product's."""
         zero = full_on_device(5 * self.m, 0.0)
@@ -672,8 +660,8 @@ class DeviceSolution(ConeSolution):
     (6n,)) and forces (`on_device`, (m, 5)) stay on the device until read: the host's `increments`
     and `forces` are copied from there when first read (a file, a packing's rest test, a solver on
     the CPU), and keep the device's as their copy. A step on the GPU reads neither: its update takes
-    the device's increments (:meth:`increments_for`), its warm start and a Coulomb fixed point's next
-    solve the device's forces (:meth:`forces_for`), and its count of active contacts is made there
+    the device's increments (:meth:`resident_increments`), its warm start and a Coulomb fixed point's next
+    solve the device's forces (:meth:`resident_forces`), and its count of active contacts is made there
     (:meth:`active_contacts`). m > 0."""
 
     def __init__(self, increments, on_device, status, iterations, setup_time, solve_time, info=None, backend=""):
@@ -690,11 +678,11 @@ class DeviceSolution(ConeSolution):
             return self.increments
         raise AttributeError(name)
 
-    def forces_for(self, device: str):
-        return self.on_device if device == "cuda" else self.forces
+    def resident_forces(self):
+        return self.on_device
 
-    def increments_for(self, device: str):
-        return self.increments_on_device if device == "cuda" else self.increments
+    def resident_increments(self):
+        return self.increments_on_device
 
     def active_contacts(self) -> int:
         """:meth:`colsim.engine.solver_contract.ConeSolution.active_contacts`, counted on the device
