@@ -132,13 +132,109 @@ def test_every_validation_page_names_its_lever_commit_and_config(page):
 
 
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+#: a commit hash: 7-40 hex digits holding at least one digit and one letter (so "deadbeef" and
+#: "1000000" are not hashes)
+COMMIT = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+ISSUE = re.compile(r"\bissues? #?\d+", re.I)
+#: where the lead's engine and solvers live: checked on their own, so that their lines are named apart
+ENGINE_AND_SOLVERS = (ROOT / "src" / "colsim" / "engine", ROOT / "src" / "colsim" / "solvers")
 
 
-def test_the_code_carries_no_dates():
-    """Issue 47.5: a date belongs beside its measurement in docs/ (with its commit and machine), not in
-    a docstring or comment of the package or the workflow, where it goes stale unseen."""
-    files = [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
-             *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml"]
-    dated = [f"{path.relative_to(ROOT)}:{n}" for path in files
-             for n, line in enumerate(path.read_text().splitlines(), 1) if DATE.search(line)]
+def _code_files() -> list[Path]:
+    return [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
+            *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml"]
+
+
+def _in_engine_or_solvers(path: Path) -> bool:
+    return any(folder in path.parents for folder in ENGINE_AND_SOLVERS)
+
+
+def _dated_lines(files) -> list[str]:
+    """file:line of each line holding a date, a commit hash or an issue number."""
+    return [f"{path.relative_to(ROOT)}:{n}" for path in files
+            for n, line in enumerate(path.read_text().splitlines(), 1)
+            if DATE.search(line) or COMMIT.search(line) or ISSUE.search(line)]
+
+
+def test_the_code_carries_no_dates_commits_or_issue_numbers():
+    """A date, a commit or an issue belongs beside its measurement in docs/ (or in CHANGELOG.md), not
+    in a docstring or comment of the package or the workflow, where it goes stale unseen."""
+    dated = _dated_lines(path for path in _code_files() if not _in_engine_or_solvers(path))
     assert not dated, dated
+
+
+def test_the_engine_and_solvers_carry_no_dates_commits_or_issue_numbers():
+    """The same for src/colsim/engine and src/colsim/solvers, apart so that their lines are named apart."""
+    dated = _dated_lines(path for path in _code_files() if _in_engine_or_solvers(path))
+    assert not dated, dated
+
+
+def test_the_dated_line_finder_sees_dates_commits_and_issues():
+    assert _finds("at 70c90ca on 2026-11-29") and _finds("see issue 46") and _finds("(issues #31)")
+    assert not _finds("deadbeef 1000000 tissue 4 decade")
+
+
+def _finds(text: str) -> bool:
+    return bool(DATE.search(text) or COMMIT.search(text) or ISSUE.search(text))
+
+
+# The project speaks of itself: none of these words about how colsim was made, rather than about
+# colsim, in anything it ships. Whole words: a letter or digit on either side makes another word
+# ("silent", "talented"); an underscore does not (a test's name is checked too).
+# forbidden words: the list begins (lines up to its end are not searched)
+#: The stepper's own `carry` (an annotation `carry: Carry`, a docstring's "carry: what the first step
+#: starts from") is not the word.
+FORBIDDEN = re.compile(r"(?i:(?<![A-Za-z0-9])(sittings?|lent|device time|give_back|budget)(?![A-Za-z0-9]))"
+                       r"|(?<![A-Za-z0-9_])carry:(?! *(Carry\b|[a-z]))|\$OUT(?![A-Za-z0-9_])")
+SHIPPED_FOLDERS = ("src", "benchmarks", "workflow", "config", "tests")
+TEXT_SUFFIXES = {".md", ".py", ".smk", ".yaml", ".yml", ".sh", ".txt", ".rst", ".toml", ".cfg", ".ini", ".html"}
+
+
+@pytest.mark.parametrize("text, forbidden", [
+    ("a silent run", False), ("talented", False), ("the second sitting", True), ("Sittings", True),
+    ("no GPU lent", True), ("def test_over_sittings():", True), ("its device time", True),
+    ("give_back()", True), ("the budget", True), ('carry: [".gpu"]', True), ("carry: Carry | None", False),
+    ("carry: what the first step starts from", False), ("class Carry:", False), ("`carry:`", True),
+    ("in $OUT/x", True), ("${OUTPUT}", False), ("$OUTPUT", False),
+])
+def test_the_forbidden_word_finder_takes_whole_words(text, forbidden):
+    assert bool(FORBIDDEN.search(text)) is forbidden
+
+
+# forbidden words: the list ends
+
+
+def _shipped_files() -> list[Path]:
+    files = [README, ROOT / "Snakefile", ROOT / "config.yaml"]
+    for folder in SHIPPED_FOLDERS:
+        files += [p for p in (ROOT / folder).rglob("*") if p.is_file() and p.suffix in TEXT_SUFFIXES
+                  and "__pycache__" not in p.parts and ".cache" not in p.parts]
+    return files
+
+
+def _searched_lines(path: Path):
+    """(number, line) of a file's lines, those of this file's word lists left out."""
+    inside = False
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if path == Path(__file__).resolve() and line.startswith("# forbidden words: the list"):
+            inside = "begins" in line
+            continue
+        if not inside:
+            yield n, line
+
+
+def _forbidden_lines(files) -> list[str]:
+    return [f"{path.relative_to(ROOT)}:{n}: {match.group(0)!r}" for path in files
+            for n, line in _searched_lines(path) for match in [FORBIDDEN.search(line)] if match]
+
+
+def test_the_project_speaks_only_of_itself():
+    """README.md, docs/, src/, benchmarks/, workflow/, config/ and tests/ name no part of how colsim
+    was developed (src/colsim/engine and solvers apart, below)."""
+    found = _forbidden_lines(path for path in _shipped_files() if not _in_engine_or_solvers(path))
+    assert not found, found
+
+
+def test_the_engine_and_solvers_speak_only_of_themselves():
+    found = _forbidden_lines(path for path in _shipped_files() if _in_engine_or_solvers(path))
+    assert not found, found

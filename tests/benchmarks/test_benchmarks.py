@@ -170,7 +170,7 @@ def test_machine_versions_and_commit():
 
 def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path):
     """A job's figures come from its Snakemake benchmark file (the last line); a job whose wall is
-    under 0.9 of its file's wall over all sittings was resumed from a checkpoint."""
+    under 0.9 of its file's wall over all segments was resumed from a checkpoint."""
     import study_cost
 
     run = tmp_path / "r0_4" / "seed_1" / "pack_x" / "packing.nc"
@@ -184,7 +184,7 @@ def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path)
     assert study_cost.with_benchmark({"wall_all": 9870.0}, bench)["resumed"] is True
     assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["resumed"] is False
     assert study_cost.with_benchmark({"wall_all": 3900.0, "resumed_from": 300}, bench)["resumed"] is True
-    # the CPU over all sittings: the file's where it has one; a resumed job's last sitting is not the whole
+    # the CPU over all segments: the file's where it has one; a resumed job's last segment is not the whole
     assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": 5202.7}, bench)["cpu_all"] == 5202.7
     assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": float("nan")}, bench)["cpu_all"] is None
     assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["cpu_all"] == 1314.41
