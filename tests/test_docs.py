@@ -131,6 +131,32 @@ def test_every_validation_page_names_its_lever_commit_and_config(page):
     assert re.search(r"config", text, flags=re.I), "no configuration named"
 
 
+VALIDATION_PAGES = sorted(p for p in (ROOT / "docs" / "validation").glob("*.md") if p.name != "README.md")
+#: the shape of a validation page, in this order (a "## Figure" between Answer and Caveats where it has one)
+PAGE_SHAPE = ("## Question", "## Config and command", "## Answer", "## Caveats")
+
+
+@pytest.mark.parametrize("page", VALIDATION_PAGES, ids=lambda page: page.name)
+def test_every_validation_page_has_the_one_shape(page):
+    """The question, the config and command, the answer, the caveats, in that order, and one
+    provenance line at the end naming a commit."""
+    lines = page.read_text().splitlines()
+    headings = [line for line in lines if line in PAGE_SHAPE]
+    assert headings == list(PAGE_SHAPE), f"{page.name}: headings {headings}"
+    provenance = [line for line in lines if line.startswith("Provenance:")]
+    assert len(provenance) == 1 and COMMIT.search(" ".join(lines[lines.index(provenance[0]):]))
+
+
+@pytest.mark.parametrize("page", VALIDATION_PAGES, ids=lambda page: page.name)
+def test_a_page_of_the_effective_lever_says_so_first(page):
+    """A page made under the effective lever (an earlier model) says so in its first line after the
+    title, as the index's table says of it."""
+    index = (ROOT / "docs" / "validation" / "README.md").read_text()
+    row = next(line for line in index.splitlines() if f"]({page.name})" in line)
+    first = next(line for line in page.read_text().splitlines()[1:] if line.strip())
+    assert ("| effective |" in row) == ("effective rolling lever" in first), (page.name, first)
+
+
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 #: a commit hash: 7-40 hex digits holding at least one digit and one letter (so "deadbeef" and
 #: "1000000" are not hashes)
@@ -186,7 +212,7 @@ def _finds(text: str) -> bool:
 #: starts from") is not the word.
 FORBIDDEN = re.compile(r"(?i:(?<![A-Za-z0-9])(sittings?|lent|device time|give_back|budget)(?![A-Za-z0-9]))"
                        r"|(?<![A-Za-z0-9_])carry:(?! *(Carry\b|[a-z]))|\$OUT(?![A-Za-z0-9_])")
-SHIPPED_FOLDERS = ("src", "benchmarks", "workflow", "config", "tests")
+SHIPPED_FOLDERS = ("docs", "src", "benchmarks", "workflow", "config", "tests")
 TEXT_SUFFIXES = {".md", ".py", ".smk", ".yaml", ".yml", ".sh", ".txt", ".rst", ".toml", ".cfg", ".ini", ".html"}
 
 
