@@ -131,6 +131,13 @@ def test_every_validation_page_names_its_lever_commit_and_config(page):
     assert re.search(r"config", text, flags=re.I), "no configuration named"
 
 
+def test_the_readme_results_table_is_the_data_s():
+    """The README's results table is what `colsim docs` makes from docs/data, to the character."""
+    from colsim.study.docs_tables import regenerate
+
+    assert regenerate(ROOT)[README] == README.read_text(encoding="utf-8"), "run `colsim docs`"
+
+
 VALIDATION_PAGES = sorted(p for p in (ROOT / "docs" / "validation").glob("*.md") if p.name != "README.md")
 #: the shape of a validation page, in this order (a "## Figure" between Answer and Caveats where it has one)
 PAGE_SHAPE = ("## Question", "## Config and command", "## Answer", "## Caveats")
