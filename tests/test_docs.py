@@ -138,6 +138,25 @@ def test_the_readme_results_table_is_the_data_s():
     assert regenerate(ROOT)[README] == README.read_text(encoding="utf-8"), "run `colsim docs`"
 
 
+RECORD_CELL = re.compile(r"\| ([A-Za-z0-9_.-]+) \((\d+)\) \|$")
+
+
+def test_every_record_performance_cites_is_kept_with_its_provenance():
+    """Each row of docs/performance.md's tables names a record of benchmarks/records/ that exists
+    and holds the machine, the device, the commit, the date and the figures; the rows name some."""
+    import json
+
+    cited = {m.group(1) for line in (ROOT / "docs" / "performance.md").read_text().splitlines()
+             for m in [RECORD_CELL.search(line)] if m}
+    assert len(cited) >= 5, cited
+    for name in sorted(cited):
+        path = ROOT / "benchmarks" / "records" / f"{name}.json"
+        assert path.is_file(), f"docs/performance.md cites {name}, which benchmarks/records/ lacks"
+        record = json.loads(path.read_text())
+        assert {"machine", "device", "git", "date", "figures"} <= set(record), (name, sorted(record))
+        assert DATE.fullmatch(record["date"]) and COMMIT.fullmatch(record["git"]["commit"]), name
+
+
 VALIDATION_PAGES = sorted(p for p in (ROOT / "docs" / "validation").glob("*.md") if p.name != "README.md")
 #: the shape of a validation page, in this order (a "## Figure" between Answer and Caveats where it has one)
 PAGE_SHAPE = ("## Question", "## Config and command", "## Answer", "## Caveats")
