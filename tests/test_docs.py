@@ -194,7 +194,8 @@ ENGINE_AND_SOLVERS = (ROOT / "src" / "colsim" / "engine", ROOT / "src" / "colsim
 
 def _code_files() -> list[Path]:
     return [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
-            *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml"]
+            *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml",
+            *(ROOT / "config").glob("*.yaml")]
 
 
 def _in_engine_or_solvers(path: Path) -> bool:
