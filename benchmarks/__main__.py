@@ -32,7 +32,7 @@ import record   # noqa: E402
 
 #: the benchmarks, in the order `all` runs them
 NAMES = ("packings", "step", "solvers", "collapse", "apgd_iteration", "threads", "crossover",
-         "stopping", "trajectory", "tolerance", "cold_step", "gauss_seidel", "study_cost", "cuda_operator", "gpu",
+         "stopping", "trajectory", "tolerance", "cold_step", "study_cost", "cuda_operator", "gpu",
          "device_copies", "ptx", "host_work", "scatter", "kernel_trace", "checkpoints")
 
 #: the column of `all` (collapse.column_file's r0, aspect ratio, seed, packing solver and dt)
@@ -57,7 +57,6 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
             "tolerance": [*c, "--tolerances", "1e-3", "--steps", "100", "--record",
                           str(scratch / "tolerance.jsonl")],
             "cold_step": c,
-            "gauss_seidel": [*c, "--steps", "2", "--n-steps", "100", "--variants", "down:1"],
             "study_cost": _study_results(),
             "cuda_operator": _cuda(["--spheres", "200", "--repeat", "1"]),
             "gpu": _cuda(["--spheres", "100", "--iterations", "3"]),
@@ -73,7 +72,6 @@ def arguments_for_all(name: str, quick: bool, column: Path | None, scratch: Path
         "packings": ["1000", "4000"], "step": [], "solvers": [], "collapse": [],
         "apgd_iteration": [], "threads": c, "crossover": c, "stopping": [*c, "--steps", "2", "50", "300", "900"],
         "trajectory": c, "tolerance": [*c, "--record", str(scratch / "tolerance.jsonl")], "cold_step": c,
-        "gauss_seidel": [*c, "--steps", "2", "50", "150", "400"],
         "study_cost": _study_results(),
         "cuda_operator": _cuda([]),
         "gpu": _cuda([]),

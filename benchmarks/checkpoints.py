@@ -7,8 +7,7 @@ steps, a frame every `--frame-every`; the column's state, its warm start and eac
 diagnostics), with nothing stepped: the column (`colsim trim`), or one of radius R0 tiled from it
 (benchmarks/tiling.py), stands for every frame. Prints the seconds of each checkpoint and their sum,
 and the seconds of one deposit measure (the main mass, h_inf, r_inf: what the rest test measures on
-a frame it reads). Before 53fad35 a checkpoint held every frame so far, so its cost grew with the
-run (docs/gpu-record.md, "Work that grew with the run").
+a frame it reads).
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@ pair of products an APGD iteration makes, per call.
 
     python -m benchmarks cuda_operator --spheres 73000 704000 2000000 --repeat 20
 
-The column is synthetic, as in issue 46's measurements: a jittered cubic lattice of spheres (diameter
+The column is synthetic, as in `benchmarks gpu`'s lattices: a jittered cubic lattice of spheres (diameter
 0.375, spacing 0.376) in a box of aspect ratio 5, each sphere in contact with its lattice neighbours
 along +x, +y and +z (about 3 contacts a sphere), frames and radii as colsim's detection makes them.
 CPU: colsim.engine.operator on the process's numba threads (NUMBA_NUM_THREADS, all cores by default),

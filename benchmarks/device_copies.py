@@ -1,5 +1,5 @@
 """The copies between host and GPU a collapse step makes, by where they are made: what keeping a
-step's data on the device (issue 46, "kernels at 80 %") has left to remove.
+step's data on the device has left to remove.
 
     NUMBA_ENABLE_CUDASIM=1 python -m benchmarks device_copies          # here, on numba's simulator
     python -m benchmarks device_copies --steps 5                        # on a GPU
@@ -14,8 +14,8 @@ colsim function that made it, and so is each device array made (`cuda.device_arr
 `device_array_like`, `to_device`: an allocation on the device each); on numba's simulator, so is each
 kernel's launch, and on a GPU each launch made the plain way (numba-cuda's dispatcher, not
 `colsim.engine.cuda_launch.launch`), by kernel. The count of a step's copies depends on its attempts
-and on the solver's residual checks, not on the column's size (a copy from the host costs about 0.15 ms on an
-H200 whatever its size, docs/gpu-record.md, "The third GPU sitting"); the bytes grow with it.
+and on the solver's residual checks, not on the column's size (a small copy's cost hardly depends on its size); the bytes
+grow with it.
 
 `--redo SIDE`: one step that is redone instead (:func:`redone_step`), counted after the same step
 once uncounted: a sphere flies into a resting one and pushes it into a third that the first attempt
@@ -79,8 +79,8 @@ def counting_copies():
 
 def counting_allocations():
     """Patch numba.cuda's ways of making a device array (device_array, device_array_like, to_device) to
-    count them; returns (counts, bytes), Counters by caller. An allocation of 8 kB on an H200 took
-    43-51 us (docs/gpu-record.md, "The third GPU sitting"), as much as a small copy."""
+    count them; returns (counts, bytes), Counters by caller (a small allocation costs about as much
+    as a small copy)."""
     from numba import cuda
 
     counts, sizes = collections.Counter(), collections.Counter()

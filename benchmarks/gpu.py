@@ -453,7 +453,7 @@ def collapse_steps(column: str, steps: int, device: str, profile: str | None = N
     steps, and their count, apart), iterations a step, the end positions, and on a GPU the share of
     the wall time its kernels ran (:func:`kernels_busy`), and by step its seconds, iterations,
     redone attempts, missed contacts, detection margin and contacts (which steps are redone, and
-    why: the fifth sitting's r0 = 13 steps redid 9 of 100); profile: a file for cProfile's statistics
+    why); profile: a file for cProfile's statistics
     of the steps (None: none); trace: a file for the steps' kernel trace (benchmarks/kernel_trace.py:
     the card's busy share, idle gaps and kernels; None: none)."""
     from colsim import io

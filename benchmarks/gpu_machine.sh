@@ -1,21 +1,19 @@
 #!/usr/bin/env bash
-# The issue-46 measurements in one call on a lent GPU machine, the CPU baseline (the host's threads)
-# in the same call. Prepared here first (benchmarks/README.md, "On a lent GPU"): .gpu/ holds the
-# wheels the machine's image lacks (clarabel, netCDF4, cftime) and the column files to collapse.
+# The GPU measurements in one command, on a machine with one NVIDIA GPU, with the CPU baseline (the
+# host's threads) in the same command. Make .gpu/ first (benchmarks/gpu_prepare.sh): the wheels the
+# machine's Python may lack (clarabel, netCDF4, cftime) and the column files to collapse.
 #
 #   bash benchmarks/gpu_machine.sh                      # the defaults below
 #   bash benchmarks/gpu_machine.sh --spheres 100 --iterations 2   # any `benchmarks gpu` arguments
 #
-# Records go to $OUT (the device tool's folder that comes back), else results/benchmarks.
+# Records go to $COLSIM_BENCHMARK_RESULTS, else results/benchmarks.
 # STAGES (default "bench rest pour") picks what runs, in that order: the benchmark, "scatter" (not by
 # default: the same-answer runs on both devices at once), the collapses of .gpu/rest/ to rest, the
-# pours of .gpu/pour/ with their collapses; "pool" (not by default: a step's allocations, below); "big"
-# (not by default, last)
-# adds the first BIG_STEPS (100) steps of an r0 = BIG_R0 (13) column on the GPU, tiled from
-# BIG_SOURCE (benchmarks/tiling.py: about 657,000 spheres from r0 = 6, a timing, not a pour): by
-# default .gpu/rest/r0_6_a5_seed1.nc, else the column of a pour of r0 = 6 made on this machine
-# (results/gpu-pour/r0_6_seed1/column.nc: `STAGES=pour` in the same call, or in an earlier one while
-# the machine stayed warm). benchmarks/gpu_prepare.sh makes .gpu/ here.
+# pours of .gpu/pour/ with their collapses; "big" (not by default, last) adds the first BIG_STEPS
+# (100) steps of an r0 = BIG_R0 (13) column on the GPU, tiled from BIG_SOURCE (benchmarks/tiling.py:
+# about 657,000 spheres from r0 = 6, a timing, not a pour): by default .gpu/rest/r0_6_a5_seed1.nc,
+# else the column of a pour of r0 = 6 made on this machine (results/gpu-pour/r0_6_seed1/column.nc:
+# `STAGES=pour` in the same command or an earlier one).
 set -euo pipefail
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/colsim-site \
     .gpu/whl/*.whl
@@ -30,9 +28,11 @@ if [ -n "${GPU_TESTS:-}" ]; then
 fi
 
 stages=" ${STAGES:-bench rest pour} "
+results=${COLSIM_BENCHMARK_RESULTS:-results/benchmarks}
+mkdir -p "$results"
 
 # busy COMMAND...: runs it, then prints the share of its wall time in which the GPU ran a kernel
-# (issue 46's "kernels at least 80 % of a step"): the mean of nvidia-smi's utilisation, read every
+# (the "kernels at least 80 % of a step"): the mean of nvidia-smi's utilisation, read every
 # 200 ms in the background (each reading: the share of its last sample period with a kernel running),
 # its start, imports and kernels' compilation included. Returns the command's exit status.
 busy() {
@@ -51,12 +51,12 @@ if [[ "$stages" == *" bench "* ]]; then
     if [ $# -eq 0 ]; then
         columns=(.gpu/*.nc)
         set -- --spheres 73000 704000 2000000 --iterations 60 --columns "${columns[@]}" --steps 20 \
-            --profile "${OUT:-results/benchmarks}/profiles"
+            --profile "$results/profiles"
     fi
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
+    python3 -m benchmarks --results "$results" gpu "$@" || echo "benchmarks gpu: failed (exit $?)"
 fi
 
-# The same answer (issue 46): `python -m benchmarks scatter` on SCATTER_COLUMN (default r0_3_a2_seed1 of
+# The same answer : `python -m benchmarks scatter` on SCATTER_COLUMN (default r0_3_a2_seed1 of
 # .gpu/rest/) with its settings, on both devices at once: the GPU's runs (the settings' own, each of
 # SCATTER_TOLERANCES, default "9e-6 1.1e-5", and each draw of SCATTER_GPU_DRAWS, default "1-2": positions
 # moved by 1e-12 d), SCATTER_GPU_JOBS (default 1) at once on the one card, and beside them the CPU's (the
@@ -66,27 +66,20 @@ fi
 # placed in the CPU's scatter (this call's CPU runs and SCATTER_ALSO's records), come back as
 # scatter-*.json, and the runs' records as scatter-*.jsonl (resumable in results/ there; on a warm machine
 # a later call goes on from them). SCATTER_LIMIT (seconds) stops the GPU's scatter, its finished runs
-# kept, its tables then left to be made here (`scatter --also`). With SCATTER_GPU_UNFUSED=1 the
-# GPU's runs are benchmarks/unfused.py's (kernels compiled with libNVVM's -fma=0, rounding as the plain
-# CPU; recorded as "cuda-unfused"), after its check that a kernel's a * b + c is then not fused. With
-# SCATTER_GPU_STORAGE=float32 they store APGD's arrays in float32 (`--gpu-storage`; "cuda-float32").
+# kept, its tables then left to be made elsewhere (`scatter --also`). With SCATTER_GPU_STORAGE=float32 they store APGD's arrays in float32 (`--gpu-storage`; "cuda-float32").
 if [[ "$stages" == *" scatter "* ]]; then
     column=.gpu/rest/${SCATTER_COLUMN:-r0_3_a2_seed1}
     common=("$column.nc" --settings "$column.settings.yaml" --tolerances ${SCATTER_TOLERANCES:-9e-6 1.1e-5})
     gpu=(--device cuda --gpu-storage "${SCATTER_GPU_STORAGE:-float64}")
-    if [ "${SCATTER_GPU_UNFUSED:-0}" = 1 ]; then
-        gpu+=(--unfused)
-        python3 benchmarks/unfused.py --check || echo "unfused check: the unfused kernel fused (exit $?)"
-    fi
     cpu_scatter=
     if [ "${SCATTER_CPU_DRAWS:-1-10}" != none ]; then
-        python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" --device cpu \
+        python3 -m benchmarks --results "$results" scatter "${common[@]}" --device cpu \
             --draws "${SCATTER_CPU_DRAWS:-1-10}" --jobs "$(( $(nproc) - 2 * ${SCATTER_GPU_JOBS:-1} ))" \
             --record results/scatter-cpu.jsonl > /tmp/scatter-cpu.log 2>&1 &
         cpu_scatter=$!
     fi
     stopped=0
-    timeout "${SCATTER_LIMIT:-86400}" python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter \
+    timeout "${SCATTER_LIMIT:-86400}" python3 -m benchmarks --results "$results" scatter \
         "${common[@]}" "${gpu[@]}" --draws "${SCATTER_GPU_DRAWS:-1-2}" --threads 2 --jobs "${SCATTER_GPU_JOBS:-1}" \
         --record results/scatter-gpu.jsonl || { stopped=$?; echo "scatter on the GPU: stopped or failed (exit $stopped)"; }
     if [ -n "$cpu_scatter" ]; then
@@ -94,18 +87,17 @@ if [[ "$stages" == *" scatter "* ]]; then
         cat /tmp/scatter-cpu.log
     fi
     # the tables of both would run the GPU's missing draws again: only after a whole scatter
-    [ "$stopped" != 0 ] || python3 -m benchmarks --results "${OUT:-results/benchmarks}" scatter "${common[@]}" \
+    [ "$stopped" != 0 ] || python3 -m benchmarks --results "$results" scatter "${common[@]}" \
         "${gpu[@]}" --draws "${SCATTER_GPU_DRAWS:-1-2}" --record results/scatter-gpu.jsonl \
         --also results/scatter-cpu.jsonl ${SCATTER_ALSO:-} || echo "scatter: the tables of both failed (exit $?)"
-    cp results/scatter-*.jsonl "${OUT:-results/benchmarks}/" 2> /dev/null || true   # every finished run's record
+    cp results/scatter-*.jsonl "$results/" 2> /dev/null || true   # every finished run's record
 fi
 
-# A whole collapse on the GPU (issue 46's r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
+# A whole collapse on the GPU (the r0 = 6 target): each .gpu/rest/NAME.nc column with its run's
 # NAME.settings.yaml (the study's settings.yaml), `colsim collapse --device cuda` to rest, stopped
 # after REST_LIMIT seconds (default 240) if not at rest, after the benchmarks; with REST_TOLERANCES
 # (e.g. "1e-5 9e-6 1.1e-5") once for each APGD tolerance. The logs and `colsim analyse` of each
-# finished run (h_inf/r0 and the run-out, in the log too) come back in rest.tgz (the device tool
-# brings back 8 files); the trajectories stay in results/gpu-rest there (an r0 = 3 collapse's is 31 MB).
+# finished run (h_inf/r0 and the run-out, in the log too) go into rest.tgz; the trajectories stay in results/gpu-rest (an r0 = 3 collapse's is 31 MB).
 # REST_COLUMNS (names without .nc, e.g. "r0_6_a5_seed1") picks some of them; a run that finds its
 # checkpoint in results/gpu-rest (git-ignored: kept on a warm machine between calls) goes on from it.
 # Each finished run's steps are split by phase (`benchmarks gpu --trajectories`) in its log.
@@ -136,12 +128,12 @@ for column in .gpu/rest/*.nc; do
             || echo "$name: stopped or failed (exit $?); see rest.tgz"
         echo "$name: $(( $(date +%s) - start )) s of wall"; grep "^GPU busy" "$out/$name.log" || true
         tail -n 3 "$out/$name.log"
-        tar czf "${OUT:-results/benchmarks}/rest.tgz" -C /tmp rest-out   # each run's log and analysis, one file
+        tar czf "$results/rest.tgz" -C /tmp rest-out   # each run's log and analysis, one file
     done
 done
 
 
-# A pour, its trim and its collapse on the GPU (issue 46's "pour and collapse of r0 = 6 in 10
+# A pour, its trim and its collapse on the GPU (the "pour and collapse of r0 = 6 in 10
 # minutes"): each .gpu/pour/NAME.pack.yaml (a study's packing settings.yaml) with NAME.collapse.yaml
 # (its run's settings.yaml), `colsim pack --device cuda` stopped after POUR_LIMIT seconds (default
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
@@ -154,7 +146,7 @@ done
 # by length and the kernels of most GPU time come back in pour.tgz: where a GPU step's wall goes
 # outside the kernels, and which kernels take it (the collapse's busy share at r0 = 6 was 28 %).
 # POUR_PROFILE=collapse: the collapse alone so (the pour at its own speed). POUR_NAMES picks the
-# pours (default "r0_6_seed1"; "r0_8_seed1" is issue 46's r0 = 8, a = 5 pour and collapse, about
+# pours (default "r0_6_seed1"; "r0_8_seed1" is the r0 = 8, a = 5 pour and collapse, about
 # 166,000 spheres: its pour may take one call and its collapse the next, on the same warm machine).
 for settings in .gpu/pour/*.pack.yaml; do
     name=$(basename "$settings" .pack.yaml); out=/tmp/pour-out; work=results/gpu-pour/$name
@@ -179,7 +171,7 @@ for settings in .gpu/pour/*.pack.yaml; do
     grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
     [ -e "$work/packing.nc" ] && phases "$work/packing.nc" "$out/$name.pack.log" || true
     profile_top "$out/$name.pack"
-    tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
+    tar czf "$results/pour.tgz" -C /tmp pour-out
     [ -e "$work/packing.nc" ] || continue
     python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
         --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
@@ -194,30 +186,10 @@ for settings in .gpu/pour/*.pack.yaml; do
     echo "$name: trim and collapse $(( $(date +%s) - poured )) s of wall, $(( $(date +%s) - start )) s in all"
     grep "^GPU busy" "$out/$name.collapse.log" || true; tail -n 4 "$out/$name.collapse.log"   # h_inf, phases
     profile_top "$out/$name.collapse"
-    tar czf "${OUT:-results/benchmarks}/pour.tgz" -C /tmp pour-out
+    tar czf "$results/pour.tgz" -C /tmp pour-out
 done
 
-# What a step's device allocations cost ("pool", not by default): the first POOL_STEPS (100) steps of
-# POOL_COLUMN (default the pour stage's r0 = 6 column) on the GPU three times: with numba-cuda's own
-# allocator; with it and its frees held back (numba-cuda frees a device array's memory ten at a time,
-# cuMemFree may wait for the device each time: NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=1000000 leaves
-# them to its byte limit, a fifth of the card, so what remains is the allocations); and with
-# benchmarks/memory_pool.py's pool (NUMBA_CUDA_MEMORY_MANAGER: neither). The same steps and
-# iterations, so the differences in seconds a step (and in the card's busy share) are the frees' waits
-# and the allocations'.
-if [[ "$stages" == *" pool "* ]]; then
-    column=${POOL_COLUMN:-results/gpu-pour/r0_6_seed1/column.nc}
-    for variant in default:10 default:1000000 benchmarks.memory_pool:10; do
-        manager=${variant%:*}; pending=${variant#*:}
-        echo "pool: $column, device memory from $manager, frees held back up to $pending"
-        NUMBA_CUDA_MEMORY_MANAGER=$manager NUMBA_CUDA_MAX_PENDING_DEALLOCS_COUNT=$pending \
-            python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu \
-            --spheres --columns "$column" --steps "${POOL_STEPS:-100}" --cpu-steps 0 \
-            || echo "benchmarks gpu (pool, $variant): failed (exit $?)"
-    done
-fi
-
-# The r0 = 13 steps (issue 46's "at most 1 s a step over the first 100 steps"): no 700,000-sphere
+# The r0 = 13 steps (the "at most 1 s a step over the first 100 steps"): no 700,000-sphere
 # pour fits one call, so the column is tiled from the r0 = 6 one; the GPU's steps only (the host's 16
 # threads took 3.3 s a step over r0 = 6's first steps, with ten times fewer spheres). BIG_TRACE=K
 # then runs its first K steps again with their kernels traced (`benchmarks gpu --kernel-trace`): the
@@ -229,10 +201,10 @@ if [[ "$stages" == *" big "* ]]; then
     tiled_from=.gpu/rest/r0_6_a5_seed1.nc
     [ -e "$tiled_from" ] || tiled_from=results/gpu-pour/r0_6_seed1/column.nc
     echo "big: tiled from ${BIG_SOURCE:-$tiled_from}"
-    python3 -m benchmarks --results "${OUT:-results/benchmarks}" gpu --spheres \
+    python3 -m benchmarks --results "$results" gpu --spheres \
         --columns "${BIG_SOURCE:-$tiled_from}" --tile "${BIG_R0:-13}" \
         --steps "${BIG_STEPS:-100}" --cpu-steps 0 \
-        ${BIG_TRACE:+--kernel-trace "${OUT:-results/benchmarks}" --trace-steps "$BIG_TRACE"} \
+        ${BIG_TRACE:+--kernel-trace "$results" --trace-steps "$BIG_TRACE"} \
         ${BIG_STORED:+--stored $BIG_STORED} \
         || echo "benchmarks gpu (big): failed (exit $?)"
 fi

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Make .gpu/, the inputs of benchmarks/gpu_machine.sh, from this repository alone, on this machine's
-# CPU (git-ignored; it travels to a lent GPU machine with the device tool's `carry: [".gpu"]`):
+# CPU (git-ignored; copy it with the repository to the machine with the GPU):
 #
 #   bash benchmarks/gpu_prepare.sh           # about 15 minutes on one core: the r0 = 3 pour
 #

@@ -20,7 +20,7 @@ Some pieces are timed both ways, as 93f3a2a's GPU step ran them and as it runs t
 - a redo's join of its given pairs (GIVEN of them) with the pairs found, now on the device.
 
 No GPU is needed: nothing here launches a kernel. glibc's allocator makes the figures depend on the
-process's history (docs/gpu-record.md): set MALLOC_MMAP_THRESHOLD_ and MALLOC_TRIM_THRESHOLD_ to
+process's history: set MALLOC_MMAP_THRESHOLD_ and MALLOC_TRIM_THRESHOLD_ to
 compare runs.
 """
 from __future__ import annotations

@@ -9,8 +9,8 @@ it, numba-cuda's kernels included. Then prints, over the window from the first k
 the last one's end (the imports before it left out):
 
 - the window's wall, the share of it in which a kernel ran (the union of the kernels' intervals; on
-  one stream they do not overlap) and in which a copy ran: issue 46's "kernels at least 80 % of a
-  step", read on the card rather than sampled by NVML;
+  one stream they do not overlap) and in which a copy ran: the share "kernels at least 80 % of a
+  step" asks for, read on the card rather than sampled by NVML;
 - the card's idle gaps by length: many short ones mean launch-bound steps (the host's launches
   pace the card), a few long ones the host's own work or a wait (a compilation, a file written);
 - the kernels with the most GPU time: launches, total ms, mean us, share of the window.

@@ -1,6 +1,6 @@
 """Every CUDA kernel a GPU collapse launches, compiled for a card without one: the check numba's
 simulator cannot make (it runs a kernel's Python; it never types or compiles it), and how many fused
-multiply-adds each kernel holds (issue 46: the card's rounding).
+multiply-adds each kernel holds (the card's rounding, docs/solvers.md).
 
     python -m benchmarks ptx                 # sm_90 (H100, H200): no card; numba-cuda and libNVVM
     python -m benchmarks ptx --cc 8.0        # another compute capability
@@ -10,16 +10,14 @@ storages (`--gpu-storage`; a 27-sphere column poured on the CPU: a pour on the s
 minutes, and `colsim pack --device cuda` steps with the same stepper) record the types of every kernel
 launch's arguments (colsim's kernels only). Then,
 with the simulator off, each kernel is compiled with each of its argument types by
-`numba.cuda.compile_ptx` (libNVVM; no driver, no card), once by default and once with libNVVM's
-`-fma=0` (benchmarks/unfused.py). The table: each kernel, its signatures, its PTX's
-double-precision instructions, and how many of them are fused multiply-adds (fma.rn.f64), by default
-and unfused; where CUDA's ptxas is at hand (CUDA_HOME/bin, or PATH), also the registers a thread and
+`numba.cuda.compile_ptx` (libNVVM; no driver, no card). The table: each kernel, its signatures, its
+PTX's double-precision instructions, and how many of them are fused multiply-adds (fma.rn.f64); where CUDA's ptxas is at hand (CUDA_HOME/bin, or PATH), also the registers a thread and
 the bytes spilled that ptxas gives the default PTX for the card, and for sm_90 how many threads an SM
 then holds in blocks of 256 (of 2,048: the registers are what limits a large kernel's occupancy).
 It needs numba-cuda, the compiler a card's run uses (`pip install -e .[gpu]`; numba's own deprecated
 numba.cuda fails to type some of the kernels, e.g. `max` in a device function, which numba-cuda
 compiles), and libNVVM (a CUDA toolkit, e.g. CUDA_HOME=/usr/local/cuda).
-Exit 1 if a kernel does not compile or an unfused one still holds an FMA.
+Exit 1 if a kernel does not compile.
 """
 from __future__ import annotations
 
@@ -96,12 +94,6 @@ def ptx_of(function, signature, cc: tuple[int, int], **options) -> str:
     return cuda.compile_ptx(function, signature, cc=cc, **options)[0]
 
 
-def f64_instructions(function, signature, cc: tuple[int, int], **options) -> list[str]:
-    """The double-precision instructions (e.g. "fma.rn.f64") of `function` compiled to PTX for `cc` with
-    argument types `signature`."""
-    return f64_of(ptx_of(function, signature, cc, **options))
-
-
 def f64_of(ptx: str) -> list[str]:
     """The double-precision instructions of a PTX text, in order."""
     return [line.split()[0] for line in ptx.splitlines() if line.split() and line.split()[0].endswith(".f64")]
@@ -154,14 +146,11 @@ def threads_an_sm(registers: int, block: int = 256) -> int:
 
 
 def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
-    """Each kernel compiled to PTX with each of its argument types, by default and unfused (with the
-    simulator off in this process): {module, kernel, signatures, f64 instructions, fma (default,
-    unfused), error}."""
+    """Each kernel compiled to PTX with each of its argument types (with the simulator off in this
+    process): {module, kernel, signatures, f64 instructions, fma, registers, spills, error}."""
     from types import SimpleNamespace
 
     from numba.cuda import dispatcher
-
-    import unfused
 
     # a device function a kernel calls compiles for the current device's compute capability: with no
     # driver, for `cc`
@@ -169,7 +158,7 @@ def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
     rows = []
     for (module, name), signatures in sorted(launches.items()):
         row = {"module": module, "kernel": name, "signatures": len(signatures), "f64": 0, "fma": 0,
-               "fma_unfused": 0, "registers": None, "spill_stores": None, "spill_loads": None, "error": ""}
+               "registers": None, "spill_stores": None, "spill_loads": None, "error": ""}
         try:
             function = getattr(importlib.import_module(module), name).py_func
             for signature in signatures:
@@ -178,11 +167,8 @@ def compiled(launches: dict, cc: tuple[int, int]) -> list[dict]:
                 used = resources(ptx, cc)
                 for key, value in (used or {}).items():   # the most over the kernel's signatures
                     row[key] = max(row[key] or 0, value)
-                with unfused.unfused_compilation():
-                    separate = f64_instructions(function, signature, cc)
                 row["f64"] += len(fused)
                 row["fma"] += fused.count("fma.rn.f64")
-                row["fma_unfused"] += separate.count("fma.rn.f64")
         except Exception as error:   # a kernel that does not compile is this check's finding
             row["error"] = f"{type(error).__name__}: {str(error).splitlines()[0][:200]}"
         rows.append(row)
@@ -241,19 +227,19 @@ def main(argv=None) -> int:
         child("record", folder, args.cc)
         child("compile", folder, args.cc)
         rows = json.loads((folder / "compiled.json").read_text())
-    table = record.table(["kernel", "signatures", "f64 instructions", "fma.rn.f64", "fma.rn.f64 unfused",
+    table = record.table(["kernel", "signatures", "f64 instructions", "fma.rn.f64",
                           f"registers a thread (ptxas, sm_{cc[0]}{cc[1]})", "spilled bytes stored, loaded",
                           "threads an SM by registers (blocks of 256)", "error"],
                          title=f"colsim's CUDA kernels compiled to PTX for sm_{cc[0]}{cc[1]}")
     for row in rows:
         known = row.get("registers") is not None
         table.row(f"{row['module'].rsplit('.', 1)[-1]}.{row['kernel']}", row["signatures"], row["f64"], row["fma"],
-                  row["fma_unfused"], row["registers"] if known else "-",
+                  row["registers"] if known else "-",
                   f"{row['spill_stores']}, {row['spill_loads']}" if known else "-",
                   threads_an_sm(row["registers"]) if known and cc == (9, 0) else "-", row["error"], data=row)
-    failed = [row["kernel"] for row in rows if row["error"] or row["fma_unfused"]]
+    failed = [row["kernel"] for row in rows if row["error"]]
     print(f"{len(rows)} kernels, {sum(row['signatures'] for row in rows)} signatures; "
-          f"{sum(row['fma'] for row in rows)} FMAs by default, {sum(row['fma_unfused'] for row in rows)} unfused")
+          f"{sum(row['fma'] for row in rows)} FMAs")
     if failed:
         raise SystemExit(f"{len(failed)} kernels failed: {', '.join(failed)}")
     return 0

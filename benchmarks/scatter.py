@@ -1,5 +1,5 @@
 """How far a collapse's deposit moves under rounding-sized changes: the scatter a device's answer is
-judged against (issue 46, "the same answer").
+judged against ("the same answer", docs/solvers.md).
 
     python -m benchmarks scatter .gpu/rest/r0_3_a2_seed1.nc --settings .gpu/rest/r0_3_a2_seed1.settings.yaml \
         --draws 1-10 --tolerances 9e-6 9.5e-6 1.05e-5 1.1e-5 --jobs 2 --record scatter.jsonl
@@ -11,12 +11,8 @@ for each of `--draws` with every starting position moved by `--epsilon` (1e-12) 
 a uniform draw in (-1, 1) (numpy's default_rng(draw)), a change of the size of rounding. The
 collapse is chaotic, so these end on different deposits; their spread is what "the same answer"
 means for two devices, whose arithmetic rounds differently. `--device` and `--threads` pass to
-`colsim collapse`; `--fused` runs it with the CPU's kernels compiled to fuse multiply-adds as a
-GPU's compiler does (benchmarks/fused.py), recorded as the device "cpu-fused" (`--fused
-colsim.solvers`: only the kernels of the modules named, "cpu-fused:colsim.solvers"), and `--unfused`
-with the GPU's kernels compiled not to fuse them, as the plain CPU (benchmarks/unfused.py),
-"cuda-unfused"; `--gpu-storage float32` with APGD's float32 storage on the GPU, "cuda-float32";
-`--jobs` runs that many at once. Each finished run is appended to `--record` as
+`colsim collapse`; `--gpu-storage float32` runs with APGD's float32 storage on the GPU, recorded as
+the device "cuda-float32"; `--jobs` runs that many at once. Each finished run is appended to `--record` as
 one JSON line, and runs already there are skipped, so a killed scatter resumes. The tables: each
 run, then for each device the range, mean and standard deviation of h_inf/r0 and run-out (r_inf -
 r0)/r0 (with `--compare H RUNOUT`, where a deposit measured elsewhere lies in them), and where the
@@ -27,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -38,9 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-import fused as fused_build
 import record
-import unfused as unfused_build
 from colsim.solvers.defaults import DEFAULT_GPU_STORAGE, GPU_STORAGES
 
 # HDF5, under netCDF4, is not safe to call from two threads at once: `--jobs 14` segfaulted in
@@ -74,46 +67,25 @@ def perturbed(column: Path, draw: int, epsilon: float, folder: Path) -> Path:
     return path
 
 
-def recorded_device(device: str, fused: list[str] | None, unfused: bool = False,
-                    storage: str = DEFAULT_GPU_STORAGE) -> str:
-    """The device a run is recorded as: `device`, or for a `--fused` run "cpu-fused", or "cpu-fused:"
-    and the modules fused; for an `--unfused` one "cuda-unfused"; for one with float32 storage on the
-    GPU "cuda-float32"."""
-    if storage != DEFAULT_GPU_STORAGE:
-        return f"{recorded_device(device, fused, unfused)}-{storage}"
-    if unfused:
-        return f"{device}-unfused"
-    if fused is None:
-        return device
-    return ":".join(["cpu-fused", ",".join(fused)]) if fused else "cpu-fused"
-
-
-def colsim_command(fused: list[str] | None, unfused: bool) -> tuple[list[str], dict | None]:
-    """The command that runs colsim's CLI, and its environment (None: this one's), for a run of the
-    plain build, the CPU's fused one (fused: the modules, empty for all) or the GPU's unfused one."""
-    if unfused:
-        return [sys.executable, unfused_build.__file__], None
-    if fused is not None:
-        return [sys.executable, fused_build.__file__], {**os.environ, fused_build.MODULES: ",".join(fused)}
-    return [sys.executable, "-m", "colsim.cli"], None
+def recorded_device(device: str, storage: str = DEFAULT_GPU_STORAGE) -> str:
+    """The device a run is recorded as: `device`, or for one with float32 storage on the GPU
+    "cuda-float32"."""
+    return device if storage == DEFAULT_GPU_STORAGE else f"{device}-{storage}"
 
 
 def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, epsilon: float,
-            fused: list[str] | None = None, unfused: bool = False, storage: str = DEFAULT_GPU_STORAGE) -> dict:
-    """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...}); fused:
-    with the CPU's kernels fusing multiply-adds, those of the modules listed or (empty) all (device
-    "cpu" only); unfused: with the GPU's kernels not fusing them (device "cuda" only); storage: APGD's
-    on the GPU (`--gpu-storage`)."""
+            storage: str = DEFAULT_GPU_STORAGE) -> dict:
+    """Collapse and analyse one run ({"kind": "settings" | "tolerance" | "draw", "value": ...});
+    storage: APGD's on the GPU (`--gpu-storage`)."""
     with tempfile.TemporaryDirectory(prefix="scatter-") as scratch:
         folder = Path(scratch)
         start_from = perturbed(column, run["value"], epsilon, folder) if run["kind"] == "draw" else column
         flags = ["--solver-tolerance", f"{run['value']:g}"] if run["kind"] == "tolerance" else []
-        colsim, environment = colsim_command(fused, unfused)
-        command = [*colsim, "collapse", "--settings", str(settings), "--input",
+        command = [sys.executable, "-m", "colsim.cli", "collapse", "--settings", str(settings), "--input",
                    str(start_from), "--output", str(folder / "collapse.nc"), "--device", device,
                    "--threads", str(threads), "--gpu-storage", storage, "-q", *flags]
         started = time.perf_counter()
-        done = subprocess.run(command, capture_output=True, text=True, env=environment)
+        done = subprocess.run(command, capture_output=True, text=True)
         wall = time.perf_counter() - started
         if done.returncode:
             raise RuntimeError(f"{run}: colsim collapse failed:\n{done.stderr[-2000:]}")
@@ -126,7 +98,7 @@ def run_one(column: Path, settings: Path, run: dict, device: str, threads: int, 
                 steps = int(trajectory.attrs["n_steps"])
             with xr.open_dataset(folder / "analysis.nc") as analysis:
                 h, out = float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])
-    return {"column": str(column), "device": recorded_device(device, fused, unfused, storage), "kind": run["kind"],
+    return {"column": str(column), "device": recorded_device(device, storage), "kind": run["kind"],
             "value": run["value"], "h_inf_over_r0": h, "runout_over_r0": out, "steps": steps, "wall_s": wall}
 
 
@@ -215,12 +187,6 @@ def main(argv=None):
     parser.add_argument("--epsilon", type=float, default=1e-12, help="the perturbation, mean diameters")
     parser.add_argument("--no-own", action="store_true", help="skip the run with the settings' own tolerance")
     parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"))
-    parser.add_argument("--fused", nargs="*", metavar="MODULE", default=None,
-                        help="the CPU's kernels fuse multiply-adds, as a GPU's compiler does (device cpu-fused); "
-                             "with module prefixes, only theirs")
-    parser.add_argument("--unfused", action="store_true",
-                        help="the GPU's kernels compiled without fused multiply-adds, as the plain CPU's "
-                             "(device cuda-unfused)")
     parser.add_argument("--gpu-storage", default=DEFAULT_GPU_STORAGE, choices=GPU_STORAGES,
                         help="APGD's storage on the GPU (--device cuda), recorded as cuda-float32")
     parser.add_argument("--threads", type=int, default=1, help="threads of each run")
@@ -232,13 +198,9 @@ def main(argv=None):
     parser.add_argument("--compare", type=float, nargs=2, metavar=("H", "RUNOUT"),
                         help="another device's h_inf/r0 and run-out, placed in the scatter")
     args = parser.parse_args(argv)
-    if args.fused is not None and args.device != "cpu":
-        parser.error("--fused is a CPU run's (numba.cuda's kernels on a card fuse already)")
-    if args.unfused and args.device != "cuda":
-        parser.error("--unfused is a GPU run's (the CPU's kernels fuse nothing unless --fused)")
     if args.gpu_storage != DEFAULT_GPU_STORAGE and args.device != "cuda":
         parser.error("--gpu-storage float32 is a GPU run's (--device cuda)")
-    device = recorded_device(args.device, args.fused, args.unfused, args.gpu_storage)
+    device = recorded_device(args.device, args.gpu_storage)
     records = [json.loads(line) for path in [args.record, *args.also] if path.exists()
                for line in path.read_text().splitlines()]
     records = [r for r in records if r["column"] == str(args.column)]
@@ -250,8 +212,8 @@ def main(argv=None):
     args.record.parent.mkdir(parents=True, exist_ok=True)
 
     def one(run):
-        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon, args.fused,
-                       args.unfused, args.gpu_storage)
+        return run_one(args.column, args.settings, run, args.device, args.threads, args.epsilon,
+                       args.gpu_storage)
 
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:
         for result in pool.map(one, plan):

@@ -6,10 +6,10 @@
 Issue 30's table, read from the runs a study made rather than from new runs: each job's Snakemake
 benchmark file (results/benchmarks/<the job's folder>/pack.tsv or collapse.tsv: wall `s`,
 `cpu_time` in s, `max_rss` in MB) and the run's own file (packing.nc: spheres, steps, and
-`wall_time` and `cpu_time` over all sittings, and APGD iterations a step where the file keeps its
+`wall_time` and `cpu_time` over all segments, and APGD iterations a step where the file keeps its
 steps (packings since 2026-11-26); collapse.nc: spheres, steps, APGD iterations a step, threads from
 its config). A job resumed from its checkpoint has benchmark figures for its last
-sitting only: its row says `resumed`, and its CPU over all sittings is the file's where the file
+segment only: its row says `resumed`, and its CPU over all segments is the file's where the file
 has one (runs since CPU time was saved), else unknown.
 
 Printed: one row a packing and one a collapse at each `--aspect-ratio`, then one row a column size
@@ -80,7 +80,7 @@ def collapse_rows(results: Path, aspect_ratios) -> list[dict]:
 
 def with_benchmark(row: dict, bench: dict | None) -> dict:
     """row with its job's CPU, wall and memory; resumed when the job's wall is well under the file's
-    wall over all sittings (a checkpoint carried the rest); cpu_all: the CPU over all sittings (the
+    wall over all segments (a checkpoint carried the rest); cpu_all: the CPU over all segments (the
     file's, else the job's when it was not resumed, else None)."""
     row.update({"cpu": None, "wall": None, "rss": None} if bench is None else bench)
     row["resumed"] = bool(row.get("resumed_from")) or (bench is not None and bench["wall"] < 0.9 * row["wall_all"])
@@ -118,8 +118,8 @@ def main(argv=None):
 
     print(f"{args.results}: {len(packings)} packings, {len(collapses)} collapses at a = "
           f"{', '.join(f'{a:g}' for a in args.aspect_ratio)}")
-    table = record.table(["job", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s, all sittings",
-                          "wall s, all sittings", "last sitting: CPU s", "wall s", "peak MB", "iterations a step"])
+    table = record.table(["job", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s, all segments",
+                          "wall s, all segments", "last segment: CPU s", "wall s", "peak MB", "iterations a step"])
     for row in packings:
         table.row("pack" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"], "",
                   f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),

@@ -1,6 +1,5 @@
-"""A large column for timing, tiled from a poured one: the r0 = 13 steps of issue 46 on a machine
-that cannot pour 700,000 spheres in one call (the device tool's 10 minutes a command; a column that
-size cannot come back from one call to the next).
+"""A large column for timing, tiled from a poured one: the first steps of an r0 = 13 column (about
+700,000 spheres) without pouring it, which takes hours.
 
 :func:`tiled_column` cuts the largest square box of spheres that stays clear of the source column's
 wall and top (so no wall-ordered layer and no trimmed surface), repeats it side by side and on top of

@@ -15,7 +15,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").rglob("*.md"))]
-README_MAX_LINES = 250
+README_MAX_LINES = 120
+#: the set-up and test commands come within this many lines of the README's top
+COMMANDS_WITHIN = 30
 SET_UP_COMMANDS = (
     "pip install -r environment.txt -c constraints.txt && snakemake -j2 all",
     "pip install -r environment.txt -c constraints.txt && pytest",
@@ -61,8 +63,9 @@ def test_readme_is_short():
 
 
 @pytest.mark.parametrize("command", SET_UP_COMMANDS)
-def test_readme_gives_the_set_up_commands_verbatim(command):
-    assert command in README.read_text(encoding="utf-8")
+def test_readme_gives_the_set_up_commands_verbatim_near_its_top(command):
+    top = README.read_text(encoding="utf-8").splitlines()[:COMMANDS_WITHIN]
+    assert command in top, f"{command!r} is not a line of README.md's first {COMMANDS_WITHIN}"
 
 
 def test_the_link_finder_sees_links_and_skips_code():
@@ -128,14 +131,163 @@ def test_every_validation_page_names_its_lever_commit_and_config(page):
     assert re.search(r"config", text, flags=re.I), "no configuration named"
 
 
+def test_the_readme_results_table_is_the_data_s():
+    """The README's results table is what `colsim docs` makes from docs/data, to the character."""
+    from colsim.study.docs_tables import regenerate
+
+    assert regenerate(ROOT)[README] == README.read_text(encoding="utf-8"), "run `colsim docs`"
+
+
+RECORD_CELL = re.compile(r"\| ([A-Za-z0-9_.-]+) \((\d+)\) \|$")
+
+
+def test_every_record_performance_cites_is_kept_with_its_provenance():
+    """Each row of docs/performance.md's tables names a record of benchmarks/records/ that exists
+    and holds the machine, the device, the commit, the date and the figures; the rows name some."""
+    import json
+
+    cited = {m.group(1) for line in (ROOT / "docs" / "performance.md").read_text().splitlines()
+             for m in [RECORD_CELL.search(line)] if m}
+    assert len(cited) >= 5, cited
+    for name in sorted(cited):
+        path = ROOT / "benchmarks" / "records" / f"{name}.json"
+        assert path.is_file(), f"docs/performance.md cites {name}, which benchmarks/records/ lacks"
+        record = json.loads(path.read_text())
+        assert {"machine", "device", "git", "date", "figures"} <= set(record), (name, sorted(record))
+        assert DATE.fullmatch(record["date"]) and COMMIT.fullmatch(record["git"]["commit"]), name
+
+
+VALIDATION_PAGES = sorted(p for p in (ROOT / "docs" / "validation").glob("*.md") if p.name != "README.md")
+#: the shape of a validation page, in this order (a "## Figure" between Answer and Caveats where it has one)
+PAGE_SHAPE = ("## Question", "## Config and command", "## Answer", "## Caveats")
+
+
+@pytest.mark.parametrize("page", VALIDATION_PAGES, ids=lambda page: page.name)
+def test_every_validation_page_has_the_one_shape(page):
+    """The question, the config and command, the answer, the caveats, in that order, and one
+    provenance line at the end naming a commit."""
+    lines = page.read_text().splitlines()
+    headings = [line for line in lines if line in PAGE_SHAPE]
+    assert headings == list(PAGE_SHAPE), f"{page.name}: headings {headings}"
+    provenance = [line for line in lines if line.startswith("Provenance:")]
+    assert len(provenance) == 1 and COMMIT.search(" ".join(lines[lines.index(provenance[0]):]))
+
+
+@pytest.mark.parametrize("page", VALIDATION_PAGES, ids=lambda page: page.name)
+def test_a_page_of_the_effective_lever_says_so_first(page):
+    """A page made under the effective lever (an earlier model) says so in its first line after the
+    title, as the index's table says of it."""
+    index = (ROOT / "docs" / "validation" / "README.md").read_text()
+    row = next(line for line in index.splitlines() if f"]({page.name})" in line)
+    first = next(line for line in page.read_text().splitlines()[1:] if line.strip())
+    assert ("| effective |" in row) == ("effective rolling lever" in first), (page.name, first)
+
+
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+#: a commit hash: 7-40 hex digits holding at least one digit and one letter (so "deadbeef" and
+#: "1000000" are not hashes)
+COMMIT = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+ISSUE = re.compile(r"\bissues? #?\d+", re.I)
+#: where the lead's engine and solvers live: checked on their own, so that their lines are named apart
+ENGINE_AND_SOLVERS = (ROOT / "src" / "colsim" / "engine", ROOT / "src" / "colsim" / "solvers")
 
 
-def test_the_code_carries_no_dates():
-    """Issue 47.5: a date belongs beside its measurement in docs/ (with its commit and machine), not in
-    a docstring or comment of the package or the workflow, where it goes stale unseen."""
-    files = [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
-             *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml"]
-    dated = [f"{path.relative_to(ROOT)}:{n}" for path in files
-             for n, line in enumerate(path.read_text().splitlines(), 1) if DATE.search(line)]
+def _code_files() -> list[Path]:
+    return [*(ROOT / "src" / "colsim").rglob("*.py"), *(ROOT / "workflow").rglob("*.smk"),
+            *(ROOT / "workflow").rglob("*.yaml"), ROOT / "Snakefile", ROOT / "config.yaml",
+            *(ROOT / "config").glob("*.yaml")]
+
+
+def _in_engine_or_solvers(path: Path) -> bool:
+    return any(folder in path.parents for folder in ENGINE_AND_SOLVERS)
+
+
+def _dated_lines(files) -> list[str]:
+    """file:line of each line holding a date, a commit hash or an issue number."""
+    return [f"{path.relative_to(ROOT)}:{n}" for path in files
+            for n, line in enumerate(path.read_text().splitlines(), 1)
+            if DATE.search(line) or COMMIT.search(line) or ISSUE.search(line)]
+
+
+def test_the_code_carries_no_dates_commits_or_issue_numbers():
+    """A date, a commit or an issue belongs beside its measurement in docs/ (or in CHANGELOG.md), not
+    in a docstring or comment of the package or the workflow, where it goes stale unseen."""
+    dated = _dated_lines(path for path in _code_files() if not _in_engine_or_solvers(path))
     assert not dated, dated
+
+
+def test_the_engine_and_solvers_carry_no_dates_commits_or_issue_numbers():
+    """The same for src/colsim/engine and src/colsim/solvers, apart so that their lines are named apart."""
+    dated = _dated_lines(path for path in _code_files() if _in_engine_or_solvers(path))
+    assert not dated, dated
+
+
+def test_the_dated_line_finder_sees_dates_commits_and_issues():
+    assert _finds("at 70c90ca on 2026-11-29") and _finds("see issue 46") and _finds("(issues #31)")
+    assert not _finds("deadbeef 1000000 tissue 4 decade")
+
+
+def _finds(text: str) -> bool:
+    return bool(DATE.search(text) or COMMIT.search(text) or ISSUE.search(text))
+
+
+# The project speaks of itself: none of these words about how colsim was made, rather than about
+# colsim, in anything it ships. Whole words: a letter or digit on either side makes another word
+# ("silent", "talented"); an underscore does not (a test's name is checked too).
+# forbidden words: the list begins (lines up to its end are not searched)
+#: The stepper's own `carry` (an annotation `carry: Carry`, a docstring's "carry: what the first step
+#: starts from") is not the word.
+FORBIDDEN = re.compile(r"(?i:(?<![A-Za-z0-9])(sittings?|lent|device time|give_back|budget)(?![A-Za-z0-9]))"
+                       r"|(?<![A-Za-z0-9_])carry:(?! *(Carry\b|[a-z]))|\$OUT(?![A-Za-z0-9_])")
+SHIPPED_FOLDERS = ("docs", "src", "benchmarks", "workflow", "config", "tests")
+TEXT_SUFFIXES = {".md", ".py", ".smk", ".yaml", ".yml", ".sh", ".txt", ".rst", ".toml", ".cfg", ".ini", ".html"}
+
+
+@pytest.mark.parametrize("text, forbidden", [
+    ("a silent run", False), ("talented", False), ("the second sitting", True), ("Sittings", True),
+    ("no GPU lent", True), ("def test_over_sittings():", True), ("its device time", True),
+    ("give_back()", True), ("the budget", True), ('carry: [".gpu"]', True), ("carry: Carry | None", False),
+    ("carry: what the first step starts from", False), ("class Carry:", False), ("`carry:`", True),
+    ("in $OUT/x", True), ("${OUTPUT}", False), ("$OUTPUT", False),
+])
+def test_the_forbidden_word_finder_takes_whole_words(text, forbidden):
+    assert bool(FORBIDDEN.search(text)) is forbidden
+
+
+# forbidden words: the list ends
+
+
+def _shipped_files() -> list[Path]:
+    files = [README, ROOT / "Snakefile", ROOT / "config.yaml"]
+    for folder in SHIPPED_FOLDERS:
+        files += [p for p in (ROOT / folder).rglob("*") if p.is_file() and p.suffix in TEXT_SUFFIXES
+                  and "__pycache__" not in p.parts and ".cache" not in p.parts]
+    return files
+
+
+def _searched_lines(path: Path):
+    """(number, line) of a file's lines, those of this file's word lists left out."""
+    inside = False
+    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        if path == Path(__file__).resolve() and line.startswith("# forbidden words: the list"):
+            inside = "begins" in line
+            continue
+        if not inside:
+            yield n, line
+
+
+def _forbidden_lines(files) -> list[str]:
+    return [f"{path.relative_to(ROOT)}:{n}: {match.group(0)!r}" for path in files
+            for n, line in _searched_lines(path) for match in [FORBIDDEN.search(line)] if match]
+
+
+def test_the_project_speaks_only_of_itself():
+    """README.md, docs/, src/, benchmarks/, workflow/, config/ and tests/ name no part of how colsim
+    was developed (src/colsim/engine and solvers apart, below)."""
+    found = _forbidden_lines(path for path in _shipped_files() if not _in_engine_or_solvers(path))
+    assert not found, found
+
+
+def test_the_engine_and_solvers_speak_only_of_themselves():
+    found = _forbidden_lines(path for path in _shipped_files() if _in_engine_or_solvers(path))
+    assert not found, found

@@ -20,7 +20,7 @@ sys.path.insert(0, str(REPOSITORY / "benchmarks"))
 
 import record   # noqa: E402
 
-NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gauss_seidel", "gpu", "host_work",
+NAMES = ("apgd_iteration", "cold_step", "collapse", "crossover", "cuda_operator", "device_copies", "gpu", "host_work",
          "packings", "ptx", "scatter", "solvers", "step", "stopping", "study_cost", "threads", "tolerance", "trajectory",
          "kernel_trace", "checkpoints")
 FIELDS = ("benchmark", "arguments", "date", "wall_s", "complete", "machine", "versions", "git", "notes", "tables")
@@ -170,7 +170,7 @@ def test_machine_versions_and_commit():
 
 def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path):
     """A job's figures come from its Snakemake benchmark file (the last line); a job whose wall is
-    under 0.9 of its file's wall over all sittings was resumed from a checkpoint."""
+    under 0.9 of its file's wall over all segments was resumed from a checkpoint."""
     import study_cost
 
     run = tmp_path / "r0_4" / "seed_1" / "pack_x" / "packing.nc"
@@ -184,7 +184,7 @@ def test_study_cost_reads_a_jobs_benchmark_file_and_marks_resumed_jobs(tmp_path)
     assert study_cost.with_benchmark({"wall_all": 9870.0}, bench)["resumed"] is True
     assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["resumed"] is False
     assert study_cost.with_benchmark({"wall_all": 3900.0, "resumed_from": 300}, bench)["resumed"] is True
-    # the CPU over all sittings: the file's where it has one; a resumed job's last sitting is not the whole
+    # the CPU over all segments: the file's where it has one; a resumed job's last segment is not the whole
     assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": 5202.7}, bench)["cpu_all"] == 5202.7
     assert study_cost.with_benchmark({"wall_all": 9870.0, "cpu_file": float("nan")}, bench)["cpu_all"] is None
     assert study_cost.with_benchmark({"wall_all": 3900.0}, bench)["cpu_all"] == 1314.41
@@ -239,8 +239,8 @@ def test_a_perturbed_column_moves_each_position_by_at_most_epsilon_diameters(tmp
     change = np.abs(after.position - before.position)
     assert 0 < change.max() <= 1e-3 * 0.5 and "default_rng(3)" in dataset.attrs["scatter_perturbation"]
     assert scatter.draws_of("1-3,7") == [1, 2, 3, 7]
-    assert scatter.recorded_device("cuda", None, False, "float32") == "cuda-float32"
-    assert scatter.recorded_device("cuda", None, True, "float32") == "cuda-unfused-float32"
+    assert scatter.recorded_device("cuda", "float32") == "cuda-float32"
+    assert scatter.recorded_device("cpu") == "cpu"
 
 
 def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
@@ -264,113 +264,10 @@ def test_the_means_test_tells_a_shifted_scatter_from_the_same_one():
     assert alike["low"] < 0 < alike["high"] and apart["low"] > 0
 
 
-def test_fused_kernels_get_the_contract_flag_and_keep_the_rest():
-    """benchmarks/fused.py's njit adds LLVM's contract flag (and only it) to a kernel's own options,
-    and with module prefixes only to the kernels defined in those modules."""
-    import numba
-
-    import fused
-
-    def multiply_add(a, b, c):
-        return a * b + c
-
-    plain = fused.contracting(numba.njit)(multiply_add)
-    asked = fused.contracting(numba.njit)(parallel=True, fastmath={"nnan"})(multiply_add)
-    every = fused.contracting(numba.njit)(fastmath=True)(multiply_add)
-    assert plain.targetoptions["fastmath"] == {"contract"}
-    assert asked.targetoptions["fastmath"] == {"nnan", "contract"} and asked.targetoptions["parallel"] is True
-    assert every.targetoptions["fastmath"] is True
-    elsewhere = fused.contracting(numba.njit, ("colsim.solvers",))(cache=False)(multiply_add)
-    here = fused.contracting(numba.njit, ("colsim.solvers", __name__))(multiply_add)
-    assert "fastmath" not in elsewhere.targetoptions and here.targetoptions["fastmath"] == {"contract"}
-    # a * b = 1 - 2**-60 exactly: fused, a * b + c is -2**-60; rounded first (no FMA unit: contract
-    # allows a fusion, it does not force one), 0
-    a, b, c = 1.0 + 2.0 ** -30, 1.0 - 2.0 ** -30, -1.0
-    assert plain(a, b, c) in (-(2.0 ** -60), 0.0) and multiply_add(a, b, c) == 0.0
-
-
-def stack_scatter(folder: Path) -> tuple[list[str], Path]:
-    """(`benchmarks scatter` arguments, its record): one 5-step run of the two-sphere stack at APGD
-    tolerance 1e-6, the files in `folder`."""
-    from helpers import tiny_state_files
-
-    tiny_state_files(folder)
-    settings = folder / "settings.yaml"
-    settings.write_text('{"steps": 5, "duration": 0.2, "max_duration": null, "mu_r": 0.12, "frame_every": 5}\n')
-    record_file = folder / "scatter.jsonl"
-    return (["--results", str(folder / "results"), "scatter", str(folder / "column.nc"), "--settings", str(settings),
-             "--no-own", "--tolerances", "1e-6", "--record", str(record_file)], record_file)
-
-
-def test_a_fused_scatter_run_is_recorded_as_its_own_device(tmp_path):
-    """`benchmarks scatter --fused`: the collapse run by benchmarks/fused.py, recorded as "cpu-fused",
-    on the same deposit as the plain runs (the stack at rest, within APGD's overlap tolerance); with a
-    GPU device it is an error, exit 2."""
-    arguments, record_file = stack_scatter(tmp_path)
-    done = benchmarks(*arguments, "--fused")
-    assert done.returncode == 0, done.stderr
-    (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
-    assert run["device"] == "cpu-fused" and run["steps"] == 5
-    assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
-    solvers = benchmarks(*arguments, "--fused", "colsim.solvers")
-    assert solvers.returncode == 0, solvers.stderr
-    assert json.loads(record_file.read_text().splitlines()[1])["device"] == "cpu-fused:colsim.solvers"
-    wrong = benchmarks(*arguments, "--fused", "--device", "cuda")
-    assert wrong.returncode == 2 and "--fused" in wrong.stderr
-
-
-PTX_OF_MULTIPLY_ADD = """
-import json, sys
-import ptx, unfused
-missing = ptx.nvvm_missing()
-if missing:
-    sys.exit(missing)
-def multiply_add(a, b, c, out):
-    out[0] = a[0] * b[0] + c[0]
-signature = "void(float64[:], float64[:], float64[:], float64[:])"
-default = ptx.f64_instructions(multiply_add, signature, (9, 0))
-with unfused.unfused_compilation():
-    separate = ptx.f64_instructions(multiply_add, signature, (9, 0))
-    asked = ptx.f64_instructions(multiply_add, signature, (9, 0), fastmath=True)
-print(json.dumps({"default": default, "unfused": separate, "fastmath": asked}))
-"""
-
-
-def test_unfused_kernels_compile_a_product_and_a_sum():
-    """benchmarks/unfused.py: with libNVVM given -fma=0, a * b + c compiles to a product and a sum, each
-    rounded (mul.rn, add.rn), where by default it is one fma.rn; a kernel asking for fastmath keeps its
-    FMA. PTX only, no card; needs libNVVM (a CUDA toolkit), else skipped."""
-    path = os.pathsep.join([str(REPOSITORY / "benchmarks"), os.environ.get("PYTHONPATH", "")])
-    child = subprocess.run([sys.executable, "-c", PTX_OF_MULTIPLY_ADD], capture_output=True, text=True, timeout=300,
-                           env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": path})
-    if child.returncode and "no libNVVM here" in child.stderr:
-        pytest.skip(child.stderr.strip().splitlines()[-1])
-    assert child.returncode == 0, child.stderr
-    compiled = json.loads(child.stdout)
-    assert "fma.rn.f64" in compiled["default"]
-    assert {"mul.rn.f64", "add.rn.f64"} <= set(compiled["unfused"]) and "fma.rn.f64" not in compiled["unfused"]
-    assert "fma.rn.f64" in compiled["fastmath"]
-
-
-def test_an_unfused_scatter_run_is_recorded_as_its_own_device(tmp_path):
-    """`benchmarks scatter --device cuda --unfused` (here on numba's simulator, where nothing is fused
-    either way): the collapse run by benchmarks/unfused.py, recorded as "cuda-unfused", on the stack's
-    deposit (at rest: h_inf/r0 1 and run-out -0.75 within 5e-5, APGD's overlap tolerance); on the CPU it
-    is an error, exit 2."""
-    arguments, record_file = stack_scatter(tmp_path)
-    done = benchmarks(*arguments, "--unfused", "--device", "cuda", env={"NUMBA_ENABLE_CUDASIM": "1"})
-    assert done.returncode == 0, done.stderr
-    (run,) = [json.loads(line) for line in record_file.read_text().splitlines()]
-    assert run["device"] == "cuda-unfused" and run["steps"] == 5
-    assert abs(run["h_inf_over_r0"] - 1.0) < 5e-5 and abs(run["runout_over_r0"] + 0.75) < 5e-5
-    wrong = benchmarks(*arguments, "--unfused")
-    assert wrong.returncode == 2 and "--unfused" in wrong.stderr
-
-
 def test_every_cuda_kernel_a_collapse_launches_compiles_for_a_card(tmp_path):
     """`benchmarks ptx`, where numba-cuda and libNVVM are installed (no card needed; else skipped):
     every kernel a GPU collapse launches on the simulator compiles to PTX for sm_90 with the argument
-    types it was launched with, some of them hold FMAs by default, and none does unfused."""
+    types it was launched with, and some of them hold FMAs."""
     path = os.pathsep.join([str(REPOSITORY / "benchmarks"), str(REPOSITORY / "src"), os.environ.get("PYTHONPATH", "")])
     probe = subprocess.run([sys.executable, "-c", "import ptx; print(ptx.compiler_missing())"], capture_output=True,
                            text=True, env={**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "PYTHONPATH": path})
@@ -384,7 +281,7 @@ def test_every_cuda_kernel_a_collapse_launches_compiles_for_a_card(tmp_path):
     modules = {row["module"] for row in rows}
     assert {"colsim.engine.cuda_contacts", "colsim.engine.cuda_operator", "colsim.engine.cuda_state",
             "colsim.engine.cuda_warm_start", "colsim.engine.cuda_apgd"} <= modules
-    assert all(row["error"] == "" and row["fma_unfused"] == 0 for row in rows), [r for r in rows if r["error"]]
+    assert all(row["error"] == "" for row in rows), [r for r in rows if r["error"]]
     assert sum(row["fma"] for row in rows) > 0
 
 

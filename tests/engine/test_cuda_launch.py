@@ -58,8 +58,8 @@ def test_a_prepared_launch_writes_what_the_plain_launch_writes():
 
 
 def test_numba_cudas_low_occupancy_warnings_are_off_unless_asked_for():
-    """colsim's one-block launches would each print numba-cuda's warning once a grid size (207 of them
-    in the fifth sitting's r0 = 6 pour log); a user who sets the variable gets them."""
+    """colsim's one-block launches would each print numba-cuda's warning once a grid size (hundreds of
+    them in an r0 = 6 pour's log); a user who sets the variable gets them."""
     import os
     import subprocess
     import sys

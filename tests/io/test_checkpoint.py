@@ -1,6 +1,6 @@
 """A collapse's checkpoint (colsim.io.checkpoint): what is saved comes back exactly; a checkpoint of
 other inputs, a damaged or foreign file, or an impossible saved state is refused, never taken for this
-run's nor replaced; the commits of every sitting are kept."""
+run's nor replaced; the commits of every segment are kept."""
 import logging
 import os
 from dataclasses import replace
@@ -113,21 +113,21 @@ def test_an_edited_state_is_refused_like_a_bad_column(tmp_path):
             load_checkpoint(tmp_path / "e.npz", "abc")
 
 
-def test_every_sittings_commit_is_kept(tmp_path, caplog):
+def test_every_segments_commit_is_kept(tmp_path, caplog):
     """Issue 45.4: a run resumed by other code is resumed (the fingerprint holds the inputs and
-    settings, which decide the steps), with a warning, and lists the commit of every sitting."""
+    settings, which decide the steps), with a warning, and lists the commit of every segment."""
     state, frames, diagnostics, carry = _run()
     path = tmp_path / "c.npz"
-    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0, commits=["0123abc (an earlier sitting)"])
+    save_checkpoint(path, "abc", state, frames, diagnostics, carry, 1.0, commits=["0123abc (an earlier segment)"])
     caplog.set_level(logging.WARNING, logger="colsim")
     saved = load_checkpoint(path, "abc")
-    assert saved["commits"] == ["0123abc (an earlier sitting)", source_commit()]
+    assert saved["commits"] == ["0123abc (an earlier segment)", source_commit()]
     assert "written by other code (0123abc" in caplog.text
 
 
 def test_a_checkpoint_without_cpu_time_resumes_with_it_unknown(tmp_path):
     """A checkpoint written before CPU time was saved: its run resumes, its CPU time over all
-    sittings is NaN (unknown), not the last sitting's taken for the whole."""
+    segments is NaN (unknown), not the last segment's taken for the whole."""
     state, frames, diagnostics, carry = _run()
     path = tmp_path / "old.npz"
     save_checkpoint(path, "abc", state, frames, diagnostics, carry, 12.5)
@@ -142,7 +142,7 @@ def test_a_checkpoint_without_cpu_time_resumes_with_it_unknown(tmp_path):
 
 def test_a_packing_checkpoint_keeps_its_steps_diagnostics(tmp_path):
     """A packing's checkpoint holds the diagnostics of its steps so far, so that the packing's file
-    has every step of a pour that spanned sittings; one written before it held them resumes with
+    has every step of a pour that spanned segments; one written before it held them resumes with
     none (the steps from the resumed one on)."""
     state, _, diagnostics, _ = _run()
     loop = {"steps": 2, "last": True}

@@ -107,13 +107,13 @@ def test_a_killed_packing_resumes_from_its_checkpoint_to_the_same_packing(tmp_pa
     resumed = pack(replace(settings, checkpoint_every=7, max_steps=9000), np.random.default_rng(11), AutoSolver(),
                    checkpoint=checkpoint)
     assert resumed.steps == whole.steps and resumed.clouds == whole.clouds
-    # the times cover both sittings: at least what the first had spent when it saved
+    # the times cover both segments: at least what the first had spent when it saved
     assert 0 < first_cpu <= resumed.cpu_time and 0 < first_wall <= resumed.wall_time
     for name in ("position", "velocity", "angular_velocity", "radius"):
         np.testing.assert_array_equal(getattr(resumed.state, name), getattr(whole.state, name))
     for name in ("i", "j", "family", "force", "rolling"):
         np.testing.assert_array_equal(getattr(resumed.contact_forces, name), getattr(whole.contact_forces, name))
-    # every step's diagnostics, over both sittings, as the packing never stopped had them (wall times aside)
+    # every step's diagnostics, over both segments, as the packing never stopped had them (wall times aside)
     assert [d.step for d in resumed.diagnostics] == list(range(1, whole.steps + 1))
     for name in ("time", "n_contacts", "kinetic_energy", "solver_iterations", "redone"):
         assert [getattr(d, name) for d in resumed.diagnostics] == [getattr(d, name) for d in whole.diagnostics]

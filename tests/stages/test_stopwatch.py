@@ -1,5 +1,5 @@
-"""The stopwatch of a run over its sittings (colsim.stages.stopwatch): it starts from what earlier
-sittings took, and an unknown CPU time stays unknown. Bounds from the clocks being monotonic, not
+"""The stopwatch of a run over its segments (colsim.stages.stopwatch): it starts from what earlier
+segments took, and an unknown CPU time stays unknown. Bounds from the clocks being monotonic, not
 from how fast this machine is."""
 import math
 import time
@@ -8,7 +8,7 @@ from colsim.stages import stopwatch
 from colsim.stages.stopwatch import Stopwatch
 
 
-def test_a_resumed_stopwatch_counts_on_from_the_earlier_sittings():
+def test_a_resumed_stopwatch_counts_on_from_the_earlier_segments():
     clock = Stopwatch(wall=100.0, cpu=40.0)
     cpu_before = time.process_time()
     while time.process_time() - cpu_before < 0.02:   # spend some CPU in this process

@@ -131,7 +131,7 @@ def test_study_cost_reads_the_studys_own_benchmark_files(tiny_study, tmp_path):
     assert len(packs) == 1 and len(runs) == 4
     for row in packs + runs:
         assert row["cpu"] > 0 and row["wall"] > 0 and row["rss"] > 0 and not row["resumed"]
-        assert row["cpu_file"] > 0 and row["cpu_all"] == row["cpu_file"]   # the file's CPU, all sittings
+        assert row["cpu_file"] > 0 and row["cpu_all"] == row["cpu_file"]   # the file's CPU, all segments
     collapses = sorted((tiny_study / "results").rglob("collapse.nc"))
     assert sorted(row["spheres"] for row in runs) == sorted(
         int(xr.load_dataset(path).attrs["n_particles"]) for path in collapses)

@@ -407,3 +407,26 @@ def mu_r(args):
     from ..study.polygon import polygon_rolling_coefficient
 
     print(f"{polygon_rolling_coefficient(args.polygon, args.method):.6f}")
+
+
+def docs(args):
+    """The results tables of README.md and docs/ made from docs/data (colsim.study.docs_tables):
+    written in place, or with --check only compared (SystemExit 1 naming the files that differ)."""
+    from ..study.docs_tables import DocsDataError, regenerate
+
+    root = Path(args.root)
+    if not (root / "docs" / "data").is_dir():
+        raise io.InputError(f"{root} holds no docs/data: give the repository's root with --root")
+    try:
+        texts = regenerate(root)
+    except DocsDataError as error:
+        raise io.InputError(str(error)) from None
+    stale = [path for path, text in texts.items() if path.read_text(encoding="utf-8") != text]
+    if args.check:
+        if stale:
+            raise SystemExit(f"colsim docs: tables differ from docs/data in {', '.join(map(str, stale))}; "
+                             "`colsim docs` remakes them")
+        print("colsim docs: every table equals the data")
+        return
+    io.write_all({path: _text_writer(texts[path]) for path in stale})
+    print(f"colsim docs: {len(stale)} of {len(texts)} files remade from docs/data")

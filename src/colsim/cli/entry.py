@@ -142,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder", nargs="?", default="results",
                    help="the folder holding the runs (default: %(default)s, where every study's runs are)")
 
+    p = sub.add_parser("docs", help="remake the results tables of README.md and docs/ from the datasets in docs/data")
+    p.add_argument("--root", default=".", help="the repository's root (default: %(default)s)")
+    p.add_argument("--check", action="store_true",
+                   help="write nothing; exit 1 and name the files whose tables differ from the data")
+
     p = sub.add_parser("mu-r", help="rolling coefficient of a regular polygon (the paper's Eqs. 7-10)")
     p.add_argument("--polygon", type=integer, required=True, help="number of sides N >= 3")
     p.add_argument("--method", choices=["paper", "exact"], default="paper",

@@ -1,4 +1,4 @@
-"""What an input file must hold before any command uses it (issue 45.6): one line naming the first
+"""What an input file must hold before any command uses it: one line naming the first
 thing wrong, never a traceback, silent nonsense or a huge allocation.
 
 - Size: the memory its variables would take once read is bounded per kind (a 33 kB analysis file

@@ -29,7 +29,7 @@ from ..engine.solver_contract import Solver
 from ..engine.state import ParticleState
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
-from ..io.checkpoint import load_checkpoint, save_checkpoint, sittings_commits
+from ..io.checkpoint import load_checkpoint, save_checkpoint, segment_commits
 from .analyse import measure_deposit
 from .settings import CollapseSettings, SMALLEST_SCALED_STEP  # noqa: F401 (the stage's settings, here too)
 from .stopwatch import Stopwatch
@@ -42,8 +42,8 @@ log = logging.getLogger(__name__)
 class CollapseRun:
     """frames: list of (step, ParticleState); diagnostics: list of StepDiagnostics (one per step);
     at_rest: whether the deposit was found at rest (None: not checked, no max_duration);
-    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown);
-    commits: the git commits of the code of every sitting, the first first."""
+    wall_time, cpu_time: seconds over all segments (CPU: all threads; NaN when a segment's is unknown);
+    commits: the git commits of the code of every segment, the first first."""
 
     initial: ParticleState
     frames: list
@@ -84,8 +84,8 @@ def in_rest_window(times, window: float) -> np.ndarray:
 class DepositHistory:
     """h_inf and r_inf of a run's frames, measured when the rest test reads them and kept: only the
     frames inside the rest window once the kinetic energy is low, not every frame (the measure finds
-    the contact graph's main mass: 0.08 s at 56,000 spheres, 0.9 s at 600,000 on one core, which every
-    frame of an r0 = 13 collapse would add up to a minute of)."""
+    the contact graph's main mass, whose cost grows with the spheres: over every frame of a large
+    collapse it would add up)."""
 
     def __init__(self):
         self._measured: dict[int, tuple[float, float]] = {}
@@ -164,7 +164,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
         if stop_after is not None and k - resumed_from >= stop_after:
             break
     return CollapseRun(column, frames, diagnostics, clock.wall(), resumed_from, at_rest, clock.cpu(),
-                       tuple(sittings_commits(earlier)))
+                       tuple(segment_commits(earlier)))
 
 
 def _at_rest(history: DepositHistory, frames, time_scale, diagnostics, column, settings) -> bool:

@@ -35,7 +35,7 @@ from ..engine.solver_contract import Solver, SolverError
 from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
-from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, sittings_commits
+from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, segment_commits
 from .settings import POUR_STEP_RANGE, PackSettings
 from .pour_geometry import cloud_spheres, column_height, expected_spheres, lattice_cloud, solid_fraction
 from .stopwatch import Stopwatch
@@ -49,9 +49,9 @@ class PackingResult:
     """The settled packing and what it took. solid_fraction: of the column up to `height`.
     contact_forces: the last step's contact forces (to warm-start what comes next). clouds: how
     many clouds were poured; most_fixed: the most spheres fixed at once while filling.
-    wall_time, cpu_time: seconds over all sittings (CPU: all threads; NaN when a sitting's is unknown).
-    diagnostics: the StepDiagnostics of every step taken, over all sittings (from the resumed step on for a
-    checkpoint written before packings kept them). commits: the git commits of the code of every sitting."""
+    wall_time, cpu_time: seconds over all segments (CPU: all threads; NaN when a segment's is unknown).
+    diagnostics: the StepDiagnostics of every step taken, over all segments (from the resumed step on for a
+    checkpoint written before packings kept them). commits: the git commits of the code of every segment."""
 
     state: ParticleState
     height: float
@@ -137,7 +137,7 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
     state = ParticleState.at_rest(np.zeros((0, 3)), np.zeros(0), settings.density)
     fixed = np.zeros(0, dtype=bool)
     steps, warm, clouds, most_fixed = 0, None, 0, 0
-    earlier = []   # the commits of the earlier sittings
+    earlier = []   # the commits of the earlier segments
     if saved:
         loop = saved["loop"]
         state, warm, fixed = saved["state"], saved["warm"], loop["fixed"].astype(bool)
@@ -179,7 +179,7 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
                     time=0.0)
     return PackingResult(state, column_height(state), solid_fraction(state, settings.r0, settings.height),
                          steps, pour.clock.wall(), warm, clouds, most_fixed, pour.clock.cpu(), pour.history,
-                         tuple(sittings_commits(earlier)))
+                         tuple(segment_commits(earlier)))
 
 
 def _check(settings: PackSettings) -> None:
@@ -255,7 +255,7 @@ def _slow(state: ParticleState, gravity: float, rest_energy: float) -> np.ndarra
 
 class _Pour:
     """What the clouds of one packing share: its settings and step, the solver, the stopwatch over all
-    sittings, each step's StepDiagnostics (`history`) and the progress callback."""
+    segments, each step's StepDiagnostics (`history`) and the progress callback."""
 
     def __init__(self, settings: PackSettings, solver: Solver, progress=None, backend: Backend = HOST):
         self.settings, self.solver, self.progress, self.backend = settings, solver, progress, backend

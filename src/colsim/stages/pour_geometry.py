@@ -9,7 +9,7 @@ import numpy as np
 #: A cloud holds the spheres of this solid fraction of the cylinder over the height it must fill:
 #: above the 0.61-0.63 the pours settle to at r0 = 2-4, so that one cloud fills the whole height.
 #: With 0.58 the first cloud settled short (r0 = 3 and 4) and a second one fell onto the settled
-#: packing, whose impacts strike the whole column at once (docs/performance.md, "Packings").
+#: packing, whose impacts strike the whole column at once (the change is in CHANGELOG.md).
 CLOUD_SOLID_FRACTION = 0.64
 #: the lattice spacing of a cloud, in largest diameters: room for each sphere to move in its cell
 LATTICE_FACTOR = 1.04

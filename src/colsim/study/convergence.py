@@ -1,4 +1,4 @@
-"""The study held to itself (issue 6) and to the experiments, as tables.
+"""The study held to itself and to the experiments, as tables.
 
 Four sub-studies, each a list of collapse analyses (:func:`runs_table` stacks them along `run`):
 

@@ -146,7 +146,7 @@ def front_figure(analyses, path: Path) -> Path:
     ratios = sorted({a for a, _, _ in runs})
     colours = dict(zip(ratios, _colours(len(ratios))))
     rows = [name for name in FRONT_ROWS if name == "front_position" or any(name in run for run in runs.values())]
-    # one y scale along each row, so that the mu_r panels compare at a glance (issue 48.6)
+    # one y scale along each row, so that the mu_r panels compare at a glance
     fig, axes = plt.subplots(len(rows), len(mu_rs), figsize=(4.2 * len(mu_rs), 3.2 * len(rows)), squeeze=False,
                              layout="constrained", sharex="col", sharey="row")
     for row, name in zip(axes, rows):

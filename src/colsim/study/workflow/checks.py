@@ -138,7 +138,7 @@ def cross_field_problem(config):
 def link_out_of(folder):
     """One line naming the first symbolic link below `folder` (results/) whose target lies outside
     it, or None: Snakemake writes logs and benchmarks through such a link into the file it points
-    to, so a link planted there would have a study overwrite a file elsewhere (issue 45.2). The
+    to, so a link planted there would have a study overwrite a file elsewhere. The
     folder itself may be a link (to scratch storage, say)."""
     if not os.path.isdir(folder):
         return None
