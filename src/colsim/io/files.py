@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -59,3 +60,27 @@ def check_writable(path, directory: bool = False) -> None:
         raise InputError(f"cannot write {path}: {folder} takes no new files ({error.strerror})") from None
     os.close(fd)
     os.remove(probe)
+
+
+def read_regular_text(path, limit: int, what: str) -> str:
+    """The text of `path`, a regular file of at most `limit` bytes; InputError (one line) naming `what`
+    and the path otherwise: missing, a FIFO (reading it would block), a device (/dev/zero never ends),
+    a folder, or too large. Its kind and size are checked before it is opened."""
+    path = Path(path)
+    try:
+        found = os.stat(path)
+    except OSError as error:
+        raise InputError(f"{what} {path} cannot be read ({error.strerror})") from None
+    if not stat.S_ISREG(found.st_mode):
+        raise InputError(f"{what} {path} is not a regular file (a FIFO, a device or a folder): colsim reads"
+                         " a settings file only from a regular file")
+    if found.st_size > limit:
+        raise InputError(f"{what} {path} has {found.st_size:,} bytes, more than a {what} may ({limit:,})")
+    with open(path, "rb") as stream:
+        data = stream.read(limit + 1)
+    if len(data) > limit:   # grew since its size was read
+        raise InputError(f"{what} {path} has more than {limit:,} bytes, more than a {what} may")
+    try:
+        return data.decode()
+    except UnicodeDecodeError:
+        raise InputError(f"{what} {path} is not UTF-8 text") from None
