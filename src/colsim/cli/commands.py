@@ -125,6 +125,23 @@ def _solver(solver: SolverSettings, scaled_time_step: float):
     return make_solver(solver.solver, **options)
 
 
+def _what_runs(solving: SolverSettings, spheres: float) -> SolverSettings:
+    """The back-end's settings as they run, and as the file records them: the device that runs a
+    pour or collapse of about `spheres` spheres (auto: which), and the storage that runs. A GPU
+    storage (--gpu-storage float32) with --device cpu is refused; under --device auto, where the CPU
+    runs, it is dropped with a warning, and the file records float64, which the CPU stores."""
+    device = device_for(solving.device, spheres, solving.solver)
+    storage = solving.gpu_storage
+    if device == "cpu" and storage != defaults.DEFAULT_GPU_STORAGE and solving.solver in ("auto", "apgd"):
+        if solving.device == "cpu":
+            raise io.InputError(f"--gpu-storage {storage} is a GPU's storage (--device cuda or auto); the CPU stores"
+                                f" {defaults.DEFAULT_GPU_STORAGE}, so it would do nothing")
+        log.warning("--device auto runs this on the CPU, which stores %s: --gpu-storage %s does nothing here,"
+                    " and the file records %s", defaults.DEFAULT_GPU_STORAGE, storage, defaults.DEFAULT_GPU_STORAGE)
+        storage = defaults.DEFAULT_GPU_STORAGE
+    return replace(solving, device=device, gpu_storage=storage)
+
+
 def _pack_solver(solver: SolverSettings):
     """The packing's back-end: under auto, APGD for every step at the packing's own tolerance
     (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or solver_tolerance), Clarabel where APGD
@@ -139,7 +156,7 @@ def _pack_solver(solver: SolverSettings):
 def pack(args):
     settings, solving = stage_settings(args, PackSettings, SolverSettings)
     spheres = expected_spheres(settings.r0, settings.height, (settings.diameter_min, settings.diameter_max))
-    solving = replace(solving, device=device_for(solving.device, spheres, solving.solver))   # auto: which
+    solving = _what_runs(solving, spheres)
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
     solver = _pack_solver(solving)
@@ -190,7 +207,7 @@ def collapse(args):
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
     settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
-    solving = replace(solving, device=device_for(solving.device, column.n, solving.solver))   # auto: which
+    solving = _what_runs(solving, column.n)
     use_threads(solving.threads)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"
