@@ -283,3 +283,28 @@ def test_settings_a_run_cannot_honour_are_refused(work, args, words):
     recorded) and a gravity at which the spheres fly off."""
     one_line_error(colsim(*args, cwd=work), 2, *words)
     assert not (work / "x.nc").exists()
+
+
+@pytest.mark.parametrize("gravity, words", [
+    (1e-300, ["column.nc", "sqrt(d_min/g)", "gravity 1e-300"]),   # as `colsim pack --gravity 1e-300`
+    (1.0, ["column.nc", "its gravity 1 is not the 9.81 its packing was poured under"]),
+])
+def test_a_column_s_gravity_is_checked_as_the_pour_checks_it(work, gravity, words):
+    """Issue 80.6: a column whose gravity was 1e-300 collapsed to h_inf/r0 = 23.5, exit 0, where
+    `colsim pack` refuses the same gravity; trim and collapse now check a file's gravity so."""
+    for name, command in (("column.nc", ["collapse", "--input", "column.nc", "--steps", "2", "--output", "x.nc"]),
+                          ("pack.nc", ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "x.nc"])):
+        _rewrite(work / name, _set_attr("gravity", gravity))
+        one_line_error(colsim(*command, cwd=work), 2, name, *words[1:])
+        assert not (work / "x.nc").exists()
+
+
+def test_a_trajectory_whose_times_go_back_is_refused(work):
+    """Issue 80.6: the frames' times are checked as the collapse's steps are: finite and increasing."""
+    def back(dataset):
+        times = dataset["time"].values.copy()
+        times[-1] = times[0]
+        return dataset.assign_coords(time=("time", times, dict(dataset["time"].attrs)))
+    _rewrite(work / "collapse.nc", back)
+    one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
+                   "times are not finite and increasing")

@@ -22,7 +22,7 @@ from ..stages.collapse import collapse as run_collapse
 from ..stages import pack as packing
 from ..stages.pour_geometry import expected_spheres, solid_fraction
 from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
-                               by_name)
+                               by_name, declared, external_name)
 from ..stages.trim import kept_by_trim
 from .flags import stage_settings
 from .progress import progress_bar
@@ -178,9 +178,37 @@ def pack(args):
              result.cpu_time)
 
 
+def _poured_under(source) -> dict:
+    """The settings of the pour a packing's or a column's file records ({} where it records none)."""
+    config = io.config_of(source)
+    while config and config.get("command") != "pack":
+        config = config.get("input_config") or {}
+    return config
+
+
+def _read_state(path):
+    """(state, dataset) of a packing's or a column's file (io.read_state), its gravity checked as
+    `colsim pack` checks it: the gravity its pour recorded, and with the pour's step and smallest
+    diameter (the defaults where the file records none) a step within the pour's range of the fall
+    time across a diameter. InputError naming the file otherwise (gravity 1e-300 ran to a nonsense
+    deposit)."""
+    state, source = io.read_state(path)
+    gravity = float(source.attrs.get("gravity", 9.81))
+    recorded = _poured_under(source)
+    poured = {**{external_name(item): item.default for item in declared(PackSettings)}, **recorded}
+    try:
+        packing.check_pour_step(float(poured["dt"]), gravity, float(poured["diameter_min"]))
+    except ValueError as error:
+        raise io.InputError(f"input file {path}: {error}") from None
+    if "gravity" in recorded and float(recorded["gravity"]) != gravity:
+        raise io.InputError(f"input file {path}: its gravity {gravity:g} is not the {float(recorded['gravity']):g}"
+                            " its packing was poured under")
+    return state, source
+
+
 def trim(args):
     settings = stage_settings(args, TrimSettings)
-    state, source = io.read_state(args.input)
+    state, source = _read_state(args.input)
     r0 = float(source.attrs["r0"])
     h0 = settings.aspect_ratio * r0
     kept = kept_by_trim(state, h0)
@@ -202,7 +230,7 @@ def trim(args):
 
 def collapse(args):
     settings, solving = stage_settings(args, CollapseSettings, SolverSettings)
-    column, source = io.read_state(args.input)
+    column, source = _read_state(args.input)
     if "h0" not in source.attrs:
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])

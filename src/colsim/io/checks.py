@@ -179,6 +179,9 @@ def check_trajectory(dataset) -> None:
         raise FileProblem("it holds no frame")
     if not np.all(np.isfinite(dataset["position"].values)):
         raise FileProblem("a position is not finite")
+    time = dataset["time"].values
+    if time.ndim != 1 or not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
+        raise FileProblem("its frames' times are not finite and increasing")
     radius = dataset["radius"].values
     if radius.size == 0 or not np.all(np.isfinite(radius)) or radius.min() <= 0:
         raise FileProblem("it holds no spheres, or a radius that is not positive and finite")
