@@ -308,3 +308,25 @@ def test_a_trajectory_whose_times_go_back_is_refused(work):
     _rewrite(work / "collapse.nc", back)
     one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
                    "times are not finite and increasing")
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda dataset: dataset.assign(at_rest=("two", np.array([1, 1], dtype=np.int8))), "at_rest flag has shape (2,)"),
+    (lambda dataset: dataset.isel(step=slice(0, 0)), "holds no step"),
+])
+def test_a_trajectory_of_an_odd_shape_is_refused_in_one_line(work, change, words):
+    """Issue 80.7: a trajectory whose at_rest has shape (2,), or one with no steps, ended `analyse`
+    in a traceback."""
+    _rewrite(work / "collapse.nc", change)
+    one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
+                   words)
+    assert not (work / "out.nc").exists()
+
+
+def test_numba_s_thread_count_zero_is_refused_in_one_line(work):
+    """Issue 80.7: NUMBA_NUM_THREADS=0 made numba's import raise, a traceback before any command ran."""
+    done = subprocess.run([sys.executable, "-m", "colsim.cli", "collapse", "--input", "column.nc", "--steps", "2",
+                           "--output", "x.nc"], cwd=work, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "NUMBA_NUM_THREADS": "0"})
+    one_line_error(done, 2, "NUMBA_NUM_THREADS='0'", "whole number >= 1")
+    assert not (work / "x.nc").exists()

@@ -171,12 +171,17 @@ def check_contacts(first, second, family, force, rolling, n: int, fixed: int = 0
 
 
 def check_trajectory(dataset) -> None:
-    """FileProblem unless a trajectory has a frame, finite positions and radii > 0, and r0, h0 > 0."""
+    """FileProblem unless a trajectory has a frame, a step (where it has step diagnostics), finite
+    positions, frame times finite and increasing, one at_rest flag, radii > 0, and r0, h0."""
     for name in ("position", "radius", "time"):
         if name not in dataset.variables:
             raise FileProblem(f"it lacks the variable {name!r}")
     if dataset.sizes.get("time", 0) < 1:
         raise FileProblem("it holds no frame")
+    if "step" in dataset.dims and dataset.sizes["step"] < 1:
+        raise FileProblem("it holds no step (its step diagnostics are empty)")
+    if "at_rest" in dataset.variables and dataset["at_rest"].shape not in ((), (1,)):
+        raise FileProblem(f"its at_rest flag has shape {dataset['at_rest'].shape}, not one value")
     if not np.all(np.isfinite(dataset["position"].values)):
         raise FileProblem("a position is not finite")
     time = dataset["time"].values
