@@ -160,3 +160,14 @@ localrules:
     packing_settings,
     run_settings,
     analysis_settings,
+
+
+# Studies share their runs' folders: with the lock, a second snakemake in this folder is refused
+# while the first runs; without it, each takes the other's running jobs for incomplete files. So a
+# run (not a dry run) refuses --nolock before its first job. The jobs Snakemake spawns (a cluster's)
+# run with --nolock and --no-hooks: onstart is the main process's alone.
+onstart:
+    if not workflow.execution_settings.lock:
+        raise WorkflowError("--nolock: studies here share their runs, and a second snakemake without the lock takes"
+                            " the first one's running jobs for incomplete files; run without --nolock, one study"
+                            " after the other")

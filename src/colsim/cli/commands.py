@@ -55,7 +55,8 @@ def check_outputs(args) -> None:
     (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder) and is
     absent, a regular file or a link (which the atomic rename replaces, never follows), no two
     outputs are one file (a collapse's checkpoint included), no output is one of its inputs, and a
-    checkpoint path holds nothing but a colsim checkpoint."""
+    checkpoint path holds nothing but a colsim checkpoint. Then the temporaries of these outputs
+    that a killed run left are removed."""
     outputs = _paths(args, OUTPUT_ARGUMENTS)
     if args.command in ("collapse", "pack") and not args.checkpoint:
         outputs.append(Path(f"{args.output}.checkpoint"))
@@ -77,6 +78,9 @@ def check_outputs(args) -> None:
             raise io.InputError(f"{path} is both an input and an output: the command would write over its input")
     if args.command in ("collapse", "pack"):
         check_checkpoint_path(args.checkpoint or f"{args.output}.checkpoint")
+    for path in outputs:   # a killed run's temporaries of these outputs (nothing else's)
+        for stale in io.remove_stale_temporaries(path):
+            log.info("removed %s, a temporary a killed run left", stale)
 
 
 def _recorded(args, *stage_settings) -> dict:

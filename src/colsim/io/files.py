@@ -14,15 +14,60 @@ class InputError(ValueError):
     """An input file that is missing, unreadable or of the wrong kind."""
 
 
+#: what mkstemp adds to a temporary's prefix and suffix: 8 random characters
+RANDOM_PART = 8
+#: the longest file name where the file system does not say (POSIX's NAME_MAX on Linux and macOS)
+NAME_MAX = 255
+
+
+def _name_max(folder) -> int:
+    """The longest file name `folder`'s file system takes."""
+    try:
+        return os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return NAME_MAX
+
+
+def temporary_prefix(path, suffix: str) -> str:
+    """The prefix of a hidden temporary beside `path` ending in `suffix`: '.' and as much of
+    `path`'s name as the file system's name limit leaves room for (a legal 243-byte output name
+    made a temporary name too long), then '.'."""
+    path = Path(path)
+    room = _name_max(path.parent if path.parent.exists() else ".") - len(suffix) - RANDOM_PART - 2
+    return f".{path.name[:room]}."
+
+
+def remove_stale_temporaries(path) -> list[Path]:
+    """Remove the temporaries of `path` (`.NAME.XXXXXXXX.part`, :func:`atomic_path`'s) that a killed
+    run left beside it; a stage calls it on its own outputs as it starts. Returns those removed."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    prefix = temporary_prefix(path, ".part")
+    stale = [found for found in path.parent.iterdir()
+             if found.name.startswith(prefix) and found.name.endswith(".part")
+             and len(found.name) == len(prefix) + RANDOM_PART + len(".part") and found.is_file()
+             and not found.is_symlink()]
+    for found in stale:
+        found.unlink()
+    return stale
+
+
 @contextlib.contextmanager
 def atomic_path(path):
-    """Yield a temporary path beside `path`; rename it to `path` only if the block succeeds."""
+    """Yield a temporary path beside `path`; rename it to `path` only if the block succeeds. An
+    OSError that names no file (a full disk, as netCDF reports it) is raised naming `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(path, ".part"), suffix=".part", dir=path.parent)
     os.close(fd)
     try:
-        yield Path(tmp)
+        try:
+            yield Path(tmp)
+        except OSError as error:
+            if error.filename is None:
+                raise OSError(error.errno, error.strerror or str(error), str(path)) from error
+            raise
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
@@ -55,7 +100,8 @@ def check_writable(path, directory: bool = False) -> None:
     if not folder.is_dir():
         raise InputError(f"cannot write {path}: {folder} is not a directory")
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+        fd, probe = tempfile.mkstemp(prefix=temporary_prefix(folder / path.name, ".probe"), suffix=".probe",
+                                     dir=folder)
     except OSError as error:
         raise InputError(f"cannot write {path}: {folder} takes no new files ({error.strerror})") from None
     os.close(fd)
