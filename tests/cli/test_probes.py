@@ -330,3 +330,23 @@ def test_numba_s_thread_count_zero_is_refused_in_one_line(work):
                           env={**os.environ, "NUMBA_NUM_THREADS": "0"})
     one_line_error(done, 2, "NUMBA_NUM_THREADS='0'", "whole number >= 1")
     assert not (work / "x.nc").exists()
+
+
+def _tbb_loads() -> bool:
+    """Whether numba's TBB layer loads in a fresh interpreter (its libtbb found by the loader)."""
+    probe = "import numba.np.ufunc.tbbpool"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
+
+
+def test_a_tbb_layer_numba_cannot_load_is_explained_in_one_line(work):
+    """Issue 80.9: NUMBA_THREADING_LAYER=tbb in a plain venv failed with "Intel TBB is required, try:
+    pip install tbb" though tbb was installed: the loader does not search the venv's lib/. colsim says
+    which library failed to load and how to point the loader at it."""
+    if _tbb_loads():
+        pytest.skip("numba loads TBB here")
+    done = subprocess.run([sys.executable, "-m", "colsim.cli", "collapse", "--input", "column.nc", "--steps", "2",
+                           "--output", "x.nc"], cwd=work, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "NUMBA_THREADING_LAYER": "tbb"})
+    one_line_error(done, 2, "numba cannot load its TBB threading layer", "libtbb", "LD_LIBRARY_PATH",
+                   "unset NUMBA_THREADING_LAYER")
+    assert not (work / "x.nc").exists()
