@@ -130,7 +130,10 @@ JOB_TIME_REFUSALS = {
     "diameter range must satisfy 0 < ": ("config", {"diameter_min": 0.5, "diameter_max": 0.4}),
     "cylinder radius r0 = {settings.r": ("config", {"r0": 0.2}),
     "packing height must be positive,": ("schema", {"aspect_ratios": [0]}),
-    "the pour's step dt = {settings.d": ("config", {"gravity": 1e-300}),
+    "the pour's step dt = {dt:g} is {": ("config", {"gravity": 1e-300}),
+    "input file {path}: {error}": ("reason", "a file's gravity: the workflow's files come from its own pours, whose"
+                                             " gravity and step the planning check refused already"),
+    "input file {path}: its gravity {": ("reason", "a file's gravity against its pour's: the workflow writes both"),
     "layer height must be positive (o": ("schema", {"pack": {"layer_height": 0}}),
     "freeze depth must be >= 0, got {": ("schema", {"pack": {"freeze_depth": -1}}),
     "the packing of r0 = {settings.r0": ("config", {"r0": 1000}),
