@@ -89,12 +89,25 @@ def test_device_auto_runs_a_small_column_on_the_cpu_and_records_it(column):
     assert '"device": "cpu"' in config and '"kernel": "numba"' in config
 
 
+def test_a_gpu_storage_that_auto_leaves_on_the_cpu_is_dropped_on_record(column):
+    """Issue 80.5: --device auto --gpu-storage float32 on a column the CPU runs: a warning, and the file
+    records the float64 that the CPU stored, never float32."""
+    done = colsim("collapse", "--input", "column.nc", "--steps", "2", "--duration", "0.008", "--device", "auto",
+                  "--gpu-storage", "float32", "--output", "auto32.nc", cwd=column)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "--gpu-storage float32 does nothing here" in done.stderr
+    config = xr.load_dataset(column / "auto32.nc").attrs["config"]
+    assert '"gpu_storage": "float64"' in config and "float32" not in config
+
+
 @pytest.mark.parametrize("extra, simulator, words", [
     (["--solver", "clarabel", "--device", "cuda"], True, ["--device cuda", "APGD's", "--solver clarabel"]),
     (["--device", "cuda"], False, ["needs a CUDA GPU", "NUMBA_ENABLE_CUDASIM"]),
     (["--device", "tpu"], True, ["--device", "invalid choice", "tpu"]),   # argparse's quotes vary by Python
     (["--solver", "clarabel", "--gpu-storage", "float32"], True, ["--gpu-storage float32", "APGD's", "--solver clarabel"]),
     (["--gpu-storage", "float16"], True, ["--gpu-storage", "invalid choice", "float16"]),
+    # issue 80.5: the CPU stores float64; the file recorded float32
+    (["--gpu-storage", "float32"], True, ["--gpu-storage float32 is a GPU's storage", "would do nothing"]),
 ])
 def test_a_device_colsim_cannot_use_is_refused_in_one_line(column, extra, simulator, words):
     if not simulator and _gpu_outside_the_simulator():

@@ -283,3 +283,70 @@ def test_settings_a_run_cannot_honour_are_refused(work, args, words):
     recorded) and a gravity at which the spheres fly off."""
     one_line_error(colsim(*args, cwd=work), 2, *words)
     assert not (work / "x.nc").exists()
+
+
+@pytest.mark.parametrize("gravity, words", [
+    (1e-300, ["column.nc", "sqrt(d_min/g)", "gravity 1e-300"]),   # as `colsim pack --gravity 1e-300`
+    (1.0, ["column.nc", "its gravity 1 is not the 9.81 its packing was poured under"]),
+])
+def test_a_column_s_gravity_is_checked_as_the_pour_checks_it(work, gravity, words):
+    """Issue 80.6: a column whose gravity was 1e-300 collapsed to h_inf/r0 = 23.5, exit 0, where
+    `colsim pack` refuses the same gravity; trim and collapse now check a file's gravity so."""
+    for name, command in (("column.nc", ["collapse", "--input", "column.nc", "--steps", "2", "--output", "x.nc"]),
+                          ("pack.nc", ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "x.nc"])):
+        _rewrite(work / name, _set_attr("gravity", gravity))
+        one_line_error(colsim(*command, cwd=work), 2, name, *words[1:])
+        assert not (work / "x.nc").exists()
+
+
+def test_a_trajectory_whose_times_go_back_is_refused(work):
+    """Issue 80.6: the frames' times are checked as the collapse's steps are: finite and increasing."""
+    def back(dataset):
+        times = dataset["time"].values.copy()
+        times[-1] = times[0]
+        return dataset.assign_coords(time=("time", times, dict(dataset["time"].attrs)))
+    _rewrite(work / "collapse.nc", back)
+    one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
+                   "times are not finite and increasing")
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda dataset: dataset.assign(at_rest=("two", np.array([1, 1], dtype=np.int8))), "at_rest flag has shape (2,)"),
+    (lambda dataset: dataset.isel(step=slice(0, 0)), "holds no step"),
+])
+def test_a_trajectory_of_an_odd_shape_is_refused_in_one_line(work, change, words):
+    """Issue 80.7: a trajectory whose at_rest has shape (2,), or one with no steps, ended `analyse`
+    in a traceback."""
+    _rewrite(work / "collapse.nc", change)
+    one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
+                   words)
+    assert not (work / "out.nc").exists()
+
+
+def test_numba_s_thread_count_zero_is_refused_in_one_line(work):
+    """Issue 80.7: NUMBA_NUM_THREADS=0 made numba's import raise, a traceback before any command ran."""
+    done = subprocess.run([sys.executable, "-m", "colsim.cli", "collapse", "--input", "column.nc", "--steps", "2",
+                           "--output", "x.nc"], cwd=work, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "NUMBA_NUM_THREADS": "0"})
+    one_line_error(done, 2, "NUMBA_NUM_THREADS='0'", "whole number >= 1")
+    assert not (work / "x.nc").exists()
+
+
+def _tbb_loads() -> bool:
+    """Whether numba's TBB layer loads in a fresh interpreter (its libtbb found by the loader)."""
+    probe = "import numba.np.ufunc.tbbpool"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
+
+
+def test_a_tbb_layer_numba_cannot_load_is_explained_in_one_line(work):
+    """Issue 80.9: NUMBA_THREADING_LAYER=tbb in a plain venv failed with "Intel TBB is required, try:
+    pip install tbb" though tbb was installed: the loader does not search the venv's lib/. colsim says
+    which library failed to load and how to point the loader at it."""
+    if _tbb_loads():
+        pytest.skip("numba loads TBB here")
+    done = subprocess.run([sys.executable, "-m", "colsim.cli", "collapse", "--input", "column.nc", "--steps", "2",
+                           "--output", "x.nc"], cwd=work, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "NUMBA_THREADING_LAYER": "tbb"})
+    one_line_error(done, 2, "numba cannot load its TBB threading layer", "libtbb", "LD_LIBRARY_PATH",
+                   "unset NUMBA_THREADING_LAYER")
+    assert not (work / "x.nc").exists()

@@ -3,6 +3,7 @@ other inputs, a damaged or foreign file, or an impossible saved state is refused
 run's nor replaced; the commits of every segment are kept."""
 import logging
 import os
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -111,6 +112,21 @@ def test_an_edited_state_is_refused_like_a_bad_column(tmp_path):
         save_checkpoint(tmp_path / "e.npz", "abc", bad, frames, diagnostics, carry, 1.0)
         with pytest.raises(CheckpointError, match=words):
             load_checkpoint(tmp_path / "e.npz", "abc")
+
+
+@pytest.mark.parametrize("spoil, words", [
+    (lambda warm: warm.i.__setitem__(0, 10**9), "a contact names a sphere outside 0..3"),
+    (lambda warm: warm.j.__setitem__(0, -10**9), "a contact names a sphere outside 0..3"),
+    (lambda warm: warm.force.__setitem__((1, 2), np.inf), "a contact force is not finite"),
+])
+def test_a_warm_start_naming_spheres_the_run_does_not_hold_is_refused(tmp_path, spoil, words):
+    """Issue 80.6: a checkpoint whose warm-start indices were 10^9 was resumed silently; its forces
+    by pair are now checked as an input file's contact forces are."""
+    state, frames, diagnostics, carry = _run()
+    spoil(carry.warm_start)
+    save_checkpoint(tmp_path / "w.npz", "abc", state, frames, diagnostics, carry, 1.0)
+    with pytest.raises(CheckpointError, match="checkpoint .*w.npz: its warm start: " + re.escape(words)):
+        load_checkpoint(tmp_path / "w.npz", "abc")
 
 
 def test_every_segments_commit_is_kept(tmp_path, caplog):

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import subprocess
+
+import pytest
 from pathlib import Path
 
 import numpy as np
@@ -45,3 +47,48 @@ def test_export_vtk_removes_its_own_earlier_frames(tmp_path):
     export_trajectory(trajectory(5), tmp_path)
     export_trajectory(trajectory(2), tmp_path)
     assert sorted(p.name for p in tmp_path.glob("*.vtu")) == ["collapse_0000.vtu", "collapse_0001.vtu", "notes.vtu"]
+
+
+def test_a_stage_removes_the_temporaries_a_killed_run_left_of_its_own_outputs(tmp_path):
+    """Issue 80.8: SIGKILL left hidden .part temporaries that nothing removed (11 after 8 kills); a
+    stage removes those of its own outputs as it starts, and nothing else."""
+    import tempfile
+
+    from colsim.io.files import remove_stale_temporaries, temporary_prefix
+
+    output = tmp_path / "collapse.nc"
+    left = [Path(tempfile.mkstemp(prefix=temporary_prefix(output, ".part"), suffix=".part", dir=tmp_path)[1])
+            for _ in range(3)]
+    others = [tmp_path / ".analysis.nc.abcdefgh.part", tmp_path / ".collapse.nc.abcdefgh.part.keep",
+              tmp_path / "collapse.nc.part"]
+    for path in others:
+        path.write_text("not collapse.nc's temporary")
+    assert sorted(remove_stale_temporaries(output)) == sorted(left)
+    assert not any(path.exists() for path in left) and all(path.exists() for path in others)
+
+
+def test_a_legal_output_name_of_any_length_has_a_temporary(tmp_path):
+    """Issue 80.8: a legal 243-byte output name was refused: its temporary's name was too long."""
+    from colsim.io.files import NAME_MAX, check_writable, write_all
+
+    output = tmp_path / ("x" * (NAME_MAX - 3) + ".nc")
+    check_writable(output)
+    write_all({output: lambda tmp: Path(tmp).write_text("done")})
+    assert output.read_text() == "done" and [p.name for p in tmp_path.iterdir()] == [output.name]
+
+
+def test_a_full_disk_names_the_file_it_could_not_write(tmp_path):
+    """Issue 80.8: a full disk ended with "(no file)": netCDF's error names none. The writer's error
+    comes back naming the output (here the writer raises the no-space error a full disk gives)."""
+    import errno
+
+    from colsim.io.files import write_all
+
+    def full(tmp):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    output = tmp_path / "analysis.nc"
+    with pytest.raises(OSError) as caught:
+        write_all({output: full})
+    assert caught.value.filename == str(output) and caught.value.errno == errno.ENOSPC
+    assert list(tmp_path.iterdir()) == []

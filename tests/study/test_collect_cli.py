@@ -78,3 +78,45 @@ def test_runs_on_a_gpu_on_the_cpu_and_from_settings_files_are_one_study(tmp_path
     _analysis_file(tmp_path / "c.nc", aspect_ratio=3.0, pack={"mu": 0.0})
     assert main_in(tmp_path, ["collect", "a.nc", "b.nc", "c.nc", "--output", "summary.nc"]) == 0
 
+
+
+#: the commands that read runs: each the same checks (issue 80.3)
+READERS = {"collect": ["collect", "a.nc", "{second}", "--output", "out.nc"],
+           "calibrate": ["calibrate", "a.nc", "{second}", "--output", "out.nc", "--replicates", "10"],
+           "column-size fit": ["convergence", "--column-size", "a.nc", "{second}", "--default-end", "4",
+                               "--output", "out.nc"]}
+
+
+@pytest.mark.parametrize("command", READERS)
+@pytest.mark.parametrize("second, words", [
+    ({}, "two analyses share the same"),   # the same run given twice: counted twice in a calibration
+    ({"friction_law": "coulomb"}, "runs differ in collapse.friction_law: None in"),
+    ({"rolling_lever": "paper"}, "runs differ in collapse.rolling_lever: effective in"),
+    ({"solver_tolerance": 1e-3}, "runs differ in collapse.solver_tolerance: None in"),
+])
+def test_every_command_that_reads_runs_refuses_what_collect_refuses(tmp_path, capsys, command, second, words):
+    """Issue 80.3: `colsim calibrate` counted a duplicated analysis twice (the height limit moved from
+    0.99203 to 0.99361) and took runs of another friction law, lever or solver tolerance; it and the
+    column-size fit now run collect's checks and name the odd run in one line."""
+    _analysis_file(tmp_path / "a.nc")
+    if second:
+        _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0, **second)
+    arguments = [word.format(second="b.nc" if second else "a.nc") for word in READERS[command]]
+    assert main_in(tmp_path, arguments) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and words in err and "a.nc" in err, err
+    assert not (tmp_path / "out.nc").exists()
+
+
+@pytest.mark.parametrize("command", READERS)
+def test_a_run_result_of_two_values_is_refused_in_one_line(tmp_path, capsys, command):
+    """Issue 80.7: an analysis whose h_inf_over_r0 has shape (2,) ended `collect` in a traceback."""
+    _analysis_file(tmp_path / "a.nc")
+    _analysis_file(tmp_path / "b.nc", aspect_ratio=2.0)
+    with xr.open_dataset(tmp_path / "b.nc") as dataset:
+        bad = dataset.load()
+    bad["h_inf_over_r0"] = ("two", [1.0, 2.0], {"units": "1", "long_name": "h"})
+    io.write_dataset(bad, tmp_path / "b.nc")
+    assert main_in(tmp_path, [word.format(second="b.nc") for word in READERS[command]]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "b.nc" in err and "h_inf_over_r0 has shape (2,)" in err, err

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -107,3 +108,94 @@ def test_a_key_given_twice_in_one_file_is_refused(tmp_path):
     assert duplicate_key([good, top]) == (f"config: {top}, line 3: the key 'r0' is given twice; the later value"
                                           " would win silently")
     assert "line 3: the key 'steps' is given twice" in duplicate_key([nested])
+
+
+#: the modules whose refusals a workflow job can meet: the stages, the commands, the study's tables
+JOB_SOURCES = ("stages/settings.py", "stages/pack.py", "stages/trim.py", "stages/analyse.py", "stages/pour_geometry.py",
+               "stages/collapse.py", "cli/commands.py", "study/calibration.py", "study/convergence.py")
+#: each job-time refusal (its message's first 32 characters) and its planning twin: a configuration
+#: that cross_field_problem refuses ("config", over the tiny study), one the schema refuses ("schema"),
+#: or the reason a configuration cannot meet it ("reason")
+JOB_TIME_REFUSALS = {
+    "unknown kind {kind!r} of a setti": ("reason", "a declaration in colsim.stages.settings, never an input"),
+    "a packing needs its height (--he": ("reason", "the plan gives every packing its height (plan.pack_height)"),
+    "diameter_min {self.diameter_min}": ("config", {"diameter_min": 0.5, "diameter_max": 0.4}),
+    "a trim needs its aspect ratio (-": ("reason", "the trim rule gives the column's a"),
+    "friction coefficient {name} must": ("schema", {"mu": -1}),
+    "need duration > 0, n_steps >= 1,": ("schema", {"collapse": {"frame_every": 0}}),
+    "the step dt/sqrt(h0/g) = {self.s": ("config", {"collapse": {"steps": 10**11, "duration": 1.0}}),
+    "gravity must be positive, got {s": ("schema", {"gravity": 0}),
+    "max_duration {self.max_duration}": ("config", {"collapse": {"duration": 5.0, "max_duration": 4.0}}),
+    "need rest_window, rest_tolerance": ("schema", {"collapse": {"rest_window": 0}}),
+    "diameter range must satisfy 0 < ": ("config", {"diameter_min": 0.5, "diameter_max": 0.4}),
+    "cylinder radius r0 = {settings.r": ("config", {"r0": 0.2}),
+    "packing height must be positive,": ("schema", {"aspect_ratios": [0]}),
+    "the pour's step dt = {dt:g} is {": ("config", {"gravity": 1e-300}),
+    "input file {path}: {error}": ("reason", "a file's gravity: the workflow's files come from its own pours, whose"
+                                             " gravity and step the planning check refused already"),
+    "input file {path}: its gravity {": ("reason", "a file's gravity against its pour's: the workflow writes both"),
+    "layer height must be positive (o": ("schema", {"pack": {"layer_height": 0}}),
+    "freeze depth must be >= 0, got {": ("schema", {"pack": {"freeze_depth": -1}}),
+    "the packing of r0 = {settings.r0": ("config", {"r0": 1000}),
+    "packing not at rest after {max_s": ("reason", "the pour's dynamics decide it, known only once it ran"),
+    "a settling sphere overlaps a fix": ("reason", "the pour's dynamics decide it, known only once it ran"),
+    "column height h0 must be positiv": ("schema", {"aspect_ratios": [0]}),
+    "the packing (height {column_heig": ("reason", "the plan pours every packing taller than the largest a r0 cut"
+                                                   " from it; only a finished pour's height can fall short"),
+    "h0 = {h0:g} leaves {n_kept} sphe": ("config", {"aspect_ratios": [0.01]}),
+    "mass share must be in (0, 1], go": ("schema", {"analysis": {"mass_shares": [1.5]}}),
+    "--bin-width {bin_width:g} cuts t": ("reason", "the deposit's radius decides it, known only after the collapse"),
+    "cylinder radius r0 = {r0} is too": ("config", {"r0": 0.2}),
+    "cannot write {path}: it exists a": ("reason", "the workflow names each output, a file of its own below results/"),
+    "{path} is given as two outputs (": ("reason", "the workflow names each output, a file of its own below results/"),
+    "{path} is both an input and an o": ("reason", "the workflow names each output, a file of its own below results/"),
+    "{' and '.join(ignored)} {'are' i": ("config", {"solver": "clarabel", "device": "cuda"}),
+    "--gpu-storage {storage} is a GPU": ("config", {"gpu_storage": "float32", "device": "cpu"}),
+    "input file {args.input} is a pac": ("reason", "the collapse rule's input is the trim rule's column"),
+    "--{law} got runs of the {', '.jo": ("reason", "the rule gives each law its own runs (plan.study_runs(law=...))"),
+    "{folder} is not a folder (the ru": ("reason", "`colsim status` is no workflow job"),
+    "no analysis files to calibrate f": ("schema", {"calibration": {"r0": [2.0]}}),
+    "a calibration needs at least two": ("config", {"calibration": {"r0": [2.0, 3.0]}, "mu_r": [0.12]}),
+    "every (mu_r, a) needs runs at tw": ("schema", {"calibration": {"r0": [2.0]}}),
+    "unknown convergence sub-studies ": ("reason", "the convergence rule names the sub-studies itself"),
+    "no analyses to tabulate": ("reason", "the convergence rule runs only for a convergence section, whose"
+                                          " sub-studies the schema requires to name runs"),
+}
+
+
+def job_time_refusals() -> set[str]:
+    """The first 32 characters of each refusal message raised in JOB_SOURCES."""
+    package = ROOT / "src" / "colsim"
+    return {match.group(1)[:32] for name in JOB_SOURCES
+            for match in re.finditer(r'raise (?:io\.)?\w+\(f?"([^"]*)"', (package / name).read_text())}
+
+
+def test_every_job_time_refusal_is_listed_with_its_planning_twin_or_a_reason():
+    """Issue 80.4: a refusal added to a stage, a command or the study's tables must be listed here,
+    with the configuration the planning check refuses in its place, or why none can be."""
+    assert job_time_refusals() == set(JOB_TIME_REFUSALS)
+
+
+@pytest.mark.parametrize("refusal", [name for name, (kind, _) in JOB_TIME_REFUSALS.items() if kind != "reason"])
+def test_each_job_time_refusal_has_a_planning_twin(refusal):
+    """Issue 80.4: a calibration with one mu_r planned 14.7 h of runs and failed at the last job;
+    device cuda or gpu_storage float32 with solver clarabel failed at the first pour. Each such
+    configuration is now refused before any job."""
+    kind, extra = JOB_TIME_REFUSALS[refusal]
+    if kind == "schema":
+        problem = schema_problem(extra, SCHEMA)
+    else:
+        problem = cross_field_problem(study_config(extra))
+    assert problem is not None and problem.startswith("config:") and "\n" not in problem, (refusal, problem)
+
+
+@pytest.mark.parametrize("extra, words", [
+    ({"calibration": {"r0": [2.0, 3.0]}, "mu_r": [0.12]}, ["calibration", "mu_r holds 1"]),
+    ({"solver": "clarabel", "device": "cuda"}, ["device cuda is APGD's", "solver clarabel would ignore it"]),
+    ({"solver": "clarabel", "gpu_storage": "float32", "device": "auto"}, ["gpu_storage float32 is APGD's"]),
+    ({"solver": "admm", "solver_overlap_tolerance": 0.01}, ["solver_overlap_tolerance 0.01 is APGD's"]),
+    ({"gpu_storage": "float32", "device": "cpu"}, ["gpu_storage float32 is a GPU's storage", "device is cpu"]),
+])
+def test_contradictions_a_job_would_meet_are_named_before_any_job(extra, words):
+    problem = cross_field_problem(study_config(extra))
+    assert problem is not None and all(word in problem for word in words), problem

@@ -1,5 +1,6 @@
 """The workflow's settings files are what `colsim STAGE --settings` runs with, and the rules'
 command lines name no setting that changes a result (issue 47)."""
+import json
 import re
 from dataclasses import dataclass
 
@@ -13,7 +14,7 @@ from colsim.cli.flags import stage_settings
 from colsim.stages import settings as stage
 from colsim.study.workflow import plan as plan_module
 from colsim.study.workflow.plan import StudyPlan, settings_text
-from helpers import ROOT
+from helpers import ROOT, copy_workflow, snakemake
 from test_study_plan import SCHEMA, study_config
 
 FILES = {"pack": ["--output", "p.nc"], "collapse": ["--input", "c.nc", "--output", "o.nc"],
@@ -59,7 +60,7 @@ def test_the_rules_command_lines_name_no_setting_that_changes_a_result():
     rules = (ROOT / "workflow/rules/simulate.smk").read_text()
     flags = set(re.findall(r'colsim [a-z-]+[^\n]*|^\s+" --[^\n]*', rules, flags=re.M))
     named = {flag for line in flags for flag in re.findall(r"--([a-z-]+)", line)}
-    assert named <= {"settings", "input", "output", "output-dir", "threads", "device", "gpu-storage",
+    assert named <= {"settings", "settings-key", "input", "output", "output-dir", "threads", "device", "gpu-storage",
                      "checkpoint-every", "max-spheres", "aspect-ratio"}, named
     for command in ("pack", "collapse", "analyse"):
         assert re.search(rf"colsim {command} --settings", rules), command
@@ -143,3 +144,48 @@ def test_a_setting_added_to_its_dataclass_the_schema_and_config_yaml_reaches_the
     assert isinstance(made, Extended) and made.grain_roughness == 0.5
     flags = build_parser().parse_args(["collapse", *FILES["collapse"], "--grain-roughness", "0.25"])
     assert stage_settings(flags, Extended, stage.SolverSettings)[0].grain_roughness == 0.25
+
+
+#: one setting of each kind of settings file, edited by hand: (the file's section or None, name, new value)
+EDITS = {"pack": ("pack", "dt", 0.5), "collapse": (None, "mu_r", 0.3), "analyse": (None, "contact_tolerance", 0.2)}
+
+
+@pytest.mark.parametrize("command", EDITS)
+def test_a_settings_file_edited_after_planning_is_refused_by_its_stage_and_its_plan(tmp_path, command):
+    """Issue 80.1: a packing's, a run's and the analyses' settings file, edited after planning. The
+    stage given its folder's key refuses it in one line naming both keys; the plan names the setting."""
+    plan = StudyPlan(study_config())
+    planned = {"pack": plan.packing_settings(3.0, 1), "collapse": plan.run_settings(0.12, 100, 4.0, "associated"),
+               "analyse": plan.analysis_settings()}[command]
+    key = plan_module.settings_key(planned)
+    path = tmp_path / "settings.yaml"
+    path.write_text(settings_text(planned) + "\n")
+    assert plan_module.edited_setting(path, planned) is None
+    keyed = build_parser().parse_args([command, *FILES[command], "--settings", str(path), "--settings-key", key])
+    classes = (stage.STAGES[command], stage.SolverSettings) if command in stage.SOLVING_STAGES else (stage.STAGES[command],)
+    stage_settings(keyed, *classes)
+    section, name, value = EDITS[command]
+    edited = json.loads(settings_text(planned))
+    (edited[section] if section else edited)[name] = value
+    path.write_text(json.dumps(edited))
+    with pytest.raises(ValueError, match=f"settings of key {plan_module.settings_key(edited)}, not {key}"):
+        stage_settings(keyed, *classes)
+    assert f"holds {name if section is None else section + '.' + name} {value}," in plan_module.edited_setting(
+        path, planned)
+
+
+def test_a_run_s_settings_edited_between_planning_and_running_stop_the_workflow(tmp_path):
+    """Issue 80.1's reproduction: the tiny study's settings files written (--until run_settings),
+    mu_r edited in one run's settings.yaml; the study then stops before any job, naming the file and
+    mu_r, instead of computing the run under the key of another mu_r."""
+    directory = copy_workflow(tmp_path)
+    written = snakemake(directory, "-j1", "--configfile", "config/tiny.yaml", "--until", "run_settings",
+                        timeout=300)
+    assert written.returncode == 0, written.stderr[-2000:]
+    settings = sorted(directory.glob("results/**/run_*/settings.yaml"))[0]
+    run = json.loads(settings.read_text())
+    run["mu_r"] = 0.3
+    settings.write_text(json.dumps(run))
+    result = snakemake(directory, "-n", "all", "--configfile", "config/tiny.yaml", timeout=300)
+    assert result.returncode != 0
+    assert f"{settings.relative_to(directory)} holds mu_r 0.3, but its folder's key names mu_r" in result.stdout + result.stderr

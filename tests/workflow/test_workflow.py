@@ -578,3 +578,15 @@ def test_the_convergence_table_passes_the_cf_checker(tiny_study, tmp_path):
     assert main_in(tmp_path, ["convergence", "--seeds", *analyses, "--default-end", "4",
                               "--output", "convergence.nc"]) == 0
     assert cf_check_failures(tmp_path / "convergence.nc") == []
+
+
+def test_nolock_is_refused_with_its_reason_before_any_job(tmp_path):
+    """Issue 80.8: with --nolock, the second of two studies sharing runs failed on "Incomplete files"
+    (the first one's running jobs); the study now refuses --nolock before any job, saying why. A dry
+    run, which runs nothing, keeps it."""
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-j1", "--nolock", "--configfile", "config/tiny.yaml", "--until", "run_settings",
+                       timeout=300)
+    assert result.returncode != 0 and "--nolock: studies here share their runs" in result.stdout + result.stderr
+    assert not (directory / "results").exists()
+    assert snakemake(directory, "-n", "--nolock", "all", "--configfile", "config/tiny.yaml", timeout=300).returncode == 0

@@ -14,8 +14,8 @@ from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
                                           load_schema)
 from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
-                                        StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, fmt, logged,
-                                        settings_text)
+                                        StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, edited_setting,
+                                        fmt, logged, settings_key, settings_text)
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
@@ -60,6 +60,26 @@ packing_of = _settings_lookup(PLAN.packing_of)
 column_of = _settings_lookup(PLAN.column_of)
 run_of = _settings_lookup(PLAN.run_of)
 analysis_settings_of = _settings_lookup(PLAN.analysis_settings_of)
+
+
+def settings_file(folder, lookup):
+    """The input function of the settings.yaml of a packing's or a run's folder: its path, or a
+    WorkflowError naming the setting where the file there holds other settings than its folder's key
+    names (edited by hand after planning; plan.edited_setting)."""
+    def path(wildcards):
+        file = f"{folder}/settings.yaml".format(**dict(wildcards.items()))
+        problem = edited_setting(file, lookup(wildcards))
+        if problem:
+            raise WorkflowError(problem)
+        return file
+    return path
+
+
+ANALYSIS_SETTINGS_PATH = PLAN.analysis_settings_path()
+problem = edited_setting(ANALYSIS_SETTINGS_PATH, PLAN.analysis_settings())
+if problem:
+    raise WorkflowError(problem)
+ANALYSIS_KEY = settings_key(PLAN.analysis_settings())
 # the study's files (naming one registers its packing, column and run)
 runs = PLAN.study_runs
 side_view_mu_r = PLAN.side_view_mu_r
@@ -140,3 +160,14 @@ localrules:
     packing_settings,
     run_settings,
     analysis_settings,
+
+
+# Studies share their runs' folders: with the lock, a second snakemake in this folder is refused
+# while the first runs; without it, each takes the other's running jobs for incomplete files. So a
+# run (not a dry run) refuses --nolock before its first job. The jobs Snakemake spawns (a cluster's)
+# run with --nolock and --no-hooks: onstart is the main process's alone.
+onstart:
+    if not workflow.execution_settings.lock:
+        raise WorkflowError("--nolock: studies here share their runs, and a second snakemake without the lock takes"
+                            " the first one's running jobs for incomplete files; run without --nolock, one study"
+                            " after the other")

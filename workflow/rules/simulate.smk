@@ -37,7 +37,7 @@ rule run_settings:
 
 rule pack:
     input:
-        f"{PACKING_DIR}/settings.yaml",
+        settings_file(PACKING_DIR, packing_of),
     output:
         f"{PACKING_DIR}/packing.nc",
     priority: pack_priority
@@ -55,7 +55,7 @@ rule pack:
     benchmark:
         benchmarked(f"{PACKING_DIR}/pack.tsv")
     shell:
-        "colsim pack --settings {input:q} --max-spheres {params.max_spheres} --threads {threads}"
+        "colsim pack --settings {input:q} --settings-key {wildcards.packing} --max-spheres {params.max_spheres} --threads {threads}"
         " --device {params.device} --gpu-storage {params.gpu_storage} --output {output:q} > {log:q} 2>&1"
 
 
@@ -83,7 +83,7 @@ rule trim:
 rule collapse:
     input:
         column=COLUMN,
-        settings=f"{RUN_DIR}/settings.yaml",
+        settings=settings_file(RUN_DIR, run_of),
     output:
         f"{RUN_DIR}/collapse.nc",
     priority: collapse_priority
@@ -101,7 +101,7 @@ rule collapse:
     benchmark:
         benchmarked(f"{RUN_DIR}/collapse.tsv")
     shell:
-        "colsim collapse --settings {input.settings:q} --input {input.column:q}"
+        "colsim collapse --settings {input.settings:q} --settings-key {wildcards.run} --input {input.column:q}"
         " --checkpoint-every {params.checkpoint_every} --threads {threads} --device {params.device}"
         " --gpu-storage {params.gpu_storage} --output {output:q} > {log:q} 2>&1"
 
@@ -120,16 +120,18 @@ rule analysis_settings:
 rule analyse:
     input:
         collapse=f"{RUN_DIR}/collapse.nc",
-        settings=PLAN.analysis_settings_path(),   # changed analysis settings: a new input, and a rerun
+        settings=ANALYSIS_SETTINGS_PATH,   # changed analysis settings: a new input, and a rerun
     output:
         f"{RUN_DIR}/analysis.nc",
     priority: job_resources.ANALYSIS_PRIORITY
+    params:
+        key=ANALYSIS_KEY,
     log:
         logged(f"{RUN_DIR}/analyse.log"),
     benchmark:
         benchmarked(f"{RUN_DIR}/analyse.tsv")
     shell:
-        "colsim analyse --settings {input.settings:q} --input {input.collapse:q} --output {output:q} > {log:q} 2>&1"
+        "colsim analyse --settings {input.settings:q} --settings-key {params.key} --input {input.collapse:q} --output {output:q} > {log:q} 2>&1"
 
 
 # Not part of `all`: a ParaView time series of one collapse, on request, e.g.

@@ -25,7 +25,7 @@ from ..stages.collapse import collapse as run_collapse
 from ..stages import pack as packing
 from ..stages.pour_geometry import expected_spheres, solid_fraction
 from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
-                               by_name)
+                               by_name, declared, external_name)
 from ..stages.trim import kept_by_trim
 from .flags import stage_settings
 from .progress import progress_bar
@@ -58,7 +58,8 @@ def check_outputs(args) -> None:
     (--output, --csv, --markdown, --figure, --checkpoint files and the --output-dir folder) and is
     absent, a regular file or a link (which the atomic rename replaces, never follows), no two
     outputs are one file (a collapse's checkpoint included), no output is one of its inputs, and a
-    checkpoint path holds nothing but a colsim checkpoint."""
+    checkpoint path holds nothing but a colsim checkpoint. Then the temporaries of these outputs
+    that a killed run left are removed."""
     outputs = _paths(args, OUTPUT_ARGUMENTS)
     if args.command in ("collapse", "pack") and not args.checkpoint:
         outputs.append(Path(f"{args.output}.checkpoint"))
@@ -80,6 +81,9 @@ def check_outputs(args) -> None:
             raise io.InputError(f"{path} is both an input and an output: the command would write over its input")
     if args.command in ("collapse", "pack"):
         check_checkpoint_path(args.checkpoint or f"{args.output}.checkpoint")
+    for path in outputs:   # a killed run's temporaries of these outputs (nothing else's)
+        for stale in io.remove_stale_temporaries(path):
+            log.info("removed %s, a temporary a killed run left", stale)
 
 
 def _recorded(args, *stage_settings) -> dict:
@@ -136,6 +140,23 @@ def _solver(solver: SolverSettings, scaled_time_step: float, backend=HOST):
     return make_solver(solver.solver, **options)
 
 
+def _what_runs(solving: SolverSettings, spheres: float) -> SolverSettings:
+    """The back-end's settings as they run, and as the file records them: the device that runs a
+    pour or collapse of about `spheres` spheres (auto: which), and the storage that runs. A GPU
+    storage (--gpu-storage float32) with --device cpu is refused; under --device auto, where the CPU
+    runs, it is dropped with a warning, and the file records float64, which the CPU stores."""
+    device = device_for(solving.device, spheres, solving.solver)
+    storage = solving.gpu_storage
+    if device == "cpu" and storage != defaults.DEFAULT_GPU_STORAGE and solving.solver in ("auto", "apgd"):
+        if solving.device == "cpu":
+            raise io.InputError(f"--gpu-storage {storage} is a GPU's storage (--device cuda or auto); the CPU stores"
+                                f" {defaults.DEFAULT_GPU_STORAGE}, so it would do nothing")
+        log.warning("--device auto runs this on the CPU, which stores %s: --gpu-storage %s does nothing here,"
+                    " and the file records %s", defaults.DEFAULT_GPU_STORAGE, storage, defaults.DEFAULT_GPU_STORAGE)
+        storage = defaults.DEFAULT_GPU_STORAGE
+    return replace(solving, device=device, gpu_storage=storage)
+
+
 def _pack_solver(solver: SolverSettings, backend=HOST):
     """The packing's back-end, its APGD on `backend`: under auto, APGD for every step at the packing's
     own tolerance (:data:`colsim.solvers.defaults.PACK_APGD_TOLERANCE`, or solver_tolerance), Clarabel
@@ -151,7 +172,7 @@ def _pack_solver(solver: SolverSettings, backend=HOST):
 def pack(args):
     settings, solving = stage_settings(args, PackSettings, SolverSettings)
     spheres = expected_spheres(settings.r0, settings.height, (settings.diameter_min, settings.diameter_max))
-    solving = replace(solving, device=device_for(solving.device, spheres, solving.solver))   # auto: which
+    solving = _what_runs(solving, spheres)
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
     backend = _backend(solving)
@@ -174,9 +195,37 @@ def pack(args):
              result.cpu_time)
 
 
+def _poured_under(source) -> dict:
+    """The settings of the pour a packing's or a column's file records ({} where it records none)."""
+    config = io.config_of(source)
+    while config and config.get("command") != "pack":
+        config = config.get("input_config") or {}
+    return config
+
+
+def _read_state(path):
+    """(state, dataset) of a packing's or a column's file (io.read_state), its gravity checked as
+    `colsim pack` checks it: the gravity its pour recorded, and with the pour's step and smallest
+    diameter (the defaults where the file records none) a step within the pour's range of the fall
+    time across a diameter. InputError naming the file otherwise (gravity 1e-300 ran to a nonsense
+    deposit)."""
+    state, source = io.read_state(path)
+    gravity = float(source.attrs.get("gravity", 9.81))
+    recorded = _poured_under(source)
+    poured = {**{external_name(item): item.default for item in declared(PackSettings)}, **recorded}
+    try:
+        packing.check_pour_step(float(poured["dt"]), gravity, float(poured["diameter_min"]))
+    except ValueError as error:
+        raise io.InputError(f"input file {path}: {error}") from None
+    if "gravity" in recorded and float(recorded["gravity"]) != gravity:
+        raise io.InputError(f"input file {path}: its gravity {gravity:g} is not the {float(recorded['gravity']):g}"
+                            " its packing was poured under")
+    return state, source
+
+
 def trim(args):
     settings = stage_settings(args, TrimSettings)
-    state, source = io.read_state(args.input)
+    state, source = _read_state(args.input)
     r0 = float(source.attrs["r0"])
     h0 = settings.aspect_ratio * r0
     kept = kept_by_trim(state, h0)
@@ -198,12 +247,12 @@ def trim(args):
 
 def collapse(args):
     settings, solving = stage_settings(args, CollapseSettings, SolverSettings)
-    column, source = io.read_state(args.input)
+    column, source = _read_state(args.input)
     if "h0" not in source.attrs:
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
     settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
-    solving = replace(solving, device=device_for(solving.device, column.n, solving.solver))   # auto: which
+    solving = _what_runs(solving, column.n)
     use_threads(solving.threads)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"

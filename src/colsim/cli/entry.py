@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -159,6 +160,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def environment_problem(environ) -> str | None:
+    """One line naming an environment variable that would stop numba as it loads (NUMBA_NUM_THREADS
+    not a whole number >= 1: numba's import raises), or None."""
+    threads = environ.get("NUMBA_NUM_THREADS")
+    if threads is not None and not (threads.strip().isdigit() and int(threads) >= 1):
+        return (f"NUMBA_NUM_THREADS={threads!r}: numba needs a whole number >= 1 (or leave it unset for every"
+                " core); --threads sets a command's threads")
+    return None
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -167,6 +178,10 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     logging.getLogger("numba").setLevel(logging.WARNING)   # its CUDA driver logs each free at INFO: 16 MB a collapse
+    problem = environment_problem(os.environ)
+    if problem:
+        print(f"colsim {args.command}: error: {problem}", file=sys.stderr)
+        return 2
     from . import commands
     from ..io.files import InputError
     from ..engine.solver_contract import SolverError

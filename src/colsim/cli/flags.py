@@ -5,10 +5,15 @@ command line overrides the file; what neither gives keeps the dataclass's defaul
 from __future__ import annotations
 
 import argparse
+import json
 import math
 from pathlib import Path
 
-from ..stages.settings import declared, external_name
+from ..io.files import read_regular_text
+from ..stages.settings import declared, external_name, settings_key
+
+#: the most bytes a settings file may hold (the workflow's are under 2 kB)
+MAX_SETTINGS_BYTES = 2**20
 
 
 def number(text, kind=float, what="a number"):
@@ -99,23 +104,39 @@ def add_settings_file_argument(parser, stage: str) -> None:
     parser.add_argument("--settings", default=None,
                         help=f"a YAML file of the {stage}'s settings by name (the workflow's settings.yaml; "
                              "a section's settings may be nested under its name); flags given override it")
+    parser.add_argument("--settings-key", default=None, metavar="KEY",
+                        help="the key the settings file's settings must have (ten hex digits: the workflow gives"
+                             " its folder's); refused otherwise, as a file edited after planning")
+
+
+def _settings_mapping(path) -> dict:
+    """The mapping a settings file holds: JSON, as the workflow writes it (so that its numbers are
+    read as the key hashed them), else YAML without aliases. ValueError naming the file otherwise."""
+    import yaml   # PyYAML: read only when a settings file is given
+
+    text = read_regular_text(path, MAX_SETTINGS_BYTES, "settings file")
+    try:
+        found = json.loads(text)
+    except ValueError:
+        try:
+            if any(isinstance(event, yaml.AliasEvent) for event in yaml.parse(text)):
+                raise ValueError(f"settings file {path} repeats a value by a YAML alias (*name): write each"
+                                 " value out")
+            found = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ValueError(f"settings file {path} is not YAML: {str(error).splitlines()[0]}") from None
+    if not isinstance(found, dict):
+        raise ValueError(f"settings file {path} is not a mapping of setting names to values")
+    return found
 
 
 def read_settings_file(path) -> dict:
-    """{name: value} of a settings file: a YAML mapping, whose mappings one level down (a section,
-    e.g. rest: or pack:) are read as if written at the top; a null (a value or a whole section) is
-    left out, so the default holds. ValueError naming the file otherwise."""
-    import yaml   # PyYAML: read only when a settings file is given
-
+    """{name: value} of a settings file: a mapping (:func:`_settings_mapping`), whose mappings one
+    level down (a section, e.g. rest: or pack:) are read as if written at the top; a null (a value or
+    a whole section) is left out, so the default holds. ValueError naming the file otherwise."""
     path = Path(path)
-    try:
-        found = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        raise ValueError(f"settings file {path} is not YAML: {str(error).splitlines()[0]}") from None
-    if not isinstance(found, dict):
-        raise ValueError(f"settings file {path} is not a mapping of setting names to values")
     flat = {}
-    for name, value in found.items():
+    for name, value in _settings_mapping(path).items():
         section = value if isinstance(value, dict) else {name: value}
         for key, item in section.items():
             if key in flat:
@@ -125,10 +146,26 @@ def read_settings_file(path) -> dict:
     return flat
 
 
+def check_settings_key(path, key: str) -> None:
+    """ValueError unless the settings of file `path` have the key `key`
+    (:func:`colsim.stages.settings.settings_key`). The workflow gives its folder's key, so that a
+    settings file edited after its folder was planned is refused, never run under a key that names
+    other settings."""
+    found = settings_key(_settings_mapping(path))
+    if found != key:
+        raise ValueError(f"settings file {path} holds settings of key {found}, not {key}, the key its folder"
+                         " names: a setting was changed after the study was planned (delete the file and"
+                         " run the workflow again to write it back)")
+
+
 def stage_settings(args, *classes):
     """The settings objects of `classes` (settings dataclasses) from the arguments: the settings file
     (--settings) where given, each flag given overriding it. A name the file holds that no class declares, or a value its field refuses, is a ValueError
     naming the file, the name and the value."""
+    if getattr(args, "settings_key", None):
+        if not getattr(args, "settings", None):
+            raise ValueError("--settings-key checks a settings file: give it with --settings")
+        check_settings_key(args.settings, args.settings_key)
     given = read_settings_file(args.settings) if getattr(args, "settings", None) else {}
     known = {external_name(item): (cls, item) for cls in classes for item in declared(cls)}
     unknown = sorted(set(given) - set(known))

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
+from pathlib import Path
 
 from .compiled import numba, prange   # noqa: F401 - prange for the kernels' modules
 
@@ -59,9 +61,34 @@ def use_threads(count: int) -> int:
     if pins_threads(count, allowed_cpus(), os.environ):
         os.environ["OMP_PROC_BIND"] = "true"
         log.info("%d threads, one to each CPU this job may use (OMP_PROC_BIND=true)", count)
-    numba.set_num_threads(count)    # starts numba's threads, on the layer compiled.py chose
+    try:
+        numba.set_num_threads(count)    # starts numba's threads, on the layer compiled.py chose
+    except ValueError as error:         # numba: "No threading layer could be loaded" and a hint
+        raise ValueError(layer_failure(str(error))) from None
     log.info("--threads %d on numba's %s threading layer", count, threading_layer())
     return count
+
+
+def layer_failure(message: str) -> str:
+    """One line saying why numba could not start its threads (its own `message` is several lines,
+    and where TBB was asked for it says "pip install tbb" even where tbb is installed): for TBB, the
+    library its loader failed to open, where the tbb package put it, and how to point the loader at
+    it (or leave NUMBA_THREADING_LAYER unset: OpenMP)."""
+    asked = os.environ.get("NUMBA_THREADING_LAYER", "")
+    if "tbb" not in asked.lower() and "TBB" not in message:
+        return f"numba could not start its threads: {' '.join(message.split())}"
+    try:
+        import numba.np.ufunc.tbbpool  # noqa: F401  (the layer's extension: its ImportError says why)
+        why = "its TBB layer loads, yet numba refused it (TBB older than numba needs?)"
+    except ImportError as error:
+        why = str(error)
+    found = sorted(Path(sys.prefix, "lib").glob("libtbb.so*")) + sorted(Path(sys.prefix, "lib").glob("libtbb*.dylib"))
+    variable = "DYLD_LIBRARY_PATH" if sys.platform == "darwin" else "LD_LIBRARY_PATH"
+    where = (f"the tbb package's library is in {found[0].parent}, where the loader does not look: export"
+             f" {variable}={found[0].parent}" if found else "install tbb (pip install tbb) and point"
+             f" {variable} at the folder of its libtbb")
+    return (f"numba cannot load its TBB threading layer (NUMBA_THREADING_LAYER={asked or 'unset'}): {why}; {where},"
+            " or unset NUMBA_THREADING_LAYER to run on OpenMP")
 
 
 def threading_layer() -> str:

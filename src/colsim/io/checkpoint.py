@@ -27,6 +27,7 @@ import numpy as np
 from ..engine.records import TEXT_DIAGNOSTICS, Carry, StepDiagnostics
 from ..engine.state import ParticleState
 from ..engine.warm_start import WarmStart
+from . import checks
 from .files import InputError, atomic_path
 from .provenance import source_commit
 from .state_file import check_geometry
@@ -182,6 +183,7 @@ def _read(path, fingerprint, restore):
     import xarray
     try:
         check_geometry(restored["state"], xarray.Dataset(), path)
+        _check_warm_start(restored, path)
     except InputError as error:
         raise CheckpointError(f"{error}; remove the checkpoint to start the run over") from None
     restored["commits"] = [str(c) for c in arrays.get("commits", np.array(["unknown (before commits were kept)"]))]
@@ -189,6 +191,19 @@ def _read(path, fingerprint, restore):
     if earlier:
         log.warning("resuming %s, written by other code (%s); the output lists every commit", path, "; ".join(earlier))
     return restored
+
+
+def _check_warm_start(restored, path) -> None:
+    """InputError unless the carried contact forces name spheres of the saved state (a wall, or a
+    fixed sphere of the pour) and are finite, as an input file's are (checks.check_contacts)."""
+    warm = restored["carry"].warm_start if "carry" in restored else restored["warm"]
+    if warm is None:
+        return
+    n = restored["state"].n
+    try:
+        checks.check_contacts(warm.i, warm.j, warm.family, warm.force, warm.rolling, n=n, fixed=n)
+    except checks.FileProblem as problem:
+        raise InputError(f"checkpoint {path}: its warm start: {problem}") from None
 
 
 def _restore(arrays, path, fingerprint) -> dict:

@@ -88,6 +88,12 @@ def open_dataset(path, kind: str):
     if not path.is_file():
         raise InputError(f"input file {path} does not exist")
     try:
+        checks.check_header(path, kind)        # before netCDF or xarray decode anything
+    except checks.FileProblem as problem:
+        raise InputError(f"input file {path}: {problem}") from None
+    except Exception as error:  # netCDF4 raises OSError, ValueError, ... for foreign files
+        raise InputError(f"input file {path} is not a readable netCDF file ({error})") from None
+    try:
         lazy = xr.open_dataset(path, engine="netcdf4")
     except Exception as error:  # netCDF4 raises OSError, ValueError, ... for foreign files
         raise InputError(f"input file {path} is not a readable netCDF file ({error})") from None

@@ -182,6 +182,16 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
                          tuple(segment_commits(earlier)))
 
 
+def check_pour_step(dt: float, gravity: float, d_min: float) -> None:
+    """ValueError unless the pour's step dt lies within POUR_STEP_RANGE of sqrt(d_min/g), the time to
+    fall about a diameter: a pour's own check, and that of a packing's or a column's gravity."""
+    scaled = dt * np.sqrt(gravity / d_min)
+    if not POUR_STEP_RANGE[0] <= scaled <= POUR_STEP_RANGE[1]:
+        raise ValueError(f"the pour's step dt = {dt:g} is {scaled:.3g} times sqrt(d_min/g), the time to fall"
+                         f" about a diameter; it must lie within {POUR_STEP_RANGE[0]:g}-{POUR_STEP_RANGE[1]:g}"
+                         f" (gravity {gravity:g})")
+
+
 def _check(settings: PackSettings) -> None:
     """ValueError naming the first setting a pour cannot use."""
     d_min, d_max, gravity = settings.diameter_min, settings.diameter_max, settings.gravity
@@ -191,11 +201,7 @@ def _check(settings: PackSettings) -> None:
         raise ValueError(f"cylinder radius r0 = {settings.r0} is smaller than the largest particle (diameter {d_max})")
     if not settings.height > 0:
         raise ValueError(f"packing height must be positive, got {settings.height}")
-    scaled = settings.dt * np.sqrt(gravity / d_min)
-    if not POUR_STEP_RANGE[0] <= scaled <= POUR_STEP_RANGE[1]:
-        raise ValueError(f"the pour's step dt = {settings.dt:g} is {scaled:.3g} times sqrt(d_min/g), the time to fall"
-                         f" about a diameter; it must lie within {POUR_STEP_RANGE[0]:g}-{POUR_STEP_RANGE[1]:g}"
-                         f" (gravity {gravity:g})")
+    check_pour_step(settings.dt, gravity, d_min)
     if settings.layer_height is not None and not settings.layer_height > 0:
         raise ValueError(f"layer height must be positive (or None: one cloud), got {settings.layer_height}")
     if not settings.freeze_depth >= 0:

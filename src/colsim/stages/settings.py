@@ -12,6 +12,8 @@ Light on purpose: the CLI builds its parser from this module before it loads the
 """
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -38,6 +40,14 @@ def setting(default, help: str, *, unit: str = "1", kind: str = "positive", name
     metadata = {"help": help, "unit": unit, "kind": kind, "name": name, "choices": choices,
                 "optional": optional, "many": many, "flag": flag}
     return field(default=tuple(default) if many else default, metadata=metadata)
+
+
+def settings_key(settings) -> str:
+    """Ten hex digits of the SHA-256 of `settings` (a packing's, a run's or the analyses' settings, as
+    their settings file holds them) as canonical JSON: the key that names their folder. The workflow
+    names folders by it and a stage given the key (--settings-key) checks its settings file by it."""
+    text = json.dumps(settings, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:10]
 
 
 def external_name(item) -> str:

@@ -61,16 +61,14 @@ class Runs:
 def runs_from_analyses(analyses) -> Runs:
     """The runs of analysis datasets (attributes mu_r, aspect_ratio, r0, seed; variables
     h_inf_over_r0, runout_over_r0, mean_diameter)."""
-    from .collect import run_key
+    from .collect import check_runs
 
+    if not analyses:
+        raise ValueError("no analysis files to calibrate from")
     rows = []
-    for analysis in analyses:
-        a, mu_r, seed = run_key(analysis)
-        r0 = float(analysis.attrs["r0"])
+    for (mu_r, a, r0, seed), analysis in zip(check_runs(analyses, ("mu_r", "aspect_ratio", "r0", "seed")), analyses):
         rows.append((mu_r, a, r0, seed, float(analysis["mean_diameter"]) / r0,
                      float(analysis["h_inf_over_r0"]), float(analysis["runout_over_r0"])))
-    if not rows:
-        raise ValueError("no analysis files to calibrate from")
     return Runs(*(np.array(column) for column in zip(*rows)))
 
 

@@ -124,14 +124,51 @@ def run_key(analysis) -> tuple[float, float, int]:
     return a, mu_r, seed
 
 
+#: what every run of one study shares, whatever it sweeps: its friction law, its rolling lever and
+#: its solver's stopping rule (a run of another joins no summary, calibration or fit)
+SHARED = ("collapse.friction_law", "collapse.rolling_lever", "collapse.solver_tolerance",
+          "collapse.solver_settings")
+
+
+def check_runs(analyses, swept=SWEPT) -> list[tuple]:
+    """The one set of checks of every command that reads runs (collect, calibrate, the column-size
+    fit): each run's attributes (:func:`run_key`), its scalar results one number each, no two runs
+    of the same `swept` values (the same run given twice would count twice), and one friction law,
+    rolling lever and solver tolerance (SHARED) among them. Returns each run's `swept` values;
+    ValueError naming the odd run otherwise."""
+    keys = []
+    for analysis in analyses:
+        run_key(analysis)
+        for name in (*SUMMARY_VARIABLES, "mean_diameter", "at_rest"):
+            if name in analysis.variables and analysis[name].size != 1:
+                raise ValueError(f"{_run_name(analysis)}: {name} has shape {analysis[name].shape}, not one number")
+        try:
+            keys.append(tuple(float(np.asarray(analysis.attrs.get(name, 0) if name == "seed" else analysis.attrs[name])
+                                    .reshape(-1)[0]) for name in swept))
+        except (KeyError, IndexError, TypeError, ValueError):
+            raise ValueError(f"{_run_name(analysis)}: its {', '.join(swept)} are not numbers") from None
+    first = {}
+    for key, analysis in zip(keys, analyses):
+        if key in first:
+            raise ValueError(f"two analyses share the same ({', '.join(swept)}): {_run_name(first[key])} and"
+                             f" {_run_name(analysis)}; each run counts once")
+        first[key] = analysis
+    reference = {name: run_settings(analyses[0]).get(name) for name in SHARED}
+    for analysis in analyses[1:]:
+        settings = run_settings(analysis)
+        for name in SHARED:
+            if settings.get(name) != reference[name]:
+                raise ValueError(f"runs differ in {name}: {reference[name]} in {_run_name(analyses[0])},"
+                                 f" {settings.get(name)} in {_run_name(analysis)}; one study has one")
+    return keys
+
+
 def collect_analyses(analyses) -> xr.Dataset:
     """Stack analysis datasets by their (aspect_ratio, mu_r, seed); NaN where a run is missing."""
     if not analyses:
         raise ValueError("no analysis files to collect")
-    keys = [run_key(a) for a in analyses]
+    keys = [(a, m, int(s)) for a, m, s in check_runs(analyses)]
     check_same_settings(analyses)
-    if len(set(keys)) != len(keys):
-        raise ValueError("two analyses share the same (aspect_ratio, mu_r, seed)")
     ratios, mu_rs, seeds = (sorted(set(values)) for values in zip(*keys))
     dims = ("aspect_ratio", "mu_r", "seed")
 

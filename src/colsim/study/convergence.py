@@ -17,9 +17,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..stages.settings import scaled_step
-from .collect import means_per_size
+from .collect import check_runs, means_per_size
 
 SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
+#: what tells two runs of one sub-study apart
+RUN_IDENTITY = ("r0", "aspect_ratio", "mu_r", "seed", "n_steps", "duration")
 RUN_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "final_to_peak_kinetic_energy", "n_particles",
                  "wall_time")
 
@@ -40,6 +42,9 @@ def runs_table(groups: dict, default_end: float) -> "xarray.Dataset":  # noqa: F
     rows = [(study, analysis) for study in SUB_STUDIES for analysis in groups.get(study, [])]
     if not rows:
         raise ValueError("no analyses to tabulate")
+    for study in SUB_STUDIES:
+        if groups.get(study):
+            check_runs(groups[study], RUN_IDENTITY)
     coords = {
         "study": [s for s, _ in rows],
         "r0": [float(a.attrs["r0"]) for _, a in rows],

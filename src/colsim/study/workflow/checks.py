@@ -10,7 +10,8 @@ import re
 import jsonschema
 import yaml
 
-from ...stages.settings import POUR_STEP_RANGE
+from ...solvers.defaults import DEFAULT_GPU_STORAGE
+from ...stages.settings import POUR_STEP_RANGE, SMALLEST_SCALED_STEP
 from ...stages.pour_geometry import expected_spheres
 
 #: far above any study's configuration (the default has about 100)
@@ -116,9 +117,12 @@ def cross_field_problem(config):
         if a * radius < d_max:
             return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
                     f" the column would hold less than one layer of particles (diameters {d_min}-{d_max})")
-    problem = time_problem(config)
+    problem = time_problem(config) or solver_problem(config)
     if problem:
         return problem
+    if config.get("calibration") and len(set(config["mu_r"])) < 2:
+        return (f"config: the calibration finds the best mu_r between the swept ones and needs two or more;"
+                f" mu_r holds {len(set(config['mu_r']))}")
     if config["friction_law"] != "associated" and config["friction_law_comparison"]:
         return "config: friction_law_comparison needs friction_law: associated (it adds the coulomb runs itself)"
     if config["friction_law"] != "associated" and config.get("convergence"):
@@ -171,14 +175,41 @@ def time_problem(config):
         if duration is not None and round(steps * duration / end) < 1:
             return (f"config: {key} {duration:g} at the study's step (collapse.duration / collapse.steps ="
                     f" {end / steps:g}) rounds to no step")
-    for n in study.get("time_step", {}).get("steps", []):
+    for key, n in [("collapse.steps", steps)] + [("convergence.time_step.steps", n)
+                                                 for n in study.get("time_step", {}).get("steps", [])]:
         if n < 1:
-            return f"config: convergence.time_step.steps {n}: a run needs at least one step"
+            return f"config: {key} {n}: a run needs at least one step"
+        if end / n < SMALLEST_SCALED_STEP:
+            return (f"config: {key} {n} over collapse.duration {end:g} makes a step dt/sqrt(h0/g) of {end / n:.3g},"
+                    f" below {SMALLEST_SCALED_STEP:g}: too small for a step's arithmetic")
     scaled = config["pack"]["dt"] * math.sqrt(config["gravity"] / config["diameter_min"])
     low, high = POUR_STEP_RANGE
     if not low <= scaled <= high:
         return (f"config: pack.dt {config['pack']['dt']:g} is {scaled:.3g} times sqrt(diameter_min / gravity),"
                 f" the time to fall about a diameter; it must lie within {low:g}-{high:g} (the default is 0.125)")
+    return None
+
+
+#: the back-ends that APGD's options (a device, a GPU storage, the overlap tolerance) reach
+APGD_SOLVERS = ("auto", "apgd")
+
+
+def solver_problem(config):
+    """One line if the solver's settings contradict each other, or None: APGD's options (device cuda,
+    a GPU storage, solver_overlap_tolerance) given to another back-end, which would ignore them, and
+    a GPU storage on the CPU, which stores float64 (the pour's and the collapse's own refusals)."""
+    solver, device, storage = config["solver"], config["device"], config["gpu_storage"]
+    if solver not in APGD_SOLVERS:
+        given = ["device cuda"] if device == "cuda" else []
+        given += [f"gpu_storage {storage}"] if storage != DEFAULT_GPU_STORAGE else []
+        if config.get("solver_overlap_tolerance") is not None:
+            given.append(f"solver_overlap_tolerance {config['solver_overlap_tolerance']:g}")
+        if given:
+            return (f"config: {' and '.join(given)} {'are' if len(given) > 1 else 'is'} APGD's (solver auto or"
+                    f" apgd); solver {solver} would ignore it")
+    if device == "cpu" and storage != DEFAULT_GPU_STORAGE:
+        return (f"config: gpu_storage {storage} is a GPU's storage, and device is cpu, which stores"
+                f" {DEFAULT_GPU_STORAGE}: use device cuda (or auto), or leave gpu_storage out")
     return None
 
 

@@ -15,10 +15,9 @@ name.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 
-from ...stages.settings import STAGES, SOLVING_STAGES, SolverSettings, declared, external_name
+from ...stages.settings import STAGES, SOLVING_STAGES, SolverSettings, declared, external_name, settings_key
 
 RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
@@ -80,12 +79,6 @@ def fmt(value) -> str:
     return short if float(short) == float(value) else repr(float(value))
 
 
-def settings_key(settings) -> str:
-    """Ten hex digits of the SHA-256 of `settings` as canonical JSON (a folder name)."""
-    text = json.dumps(settings, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:10]
-
-
 def logged(path: str) -> str:
     """The log file of a job whose output is `path` (below results/): the same path below results/logs."""
     return f"{RESULTS}/logs{path[len(RESULTS):]}"
@@ -105,6 +98,36 @@ def settings_text(settings) -> str:
     """A packing's, a run's or the analyses' settings (their identity) as the text of their
     settings.yaml: one line of JSON, keys sorted (JSON is YAML; the dry run's -p shows it whole)."""
     return json.dumps(settings, sort_keys=True)
+
+
+def _flat(settings: dict, where: str = "") -> dict:
+    """{dotted name: value} of a settings mapping, its sections' settings as section.name."""
+    flat = {}
+    for name, value in settings.items():
+        flat |= _flat(value, f"{where}{name}.") if isinstance(value, dict) else {f"{where}{name}": value}
+    return flat
+
+
+def edited_setting(path, planned: dict) -> str | None:
+    """One line naming the first setting that the settings file `path` holds other than `planned`
+    (the settings its folder's key names), or None where the file is absent or holds them: a
+    settings.yaml edited by hand would otherwise run under a key that names other settings."""
+    try:
+        with open(path) as stream:
+            found = json.loads(stream.read(2**20))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError):
+        found = None
+    if not isinstance(found, dict):
+        return f"{path} is not the settings its folder's key names (not a JSON mapping): delete it to write it back"
+    found, expected = _flat(found), _flat(json.loads(settings_text(planned)))
+    for name in sorted(set(found) | set(expected)):
+        if found.get(name, "absent") != expected.get(name, "absent"):
+            return (f"{path} holds {name} {found.get(name, 'absent')}, but its folder's key names"
+                    f" {name} {expected.get(name, 'absent')}: it was changed after planning; delete it to write it"
+                    " back, or change the configuration to make a run of other settings")
+    return None
 
 
 #: the settings rules' command: the text to a temporary file, then renamed (never half-written)
