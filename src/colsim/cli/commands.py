@@ -136,10 +136,20 @@ def _pack_solver(solver: SolverSettings):
                              **_apgd_options(solver, defaults.PACK_APGD_TOLERANCE)})
 
 
+def _device(solving: SolverSettings, spheres: float) -> SolverSettings:
+    """The settings with their device decided: 'auto' becomes the GPU or the CPU
+    (:func:`colsim.solvers.registry.device_for`), said in the log so that a job's log tells which."""
+    chosen = device_for(solving.device, spheres, solving.solver)
+    if solving.device == "auto":
+        log.info("device auto: %s (about %d spheres, solver %s; the GPU from %d spheres under APGD, when one "
+                 "is visible)", chosen, round(spheres), solving.solver, defaults.GPU_FROM_SPHERES)
+    return replace(solving, device=chosen)
+
+
 def pack(args):
     settings, solving = stage_settings(args, PackSettings, SolverSettings)
     spheres = expected_spheres(settings.r0, settings.height, (settings.diameter_min, settings.diameter_max))
-    solving = replace(solving, device=device_for(solving.device, spheres, solving.solver))   # auto: which
+    solving = _device(solving, spheres)
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
     solver = _pack_solver(solving)
@@ -190,7 +200,7 @@ def collapse(args):
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
     settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
-    solving = replace(solving, device=device_for(solving.device, column.n, solving.solver))   # auto: which
+    solving = _device(solving, column.n)
     use_threads(solving.threads)
     checkpoint = Path(args.checkpoint or f"{args.output}.checkpoint")
     law = "" if settings.friction_law == "associated" else f" {settings.friction_law}"
