@@ -53,3 +53,14 @@ def test_a_package_pinned_twice_is_pinned_by_the_python():
     for name, lines in pins.items():
         if len(lines) > 1:
             assert all("; python_full_version" in line for line in lines), lines
+
+
+def test_a_virtual_environment_in_the_checkout_is_ignored():
+    """Issue 79.9: the README's `python3 -m venv .venv` leaves nothing for git to list."""
+    import shutil
+    import subprocess
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        import pytest
+        pytest.skip("not a git checkout")
+    done = subprocess.run(["git", "-C", str(ROOT), "check-ignore", "-q", ".venv/bin/python"])
+    assert done.returncode == 0, ".venv/ is not in .gitignore"

@@ -250,7 +250,7 @@ def test_status_lists_what_is_done_and_what_is_in_progress(tmp_path, capsys):
     save_checkpoint(run / "collapse.nc.checkpoint", "abc", state, [(0, state)], [], Carry(), 4.0, 3.0)
     assert main(["status", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "1 packings and 0 collapses done, 1 in progress" in out
+    assert "1 packing and 0 collapses done, 1 in progress" in out
     assert "| r0_2/seed_1/pack_x/a_1/mu_r_0.12/run_y | collapse | 2 | -1 |" in out
     # issue 45.6: a FIFO named *.checkpoint is skipped (opening it would block), a junk file is named
     os.mkfifo(run.parent / "fifo.checkpoint")

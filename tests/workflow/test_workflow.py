@@ -563,6 +563,7 @@ def test_the_lint_asks_only_for_a_conda_environment(tmp_path):
     lints = set(re.findall(r"^    \* (.+?):?$", result.stdout + result.stderr, flags=re.M))
     assert lints == {"Specify a conda environment or container for each rule."}, lints
     assert "conda environment" in (directory / "Snakefile").read_text()
+    assert "`snakemake --lint` exits 1" in (ROOT / "docs" / "study-config.md").read_text()   # where users look
 
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_status
+from .collect import FLAGS, MAIN_MASS_SHARE, counted, rest_energy_of, run_status
 from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 
@@ -72,8 +72,8 @@ def lube_markdown(summary) -> str:
         part = summary.sel(mu_r=m)
         counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
         counts = counts[counts > 0]   # a partial study: the aspect ratios run (every mu_r has one)
-        seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
-        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
+        seeds = counted(int(counts.min()), "seed", int(counts.max()))
+        lines += [f"### mu_r = {float(m):g} (mean of {seeds}; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
                   "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error | flags |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

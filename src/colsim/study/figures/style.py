@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..collect import FLAGS, run_status
+from ..collect import FLAGS, counted, run_status
 
 
 log = logging.getLogger(__name__)
@@ -92,12 +92,12 @@ def _bars(values, kind: str):
 
 def _bar_note(kind: str, fewest: int, most: int) -> str:
     """What the error bars are, for a legend's title."""
-    seeds = f"{fewest}" if fewest == most else f"{fewest}-{most}"
+    seeds = counted(fewest, "seed", most)
     if most <= 1:
-        return f"{seeds} seed: no error bars"
+        return f"{seeds}: no error bars"
     if kind == "se":
-        return f"mean of {seeds} seeds, bars: standard error"
-    return f"mean of {seeds} seeds, bars: lowest to highest seed"
+        return f"mean of {seeds}, bars: standard error"
+    return f"mean of {seeds}, bars: lowest to highest seed"
 
 
 def _flags_of(summary) -> dict:
