@@ -129,6 +129,15 @@ def size_caveat(r0: float) -> str:
     return ""
 
 
+def size_banner(r0: float) -> str:
+    """:func:`size_caveat` in a figure title's few words, or "" at or above CONVERGED_R0."""
+    if r0 < SMOKE_TEST_R0:
+        return f"SMOKE TEST, NOT A RESULT: r0 = {r0:g}, a few dozen grains"
+    if r0 < CONVERGED_R0:
+        return f"Not converged in the column size (r0 = {r0:g}): run-outs short of the large-column limit"
+    return ""
+
+
 def lube_rst(summary, mu_r: float) -> str:
     """reStructuredText of the report's landing page: a sentence on the column size
     (:func:`size_caveat`), then a list-table at the swept mu_r nearest `mu_r`, per a, of the mean over
