@@ -1,8 +1,9 @@
 # The colsim study: pack -> trim -> collapse -> analyse -> collect -> plot -> report.
 # Rules call the `colsim` command line; see README.md and config.yaml.
-# `snakemake --lint` asks for one thing more, a conda environment or container a rule, and is left
-# so on purpose: the environment is the pip lock the README installs (environment.txt with
-# constraints.txt), the same for every rule (tests/workflow/test_workflow.py holds the lint to that).
+# `snakemake --lint` exits 1 asking for one thing more, a conda environment or container a rule, and
+# is left so on purpose: the environment is the pip lock the README installs (environment.txt with
+# constraints.txt), the same for every rule, which a conda file a rule would repeat untested
+# (docs/study-config.md, "The workflow's files"; tests/workflow/test_workflow.py holds the lint to that).
 from snakemake.utils import min_version
 
 min_version("8.0")

@@ -4,6 +4,7 @@ site (mkdocs.yml) builds with `mkdocs build --strict`: every page in the nav, ev
 resolving inside docs/. Fast: no simulation, no Snakemake (a build takes seconds)."""
 from __future__ import annotations
 
+import importlib.util
 import re
 import shutil
 import subprocess
@@ -75,11 +76,17 @@ def test_the_link_finder_sees_links_and_skips_code():
     assert [t for t in links(text) if is_relative(t)] == ["docs/a.md", "figures/b.png", "docs/g.md"]
 
 
+needs_mkdocs = pytest.mark.skipif(
+    importlib.util.find_spec("mkdocs") is None or importlib.util.find_spec("pymdownx") is None,
+    reason="the site's tools are not installed: pip install -r docs/requirements.txt -c constraints.txt")
+
+
 def _mkdocs_build(root: Path, site: Path) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(root / "mkdocs.yml"),
                            "--site-dir", str(site)], capture_output=True, text=True, timeout=300)
 
 
+@needs_mkdocs
 def test_the_site_builds_strictly(tmp_path):
     """Bound: mkdocs exits 0 in strict mode, where mkdocs.yml makes a page left out of the nav, a
     link to nothing (or out of docs/) and an anchor that no heading has each a warning, so a
@@ -94,6 +101,7 @@ def test_the_site_builds_strictly(tmp_path):
     assert 'id="why-r0--3"' in (tmp_path / "site" / "getting-started" / "index.html").read_text(encoding="utf-8")
 
 
+@needs_mkdocs
 @pytest.mark.parametrize("link, warning", [
     ("[x](method.md#no-such-heading)", "does not contain an anchor '#no-such-heading'"),
     ("[x](../config.yaml)", "'../config.yaml', but the target is not found"),

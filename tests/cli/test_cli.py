@@ -46,11 +46,13 @@ def test_all_stages_through_the_cli(tmp_path):
     is a benchmark's business, not a test's.)"""
     for args in (["pack", "--r0", "1", "--height", "1", "--seed", "3", "--output", "pack.nc"],
                  ["trim", "--input", "pack.nc", "--aspect-ratio", "1", "--output", "column.nc"],
-                 ["collapse", "--input", "column.nc", "--steps", "40", "--output", "collapse.nc"],
+                 ["collapse", "--input", "column.nc", "--steps", "40", "--device", "auto", "--output", "collapse.nc"],
                  ["analyse", "--input", "collapse.nc", "--output", "analysis.nc"],
                  ["export-vtk", "--input", "collapse.nc", "--output-dir", "vtk"]):
         done = _run_cli(*args, cwd=tmp_path)
         assert done.returncode == 0, done.stderr
+        if "--device" in args:   # auto says which device it chose (a column this small: the CPU)
+            assert "device auto: cpu (about " in done.stderr, done.stderr
     assert not list(tmp_path.glob("*.checkpoint*"))     # each stage removes its checkpoint (and frames) once its output is written
     result = io.open_dataset(tmp_path / "analysis.nc", io.ANALYSIS_KIND)
     for name, kind in (("pack.nc", io.STATE_KIND), ("column.nc", io.STATE_KIND),
@@ -248,7 +250,7 @@ def test_status_lists_what_is_done_and_what_is_in_progress(tmp_path, capsys):
     save_checkpoint(run / "collapse.nc.checkpoint", "abc", state, [(0, state)], [], Carry(), 4.0, 3.0)
     assert main(["status", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "1 packings and 0 collapses done, 1 in progress" in out
+    assert "1 packing and 0 collapses done, 1 in progress" in out
     assert "| r0_2/seed_1/pack_x/a_1/mu_r_0.12/run_y | collapse | 2 | -1 |" in out
     # issue 45.6: a FIFO named *.checkpoint is skipped (opening it would block), a junk file is named
     os.mkfifo(run.parent / "fifo.checkpoint")

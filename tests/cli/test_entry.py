@@ -44,6 +44,26 @@ def test_a_bad_value_exits_2_naming_the_option(args, option, capsys):
     assert option in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("args, said", [
+    (COLLAPSE + ["--mu_r", "0.1"], "colsim collapse: error: unrecognized arguments: --mu_r 0.1 (--mu_r: did you mean --mu-r?)"),
+    (COLLAPSE + ["--step", "2"], "colsim collapse: error: unrecognized arguments: --step 2 (--step: did you mean --steps?)"),
+    (PACK + ["--no-such-flag"], "colsim pack: error: unrecognized arguments: --no-such-flag"),
+])
+def test_a_flag_misspelt_or_abbreviated_is_refused_by_its_subcommand(args, said, capsys):
+    """Issue 79.9: an abbreviation is no flag (`--step 2` was taken for `--steps 2`), and the error
+    names the subcommand and the flag meant (it named neither)."""
+    from colsim.cli import main
+    with pytest.raises(SystemExit) as stopped:
+        main(args)
+    assert stopped.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == said
+
+
+def test_no_parser_takes_an_abbreviation():
+    parser = build_parser()
+    assert not parser.allow_abbrev and all(not command.allow_abbrev for command in parser.commands.values())
+
+
 def test_version_names_the_commit_and_verbosity_goes_anywhere(capsys):
     """Issue 48.8: --version prints the version and the source's commit; -v and -q are accepted
     before or after the subcommand, together refused; each subcommand's help starts with its line."""

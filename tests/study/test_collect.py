@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 
 from colsim.study.experimental_laws import lube_height, lube_runout
-from colsim.study.collect import collect_analyses, one_row_per_run, one_run, run_key, run_status
+from colsim.study.collect import collect_analyses, counted, one_row_per_run, one_run, run_key, run_status
 from colsim.study.markdown import lube_markdown, lube_rst
 
 
@@ -218,3 +218,12 @@ def test_collect_refuses_attributes_outside_their_vocabulary_or_range(attrs, wor
         collect_analyses([_analysis(**attrs)])
     assert all(word in str(refused.value) for word in words), str(refused.value)
     assert collect_analyses([_analysis()]).attrs["rolling_lever"] == "paper"
+
+
+def test_a_count_of_one_takes_the_singular():
+    """Issue 79.9: "1 packing", "mean of 1 seed", never "1 packings" or "1 seeds"."""
+    assert counted(1, "seed") == "1 seed"
+    assert counted(0, "packing") == "0 packings"
+    assert counted(3, "seed") == "3 seeds"
+    assert counted(1, "seed", 3) == "1-3 seeds"
+    assert counted(2, "collapse", 2) == "2 collapses"

@@ -382,3 +382,18 @@ def test_the_side_views_name_the_last_frame_as_run_status_calls_the_run():
     assert _end_name(trajectory(-1)) == "end"
     assert _end_name(trajectory(-1, [1.0, 0.5])) == "end (still moving)"
     assert _end_name(trajectory(None, [1.0, 0.001])) == "deposit"
+
+
+@pytest.mark.parametrize("r0, words", [(1.0, "SMOKE TEST, NOT A RESULT: r0 = 1"),
+                                       (3.0, "Not converged in the column size (r0 = 3)"), (13.0, None)])
+def test_every_figure_says_the_study_s_size_caveat_above_it(tmp_path, r0, words):
+    """Issue 79.2: a figure opened from the report says what the landing page's caveat does (that page
+    can open scrolled past it); a study at the converged size draws no banner."""
+    data = settled()
+    data.attrs["r0"] = r0
+    for name, figure in _drawn_figures(tmp_path, data, [], []).items():
+        texts = [text.get_text() for text in figure.texts]
+        if words is None:
+            assert not any("SMOKE" in t or "converged" in t for t in texts), (name, texts)
+        else:
+            assert any(t.startswith(words) for t in texts), (name, texts)

@@ -6,9 +6,10 @@ import re
 
 import pytest
 
-from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
-                                          load_schema, non_finite_number, schema_problem, size_problem)
-from helpers import ROOT
+from colsim.study.workflow.checks import (before_validation, cross_field_problem, cuda_gpu_count, device_problem,
+                                          duplicate_key, link_out_of, load_schema, non_finite_number, schema_problem,
+                                          size_problem)
+from helpers import ROOT, copy_workflow, snakemake
 from test_study_plan import study_config
 
 SCHEMA = load_schema(ROOT / "workflow" / "schemas" / "config.schema.yaml")
@@ -199,3 +200,40 @@ def test_each_job_time_refusal_has_a_planning_twin(refusal):
 def test_contradictions_a_job_would_meet_are_named_before_any_job(extra, words):
     problem = cross_field_problem(study_config(extra))
     assert problem is not None and all(word in problem for word in words), problem
+
+
+def test_device_cuda_without_a_gpu_is_named_in_one_line(monkeypatch):
+    """Issue 79.7: device: cuda where no GPU is, one line naming the setting; cpu and auto pass, and
+    so does cuda with a GPU or numba's simulator (which the stages take for one)."""
+    monkeypatch.delenv("NUMBA_ENABLE_CUDASIM", raising=False)
+    problem = device_problem({"device": "cuda"}, gpus=lambda: 0)
+    assert problem.startswith("config: device: cuda, but this machine has no CUDA GPU") and "\n" not in problem
+    assert device_problem({"device": "cuda"}, gpus=lambda: 1) is None
+    for device in ("cpu", "auto"):
+        assert device_problem({"device": device}, gpus=lambda: 0) is None
+    monkeypatch.setenv("NUMBA_ENABLE_CUDASIM", "1")
+    assert device_problem({"device": "cuda"}, gpus=lambda: 0) is None
+
+
+def test_the_gpu_count_asks_the_driver_without_numba():
+    """A count (0 where no NVIDIA driver is), made in a fresh interpreter without importing numba:
+    planning a study stays quick."""
+    import subprocess
+    import sys
+    probe = ("import sys; from colsim.study.workflow.checks import cuda_gpu_count; n = cuda_gpu_count(); "
+             "print(n, 'numba' in sys.modules)")
+    count, numba_loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                                         check=True).stdout.split()
+    assert int(count) >= 0 and numba_loaded == "False"
+
+
+@pytest.mark.skipif(cuda_gpu_count() > 0, reason="this machine has a GPU: device: cuda is right here")
+def test_a_study_on_cuda_without_a_gpu_is_refused_before_any_job(tmp_path, monkeypatch):
+    """The tiny study with device: cuda run here, without a GPU: Snakemake stops before its first job
+    with the one line (before: every pack and collapse failed, its cause only in each job's log)."""
+    monkeypatch.delenv("NUMBA_ENABLE_CUDASIM", raising=False)
+    copy_workflow(tmp_path)
+    done = snakemake(tmp_path, "-j1", "--configfile", "config/tiny.yaml", "--config", "device=cuda", timeout=120)
+    assert done.returncode != 0
+    assert "config: device: cuda, but this machine has no CUDA GPU" in done.stdout + done.stderr
+    assert not (tmp_path / "results").exists() or not any((tmp_path / "results").rglob("*.nc"))

@@ -6,6 +6,8 @@ schedules only the new jobs, and that a wrong configuration stops snakemake nami
 """
 import json
 import re
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -206,13 +208,52 @@ def test_report_describes_the_study_it_shows(tiny_study):
         assert result.returncode == 0, result.stderr[-3000:]
         html = (tiny_study / name).read_text(errors="replace")
         assert len(html) > 10000 and "final_height.png" in html
-        for text in ("radius r0 = 1 of spheres of diameters 0.25-0.5", "aspect ratios a: [0.5, 1]", "mu_r: [0, 0.12]",
+        for text in ("r0 = 1, a: [0.5, 1]", "mu_r: [0, 0.12]", "seeds: [1]",
                      "100 steps to t/sqrt(h0/g) = 4.0", "results/tiny/study_config.yaml",
-                     "steps by back-end", "apgd: ", "lever is paper",
+                     "steps by back-end", "apgd: ", "lever paper", "A smoke test, not a result",
                      "mu_r = 0.12, mean over seeds, against Lube et al. (2004)", "(r_inf - r0)/r0"):
             assert text in html, (name, text)
         assert "77 steps" not in html and "r0 = 2" not in html
         assert "System Message" not in html and "Undefined substitution" not in html
+
+
+#: a page holding the report in a frame of a laptop's screen, which puts in its title where the
+#: caveat's first words lie in that frame once the report has drawn itself (Chromium, headless)
+CAVEAT_PROBE = """<!DOCTYPE html><html><head><title>waiting</title><style>body{{margin:0}}
+iframe{{border:0;width:{width}px;height:{height}px;display:block}}</style></head><body>
+<iframe id="report" src="{report}"></iframe><script>
+function look() {{
+  const page = document.getElementById("report").contentDocument;
+  const caveat = page && [...page.querySelectorAll("strong")].find(e => e.textContent.includes("{words}"));
+  if (!caveat) {{ document.title = "caveat not found"; return; }}
+  const box = caveat.getBoundingClientRect();
+  document.title = "caveat from " + Math.round(box.top) + " to " + Math.round(box.bottom);
+}}
+window.addEventListener("load", () => setTimeout(look, 3000));
+</script></body></html>"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (shutil.which("chromium") or shutil.which("chromium-browser")),
+                    reason="no Chromium (Debian: apt install chromium)")
+def test_the_report_shows_its_caveat_on_a_laptop_screen(tiny_study, tmp_path):
+    """Issue 79.2: the tiny study's report opened at 1280x800 in a real browser (headless Chromium)
+    shows "A smoke test, not a result" inside the screen (before: Snakemake centres its landing page,
+    which was taller than the screen, and the caveat lay 51 px above its top)."""
+    result = snakemake(tiny_study, "--report", "caveat.html", "--configfile", "config/tiny.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    width, height = 1280, 800
+    probe = tmp_path / "probe.html"
+    probe.write_text(CAVEAT_PROBE.format(width=width, height=height, report=(tiny_study / "caveat.html").as_uri(),
+                                         words="A smoke test, not a result"))
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    done = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
+                           f"--window-size={width},{height}", "--virtual-time-budget=10000", "--dump-dom",
+                           probe.as_uri()], capture_output=True, text=True, timeout=180)
+    title = re.search(r"<title>(.*?)</title>", done.stdout)
+    assert title and title.group(1).startswith("caveat from "), (title, done.stderr[-2000:])
+    top, bottom = map(int, title.group(1).split()[2::2])
+    assert 0 <= top and bottom <= height, title.group(1)
 
 
 @pytest.mark.slow
@@ -563,6 +604,7 @@ def test_the_lint_asks_only_for_a_conda_environment(tmp_path):
     lints = set(re.findall(r"^    \* (.+?):?$", result.stdout + result.stderr, flags=re.M))
     assert lints == {"Specify a conda environment or container for each rule."}, lints
     assert "conda environment" in (directory / "Snakefile").read_text()
+    assert "`snakemake --lint` exits 1" in (ROOT / "docs" / "study-config.md").read_text()   # where users look
 
 
 

@@ -11,8 +11,8 @@ from snakemake.utils import validate
 from colsim.study.figure_names import FIGURES   # the figures `colsim plot` writes: name -> title of its report label
 from colsim.study.workflow import job_resources
 from colsim.study.workflow import report as study_report
-from colsim.study.workflow.checks import (before_validation, cross_field_problem, duplicate_key, link_out_of,
-                                          load_schema)
+from colsim.study.workflow.checks import (before_validation, cross_field_problem, device_problem, duplicate_key,
+                                          link_out_of, load_schema)
 from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
                                         StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, edited_setting,
                                         fmt, logged, settings_key, settings_text)
@@ -25,6 +25,13 @@ if problem is None:
     problem = cross_field_problem(config) or link_out_of(RESULTS)
 if problem:
     raise WorkflowError(problem)
+
+
+onstart:
+    # device: cuda where the jobs run here without a GPU: refused before the first job. Only here, once the
+    # executor is known: a study sent to a cluster (--executor slurm) plans on a login node with no GPU.
+    if workflow.local_exec and device_problem(config):
+        raise WorkflowError(device_problem(config))
 
 
 PLAN = StudyPlan(config)   # the study's packings, columns and runs, by key (registered as they are named)

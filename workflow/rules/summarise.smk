@@ -59,7 +59,8 @@ rule plot:
 # so its text describes the study that made them, whatever configuration builds the report.
 rule study_config:
     input:
-        f"{STUDY_DIR}/summary.nc",
+        summary=f"{STUDY_DIR}/summary.nc",
+        template=DESCRIPTION_TEMPLATE,   # an edit of the landing page's text rewrites it
     output:
         config=report(
             f"{STUDY_DIR}/study_config.yaml",
@@ -70,11 +71,10 @@ rule study_config:
         description=DESCRIPTION,
     params:
         config=config,
-        template=DESCRIPTION_TEMPLATE,
     log:
         f"{STUDY_DIR}/logs/study_config.log",
     benchmark:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
-        study_report.write_study_files(dict(params.config), input[0], params.template, output.config,
+        study_report.write_study_files(dict(params.config), input.summary, input.template, output.config,
                                        output.description, STUDY_DIR, log[0])

@@ -426,6 +426,7 @@ def status(args):
     energy, recent wall seconds a step, CPU and wall so far, and when the checkpoint was written."""
     import time
     from ..io.checkpoint import checkpoint_summary
+    from ..study.collect import counted
 
     folder = Path(args.folder)
     if not folder.is_dir():
@@ -433,7 +434,8 @@ def status(args):
     packings, collapses = (sum(1 for _ in folder.rglob(name)) for name in ("packing.nc", "collapse.nc"))
     # regular files only: opening a FIFO named *.checkpoint would block
     checkpoints = sorted(path for path in folder.rglob("*.checkpoint") if path.is_file() and not path.is_symlink())
-    print(f"{folder}: {packings} packings and {collapses} collapses done, {len(checkpoints)} in progress")
+    print(f"{folder}: {counted(packings, 'packing')} and {counted(collapses, 'collapse')} done,"
+          f" {len(checkpoints)} in progress")
     if not checkpoints:
         return
     print("| run | stage | spheres | step | t | kinetic energy | wall s a step (last 10) | CPU s | wall s | written |")

@@ -19,6 +19,7 @@ value and exit status 2, a failed computation with exit status 1, and never leav
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
 import os
 import sys
@@ -62,11 +63,36 @@ def _verbosity_arguments(parser, default) -> None:
                         help="log warnings and errors only (no progress)")
 
 
+class _Parser(argparse.ArgumentParser):
+    """A parser that takes a flag only as spelled in full (`--step` is not `--steps`), and whose
+    subcommands are its own kind."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+
+def _unrecognised(extras: list[str], parser: argparse.ArgumentParser) -> str:
+    """The error for arguments `parser` (a subcommand's) does not know, with the flag meant where
+    one is close (`--mu_r`: `--mu-r`)."""
+    flags = [option for action in parser._actions for option in action.option_strings]
+    hints = []
+    for extra in extras:
+        given = extra.split("=", 1)[0]
+        if not given.startswith("--"):
+            continue
+        close = [given.replace("_", "-")] if given.replace("_", "-") in flags else \
+            difflib.get_close_matches(given, flags, n=1, cutoff=0.75)
+        hints += [f"{given}: did you mean {close[0]}?"] if close else []
+    return f"unrecognized arguments: {' '.join(extras)}" + (f" ({'; '.join(hints)})" if hints else "")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="colsim", description=__doc__.split("\n\n")[0])
+    parser = _Parser(prog="colsim", description=__doc__.split("\n\n")[0])
     _verbosity_arguments(parser, False)
     parser.add_argument("--version", action=_Version, help="show colsim's version and commit, and exit")
     sub = parser.add_subparsers(dest="command", required=True)
+    parser.commands = sub.choices   # the subcommands' parsers, which name themselves in their errors
 
     p = sub.add_parser("pack", help="fill a cylinder by free fall (mu_r = 0, and mu = 0 unless --mu) and let it settle")
     _stage_arguments(p, "pack")
@@ -172,7 +198,10 @@ def environment_problem(environ) -> str | None:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:   # said by the subcommand's parser, which names itself (`colsim collapse: error: ...`)
+        command = parser.commands[args.command]
+        command.error(_unrecognised(extras, command))
     if args.verbose and args.quiet:
         parser.error("-v and -q contradict each other")
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO,

@@ -8,8 +8,8 @@ The files in general:
 Every file is CF-style: global `Conventions`, `title`, `source` ("colsim X.Y"), `history`, the
 versions of colsim, Clarabel and numpy, the run's configuration as JSON in `config` and its `seed`;
 every variable has `units` and `long_name`; `colsim_commit` names the git commit of the source
-that wrote the file (" (modified)" when its tracked files differed from it), where colsim runs from
-a git checkout. The simulation's lengths, times and masses are in SI
+that wrote the file (" (modified)" when its code, not a study's configuration, differed from it),
+where colsim runs from a git checkout. The simulation's lengths, times and masses are in SI
 units (`unit_system`): gravity 9.81 makes lengths metres and times seconds, and the density (in
 kg m-3) makes masses kilograms; scaled quantities (over r0, t/sqrt(h0/g)) have units "1". Wall-clock
 times are "s" too, and their long names say "wall-clock".

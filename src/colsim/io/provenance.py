@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import __version__
 from .cf import UNIT_SYSTEM
-from .git import git_state
+from .git import CODE_PATHS, git_state
 
 
 def global_attributes(kind: str, title: str, config: dict, seed=None) -> dict:
@@ -47,10 +47,11 @@ def versions() -> dict:
 
 @functools.lru_cache(maxsize=1)
 def source_commit() -> str:
-    """The git commit of the checkout colsim's source lies in, with " (modified)" when its tracked
-    files differ from it; "unknown (not a git checkout)" for an installed copy or without git.
-    Asked once a process: a run's files all name the code it started with."""
-    state = git_state(Path(__file__).parent)
+    """The git commit of the checkout colsim's source lies in, with " (modified)" when its code
+    (:data:`colsim.io.git.CODE_PATHS`: not a study's configuration) differs from it; "unknown (not a
+    git checkout)" for an installed copy or without git. Asked once a process: a run's files all
+    name the code it started with."""
+    state = git_state(Path(__file__).parent, CODE_PATHS)
     if not state["commit"]:
         return "unknown (not a git checkout)"
     return state["commit"] + (" (modified)" if state["dirty"] else "")

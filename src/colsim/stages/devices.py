@@ -21,6 +21,6 @@ def device_for(device: str, spheres: float, solver: str = "auto") -> str:
         from ..engine.backends import gpu_visible
 
         chosen = "cuda" if gpu_visible() else "cpu"
-    log.info("device auto: %s (about %d spheres, solver %s; a GPU from %d spheres under APGD)", chosen, spheres,
-             solver, defaults.GPU_FROM_SPHERES)
+    log.info("device auto: %s (about %d spheres, solver %s; the GPU from %d spheres under APGD, when one is "
+             "visible)", chosen, round(spheres), solver, defaults.GPU_FROM_SPHERES)
     return chosen

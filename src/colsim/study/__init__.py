@@ -3,8 +3,9 @@ column-size tables, the column-size limit fit, the mu_r calibration, the polygon
 coefficient and the figures; :func:`open_runs` gives a study's runs as one xarray Dataset."""
 
 
-def open_runs(results="results", name: str = "analysis.nc"):
-    """Every run's analysis (or trajectory) below `results` as one Dataset (:mod:`colsim.study.runs`)."""
+def open_runs(results="results", name: str = "analysis.nc", study=None):
+    """The runs' analyses (or trajectories) below `results` as one Dataset, a study's (its name or its
+    configuration file) or every run's (:mod:`colsim.study.runs`)."""
     from .runs import open_runs as opened
 
-    return opened(results, name)
+    return opened(results, name, study)

@@ -240,6 +240,13 @@ REST_ENERGY = CollapseSettings.rest_energy
 MAIN_MASS_SHARE = 0.5
 """A main mass (the largest connected cluster) with fewer than this share of the grains is a fragment:
 its h_inf and r_inf do not describe the deposit."""
+def counted(fewest: int, noun: str, most: int | None = None) -> str:
+    """'1 seed', '3 seeds', '1-3 seeds': a count (or the range of counts) with its noun."""
+    most = fewest if most is None else most
+    number = f"{fewest}" if fewest == most else f"{fewest}-{most}"
+    return f"{number} {noun}" if number == "1" else f"{number} {noun}s"
+
+
 FLAGS = {"moving": "still moving", "fragment": "main mass < half the grains"}
 """The flags of :func:`run_status` -> how tables and figures name them."""
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .collect import FLAGS, MAIN_MASS_SHARE, rest_energy_of, run_status
+from .collect import FLAGS, MAIN_MASS_SHARE, counted, rest_energy_of, run_status
 from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
 
 
@@ -72,8 +72,8 @@ def lube_markdown(summary) -> str:
         part = summary.sel(mu_r=m)
         counts = np.isfinite(part.h_inf_over_r0.values).sum(axis=-1)
         counts = counts[counts > 0]   # a partial study: the aspect ratios run (every mu_r has one)
-        seeds = f"{counts.min()}" if counts.min() == counts.max() else f"{counts.min()}-{counts.max()}"
-        lines += [f"### mu_r = {float(m):g} (mean of {seeds} seeds; spread = max - min)", "",
+        seeds = counted(int(counts.min()), "seed", int(counts.max()))
+        lines += [f"### mu_r = {float(m):g} (mean of {seeds}; spread = max - min)", "",
                   "| a | h_inf/r0 | spread | Lube | error | (r_inf - r0)/r0 | spread | Lube | error "
                   "| Lajeunesse h_inf/r0 | error | Lajeunesse run-out | error | flags |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -126,6 +126,15 @@ def size_caveat(r0: float) -> str:
         return (f"**Not converged in the column size:** at r0 = {r0:g} the run-outs fall short of the model's "
                 f"large-column limit (by 21-27 % at r0 = 3 and 10-11 % at r0 = 6; 5 % needs r0 of about "
                 f"{CONVERGED_R0:g}; docs/validation/column-size.md): read them for trends in a and mu_r.")
+    return ""
+
+
+def size_banner(r0: float) -> str:
+    """:func:`size_caveat` in a figure title's few words, or "" at or above CONVERGED_R0."""
+    if r0 < SMOKE_TEST_R0:
+        return f"SMOKE TEST, NOT A RESULT: r0 = {r0:g}, a few dozen grains"
+    if r0 < CONVERGED_R0:
+        return f"Not converged in the column size (r0 = {r0:g}): run-outs short of the large-column limit"
     return ""
 
 

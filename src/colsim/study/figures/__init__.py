@@ -13,10 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..figure_names import FIGURES
+from ..markdown import size_banner
 from .calibration import calibration_figure
 from .convergence import column_size_limit_figure, convergence_figure
 from .laws import friction_law_figure, law_figure, mu_r_figure
 from .runs import deposit_profile_figure, front_figure, side_view_figure
+from .style import banner
 
 __all__ = ["FIGURES", "all_figures", "calibration_figure", "column_size_limit_figure", "convergence_figure",
            "deposit_profile_figure", "friction_law_figure", "front_figure", "law_figure", "mu_r_figure",
@@ -24,7 +26,9 @@ __all__ = ["FIGURES", "all_figures", "calibration_figure", "column_size_limit_fi
 
 
 def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
-    """Write every figure of :data:`FIGURES` into `output_dir` (created); return their paths."""
+    """Write every figure of :data:`FIGURES` into `output_dir` (created); return their paths. Each
+    carries the study's size caveat above it (:func:`colsim.study.markdown.size_banner`), so that a
+    figure seen alone says what the report's first page does."""
     output_dir = Path(output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     analyses, trajectories = list(analyses), list(trajectories)
@@ -34,4 +38,5 @@ def all_figures(summary, analyses, trajectories, output_dir) -> list[Path]:
             "deposit_profiles": lambda path: deposit_profile_figure(analyses, path),
             "side_views": lambda path: side_view_figure(trajectories, path),
             "front_position": lambda path: front_figure(analyses, path)}
-    return [draw[name](output_dir / f"{name}.png") for name in FIGURES]
+    with banner(size_banner(float(summary.attrs["r0"])) if "r0" in summary.attrs else ""):
+        return [draw[name](output_dir / f"{name}.png") for name in FIGURES]

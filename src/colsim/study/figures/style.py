@@ -4,12 +4,14 @@ an open marker where a seed was still moving at the end, a black cross where a s
 less than half the grains), colours, empty panels and grids of panels."""
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import logging
 from pathlib import Path
 
 import numpy as np
 
-from ..collect import FLAGS, run_status
+from ..collect import FLAGS, counted, run_status
 
 
 log = logging.getLogger(__name__)
@@ -41,9 +43,25 @@ def _label(variable, fallback: str) -> str:
     return name if units in ("1", "") else f"{name} [{units}]"
 
 
+#: a line above every figure saved while it is set (:func:`banner`): the study's size caveat
+_BANNER: contextvars.ContextVar[str] = contextvars.ContextVar("banner", default="")
+
+
+@contextlib.contextmanager
+def banner(text: str):
+    """Figures saved inside this block carry `text` above them, in bold red (nothing when empty)."""
+    token = _BANNER.set(text)
+    try:
+        yield
+    finally:
+        _BANNER.reset(token)
+
+
 def _save(fig, path: Path) -> Path:
     from ...io.files import atomic_path
 
+    if _BANNER.get():   # above a suptitle too; bbox_inches="tight" keeps it in the PNG
+        fig.text(0.5, 1.04, _BANNER.get(), ha="center", va="bottom", color="#b00000", weight="bold", fontsize=11)
     with atomic_path(path) as tmp:   # a killed plot leaves no PNG that looks finished
         fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
     _pyplot().close(fig)
@@ -92,12 +110,12 @@ def _bars(values, kind: str):
 
 def _bar_note(kind: str, fewest: int, most: int) -> str:
     """What the error bars are, for a legend's title."""
-    seeds = f"{fewest}" if fewest == most else f"{fewest}-{most}"
+    seeds = counted(fewest, "seed", most)
     if most <= 1:
-        return f"{seeds} seed: no error bars"
+        return f"{seeds}: no error bars"
     if kind == "se":
-        return f"mean of {seeds} seeds, bars: standard error"
-    return f"mean of {seeds} seeds, bars: lowest to highest seed"
+        return f"mean of {seeds}, bars: standard error"
+    return f"mean of {seeds}, bars: lowest to highest seed"
 
 
 def _flags_of(summary) -> dict:

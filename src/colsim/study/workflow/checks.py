@@ -245,3 +245,31 @@ def duplicate_key(paths):
         except (OSError, yaml.YAMLError):
             continue    # Snakemake has read it already and says what is wrong with it
     return None
+
+
+def cuda_gpu_count() -> int:
+    """The CUDA GPUs the NVIDIA driver sees here (0 without a driver), asked of libcuda directly as
+    numba.cuda does (its NUMBA_CUDA_DRIVER, else libcuda.so.1 from the loader's path), without
+    importing numba: planning a study stays quick."""
+    import ctypes
+
+    for library in filter(None, (os.environ.get("NUMBA_CUDA_DRIVER"), "libcuda.so.1", "libcuda.so")):
+        try:
+            driver = ctypes.CDLL(library)
+        except OSError:
+            continue
+        count = ctypes.c_int(0)
+        if driver.cuInit(0) != 0 or driver.cuDeviceGetCount(ctypes.byref(count)) != 0:
+            return 0
+        return count.value
+    return 0
+
+
+def device_problem(config, gpus=cuda_gpu_count):
+    """One line when `device: cuda` is set and the jobs would run where no GPU is (their every
+    pack and collapse would fail), or None. numba's simulator (NUMBA_ENABLE_CUDASIM=1) stands for a
+    GPU, as the stages take it for one. `gpus`: how many GPUs this machine has, asked only when needed."""
+    if config["device"] != "cuda" or os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" or gpus() > 0:
+        return None
+    return ("config: device: cuda, but this machine has no CUDA GPU (no NVIDIA driver sees one): set device: cpu"
+            " or auto, or run the study on a GPU node (--executor slurm)")
