@@ -1,4 +1,4 @@
-"""APGD's iterations on one GPU (issue 46): the kernels of an iteration, its decisions made on the
+"""APGD's iterations on one GPU: the kernels of an iteration, its decisions made on the
 device, the residual check there, and the iteration state that stays on the device between checks.
 
 Each kernel is its CPU twin's arithmetic (colsim.engine.apgd_iteration, colsim.engine.cones) for one contact

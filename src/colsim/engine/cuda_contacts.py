@@ -1,4 +1,4 @@
-"""The swept particle pairs of contact detection on one GPU (issue 46, item 3): the pairs of
+"""The swept particle pairs of contact detection on one GPU: the pairs of
 :func:`colsim.engine.contacts.swept_pairs` from a uniform grid instead of a k-d tree, in numba.cuda
 kernels.
 

@@ -1,4 +1,4 @@
-"""Kernel launches whose array arguments are marshalled once (issue 46).
+"""Kernel launches whose array arguments are marshalled once.
 
 numba-cuda's dispatcher marshals every argument anew at each launch: it types it, wraps it and
 flattens a device array into its words (pointer, sizes, shape, strides). Measured on an NVIDIA H200
@@ -15,10 +15,7 @@ any of that is not at hand (numba's simulator, a kernel not yet compiled or comp
 signatures, a host array, a debug or extended kernel, another numba-cuda) it launches the plain way.
 
 :class:`Prepared` is one launch made again and again with the same arguments (APGD's trial step),
-through :func:`launch`. (A launch through the driver's cuLaunchKernel with the parameters packed once,
-skipping numba-cuda's and cuda.core's work, was tried and measured on an H200 at baf89b8: 10.2 us an
-empty launch against 9.8, and APGD's iterations 0.99x as fast, since the GPU's work paces them; it
-was removed. docs/gpu-record.md, "The third GPU sitting".)
+through :func:`launch` (docs/performance.md: what it saves, and what was tried and dropped).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The contact operator on one GPU (issue 46, its first part): B u, B' S z and diag(B Mbar^-1 B') as
+"""The contact operator on one GPU: B u, B' S z and diag(B Mbar^-1 B') as
 numba.cuda kernels, the arithmetic of :mod:`colsim.engine.operator` line for line, and dot products
 summed in a fixed order.
 

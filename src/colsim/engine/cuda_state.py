@@ -1,5 +1,4 @@
-"""The particles' arrays of a step on the GPU, made there from the last step's and left there
-(issue 46; item 4 of the plan in docs/gpu-record.md, "The third GPU sitting").
+"""The particles' arrays of a step on the GPU, made there from the last step's and left there.
 
 A step on the GPU needs, besides the contacts, each particle's position and predicted motion (for
 detection) and the program's masses and free forces (for the solver). The device makes its own from

@@ -1,4 +1,4 @@
-"""The warm start on one GPU (issue 46, item 3): :meth:`colsim.engine.warm_start.WarmStart.match`
+"""The warm start on one GPU: :meth:`colsim.engine.warm_start.WarmStart.match`
 with the last step's pairs in a hash table on the device instead of a sorted array on the host, and
 the step's forces carried to the next step there (:class:`DeviceWarmStart`).
 

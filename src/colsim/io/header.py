@@ -1,4 +1,4 @@
-"""A netCDF-4 file's header, bounded before netCDF or xarray read it (issue 80.2): how many
+"""A netCDF-4 file's header, bounded before netCDF or xarray read it: how many
 attributes each of its objects holds, asked of the HDF5 library itself.
 
 netCDF reads attributes by name, at a cost quadratic in their number: 50,000 attributes take seconds

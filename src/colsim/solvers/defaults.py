@@ -42,8 +42,8 @@ AUTO_APGD_OVERLAP_TOLERANCE = 1e-4
 
 #: the dt / sqrt(h0/g) at which auto's APGD length floor and overlap tolerance hold as given (the
 #: default collapse step); at a smaller step both shrink in proportion to it, so the velocity error
-#: they admit (a length over dt) does not grow as the step shrinks (issue 45; docs/method.md,
-#: "Overlaps a step starts with")
+#: they admit (a length over dt) does not grow as the step shrinks (docs/method.md, "Overlaps a
+#: step starts with")
 AUTO_APGD_LENGTHS_AT = 0.004
 
 #: APGD's tolerance when `colsim pack` runs under auto: a settled packing is an initial condition,
@@ -53,11 +53,9 @@ PACK_APGD_TOLERANCE = 1e-3
 #: APGD's overlap tolerance under auto in a packing: none (its tolerance is already as loose)
 PACK_APGD_OVERLAP_TOLERANCE = 0.0
 
-#: device auto takes a visible GPU for a pour or a column of at least this many spheres (issue 46's
-#: first table: the smallest size at which the GPU's APGD iteration was measured faster than a node's
-#: CPU threads). Whole steps were faster on an H200 from 8,455 spheres on (2.8x its host's 16 threads,
-#: docs/performance.md "One GPU"), but a node's GPU runs its jobs one at a time while its cores run
-#: many, so a study's small columns are left to the cores
+#: device auto takes a visible GPU for a pour or a column of at least this many spheres. Whole steps
+#: are faster on a GPU from a few thousand spheres on (docs/performance.md), but a node's GPU runs its
+#: jobs one at a time while its cores run many, so a study's small columns are left to the cores
 GPU_FROM_SPHERES = 73_000
 
 #: how APGD's iteration stores its arrays on a GPU: float64, the reference, or float32 (the iterate,
