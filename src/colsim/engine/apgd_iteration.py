@@ -331,7 +331,7 @@ _power_start = np.zeros(0)
 
 def power_start(size: int) -> np.ndarray:
     """(size,) the power iteration's fixed random start (reproducible): standard normals from seed 0,
-    drawn once for the longest size asked and kept (a step's draw took about 5-9 ms at r0 = 4)."""
+    drawn once for the longest size asked and kept (a draw a step cost more than a small step's iterations)."""
     return power_start_drawn(size)[:size].copy()
 
 

@@ -4,7 +4,7 @@ The threading layer is chosen here, on import, before numba can start its thread
 numba has it, else its own workqueue, and Intel TBB last (LAYER_PRIORITY). numba's own order puts TBB
 first, so merely installing a package that brings libtbb switched colsim's threads to TBB, where two
 threads took turns and a collapse ran many times slower than on one thread (docs/performance.md,
-"Threads"). A user who sets NUMBA_THREADING_LAYER or
+"Where the time goes"). A user who sets NUMBA_THREADING_LAYER or
 NUMBA_THREADING_LAYER_PRIORITY keeps that choice. Which layer a job ran on is logged at its start and
 kept in its file (colsim.engine.threads.threading_layer)."""
 from __future__ import annotations

@@ -12,8 +12,8 @@ roles of three slots move on, nothing is copied); the next trial step takes the 
 itself, in the projection's kernel: three launches a trial step. So the host launches trial steps
 without waiting for any, and reads that array once a round of them
 (:meth:`CudaIteration.iterate`): a trial step used to wait for a copy of its sums to the host, which
-with the launches was most of an iteration at 69,000 spheres (0.22 ms on an H200, against 0.04 ms of
-memory traffic). A residual check costs one more copy. A solve's start is made on the device as
+with the launches was most of a small column's iteration, several times its memory traffic. A
+residual check costs one more copy. A solve's start is made on the device as
 well (:meth:`CudaIteration.of_program`): the contacts' frames, the gaps, the coefficients and the
 warm start go there once (the masses and free forces are made there by a step on the GPU,
 :mod:`colsim.engine.cuda_state`), and the row scales, c, the first iterate,

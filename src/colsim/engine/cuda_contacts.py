@@ -139,8 +139,8 @@ class ContactRows:
 
     def upload(self, rows: dict, first: int) -> None:
         """Host contacts' arrays by name (all but the lever and keys, which :meth:`levers_and_keys`
-        makes) into rows first, first + 1, ...: in one copy (a copy from the host costs about 0.15 ms
-        on an H200 whatever its size), the bodies' integers carried as the float64 words of the same
+        makes) into rows first, first + 1, ...: in one copy (a small copy from the host costs nearly what
+        a large one does), the bodies' integers carried as the float64 words of the same
         bits, and read back as integers on the device (a copy moves bytes, never rounds them)."""
         w = len(rows["i"])
         if not w:

@@ -1,10 +1,9 @@
 """Kernel launches whose array arguments are marshalled once.
 
 numba-cuda's dispatcher marshals every argument anew at each launch: it types it, wraps it and
-flattens a device array into its words (pointer, sizes, shape, strides). Measured on an NVIDIA H200
-(benchmarks/gpu.py, `launch_costs`), an empty kernel's launch took 29.5 us with one array argument
-and 137 us with thirteen: about 9 us an array. An APGD iteration is six launches with 44 arrays, so
-a small column's iteration (0.5 ms at 69,000 spheres) was mostly this marshalling.
+flattens a device array into its words (pointer, sizes, shape, strides), at a cost that grows with
+the arrays a launch takes (benchmarks/gpu.py, `launch_costs`; docs/performance.md). An APGD iteration
+is six launches with 44 arrays, so a small column's iteration was mostly this marshalling.
 
 :func:`launch` is ``kernel[griddim, blockdim](*args)`` with each device array's words made at its
 first launch and kept (weakly: they go with the array), and the scalars marshalled at each launch

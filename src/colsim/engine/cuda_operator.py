@@ -13,7 +13,7 @@ summed in a fixed order.
 
 Without a GPU the kernels run on numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1), which is how the
 tests check them against the CPU kernels (tests/cuda_simulator.py sets the simulator up for that). APGD's iterations on the GPU use them
-(:mod:`colsim.engine.cuda_apgd`); detection and the warm start follow (docs/performance.md, "One GPU").
+(:mod:`colsim.engine.cuda_apgd`); detection and the warm start follow (docs/performance.md, "One H100/H200").
 """
 from __future__ import annotations
 
@@ -185,7 +185,7 @@ def _fill_kernel(flat, value):
 
 #: kernels compiled anew for each set of types they are launched with, by (kernel, types): one signature
 #: a dispatcher, so that :func:`launch` takes its fast way (a dispatcher of several launches the plain
-#: way, about 30 us more a launch on an H200)
+#: way, which costs more a launch)
 _by_types: dict = {}
 
 

@@ -395,7 +395,7 @@ def _midpoint_kernel(position, predicted, out):
 def axis_distance(position, i):
     """rho_i = sqrt(x_i^2 + y_i^2), particle i's distance from the z axis: the host's np.hypot to a unit
     or two in the last place (the card's own hypot is not glibc's either, and holds fused
-    multiply-adds that libNVVM's -fma=0 leaves: benchmarks/unfused.py)."""
+    multiply-adds)."""
     return math.sqrt(position[i, 0] * position[i, 0] + position[i, 1] * position[i, 1])
 
 

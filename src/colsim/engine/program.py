@@ -184,8 +184,7 @@ def contact_jacobian(contacts: Contacts, n_particles: int) -> sp.csr_matrix:
 def _fill_program(m_i, inertia, velocity, angular_velocity, dt, dt2, gravity, mass, fbar):
     """mass (6n,) = [m; I] / dt2 and fbar (6n,) = [m v / dt + m g; I w / dt], each body's six entries
     (particle-major) in one pass over the bodies (compiled; dt2 = dt**2 as Python makes it): the
-    arithmetic of numpy's column-at-a-time fill, so the same bits, in 15 ms against 37 at 598,179
-    spheres on one core (docs/gpu-record.md, "Work that grew with the run")."""
+    arithmetic of numpy's column-at-a-time fill, so the same bits, in one pass instead of several."""
     n = m_i.shape[0]
     for b in prange(n):
         mass_b = m_i[b] / dt2

@@ -12,11 +12,11 @@ the tolerance is redone: missed pairs are added, linearised about their end-of-a
 margin grows (2x by default) and cylinder gaps are tightened by the overlap the attempt made; a
 solver that takes a warm start starts the redo from the attempt's forces (the missed pairs at
 zero), not from the previous step's: a pour's impact steps are redone about once each, so this makes
-its steps cheaper (docs/performance.md, "Packings"). A step that
+its steps cheaper (docs/performance.md). A step that
 still overlaps after `max_redo` redos fails with an :class:`OverlapError` naming the step.
 The next step starts from the margin that caught a missed contact (at most 4x the base), halved
 after each clean step (:func:`next_margin`): the fast phase of a tall column's collapse redoes fewer
-steps (docs/performance.md, "Wall times with Clarabel").
+steps (docs/performance.md).
 
 The overlap check measures the pairs of the next step's first detection, made at the attempt's end
 (:class:`Upcoming`): its swept pairs hold every pair that overlaps there, so the check needs no

@@ -9,7 +9,7 @@ thread gives exactly the serial sums.
 A job whose threads are as many as the CPUs it may run on (a whole machine, or a cluster job's
 allocation) has them pinned one to a CPU (OpenMP's OMP_PROC_BIND=true), unless the user set
 OpenMP's binding: unpinned, two threads on two cores lost up to half their speed to moves between
-the cores (docs/performance.md, "Threads").
+the cores (docs/performance.md, "Where the time goes").
 
 The threads run on numba's OpenMP layer where it has one (:mod:`colsim.engine.compiled` chooses it,
 not numba's TBB-first default); :func:`threading_layer` says which, once they have started.

@@ -36,8 +36,7 @@ more than `adapt_factor`; here that rule lowered rho and slowed convergence.
 
 Not faster than Clarabel at any size measured: its iteration count shrinks neither with a warm start
 nor with size, and most of an iteration is the two triangular solves; the forces, which a
-hyperstatic packing leaves nearly indeterminate, converge last (docs/performance.md, "One cold
-step", has the measurements).
+hyperstatic packing leaves nearly indeterminate, converge last (docs/performance.md has the measurements).
 
 Warm start: forces (m, 5) (the stepper passes the previous step's forces matched by contact pair,
 :class:`colsim.solvers.WarmStart`): w = -D^-1 lam / rho and z = Proj_C^(D (B u(lam) + g e_n) + w).

@@ -15,7 +15,7 @@ i.e. each contact's gap at the end of the step, so one iteration costs one produ
 with B (work linear in the number of contacts) plus the exact Euclidean projection onto K_k
 (:func:`colsim.engine.cones.project_point`). The compiled kernel fuses them and applies B and B' from the
 contacts' frames and radii (12 numbers a contact) instead of the matrix (42 non-zeros a contact),
-which costs less an iteration (docs/performance.md, "Cost of one APGD iteration").
+which costs less an iteration (docs/performance.md).
 
 Preconditioning: each contact's normal, sliding and rolling rows are scaled separately, lam = S z
 with S = diag(s_n, s_t, s_t, s_r, s_r) per contact and s = diag(W)^-1/2 (averaged over the two rows

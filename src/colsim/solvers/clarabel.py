@@ -29,9 +29,8 @@ class ClarabelSolver(Solver):
     """Clarabel's interior-point method on the displacement form (default) or the force form.
 
     direct_solve_method: 'qdldl' or 'faer' (Clarabel's KKT factorisation); threads: faer threads (0 = all).
-    Defaults faer with 1 thread, by measurement (benchmarks/README.md): on settled 1k and 4k packings
-    faer took half the CPU time of qdldl at the same accuracy, and a second thread gained nothing
-    measurable on 2 cores (where the study runs two simulations at once anyway).
+    Defaults faer with 1 thread, by measurement (benchmarks/step.py, docs/performance.md): faer takes
+    less CPU time than qdldl at the same accuracy, and a study runs several simulations at once anyway.
     equilibrate: Clarabel's Ruiz equilibration. Off by default: on resting, hyperstatic packings with
     rolling resistance it ended NumericalError on 2 of 3 test collapses, off it solved every step.
     retry: on NumericalError or InsufficientProgress, try again with equilibration and extra static
