@@ -66,3 +66,22 @@ def test_a_bad_settings_file_is_refused_naming_the_file_and_the_setting(tmp_path
     with pytest.raises(ValueError, match=re.escape(message)) as refused:
         stage_settings(_parsed("collapse", "--settings", str(path)), stage.CollapseSettings, stage.SolverSettings)
     assert str(path) in str(refused.value)
+
+
+@pytest.mark.parametrize("make", ["fifo", "device", "large"])
+def test_a_settings_file_must_be_a_regular_file_of_bounded_size(tmp_path, make):
+    """Issue 80.2: --settings on a FIFO blocked forever, and /dev/zero was read until memory ran out
+    (1.4 GB); both are refused before they are opened, as is a file over the bound."""
+    import os
+
+    from colsim.cli.flags import MAX_SETTINGS_BYTES
+
+    path = {"fifo": tmp_path / "settings.fifo", "device": "/dev/zero", "large": tmp_path / "large.yaml"}[make]
+    if make == "fifo":
+        os.mkfifo(path)
+    elif make == "large":
+        path.write_text("# " + "x" * MAX_SETTINGS_BYTES + "\n")
+    args = build_parser().parse_args(["analyse", "--input", "c.nc", "--output", "a.nc", "--settings", str(path)])
+    words = "more than a settings file may" if make == "large" else "is not a regular file (a FIFO, a device"
+    with pytest.raises(ValueError, match=re.escape(words)):
+        stage_settings(args, stage.AnalysisSettings)

@@ -350,3 +350,14 @@ def test_a_tbb_layer_numba_cannot_load_is_explained_in_one_line(work):
     one_line_error(done, 2, "numba cannot load its TBB threading layer", "libtbb", "LD_LIBRARY_PATH",
                    "unset NUMBA_THREADING_LAYER")
     assert not (work / "x.nc").exists()
+
+
+def test_a_command_removes_the_temporaries_a_killed_run_left_of_its_outputs(work):
+    """Issue 80.8: SIGKILL left hidden .part temporaries that nothing removed; `colsim analyse`
+    removes those of its own output as it starts, and leaves another output's."""
+    mine, other = work / ".out.nc.k1ll3d00.part", work / ".analysis.nc.k1ll3d00.part"
+    for path in (mine, other):
+        path.write_bytes(b"half a file")
+    done = colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert not mine.exists() and other.exists() and (work / "out.nc").is_file()

@@ -129,6 +129,21 @@ def test_a_warm_start_naming_spheres_the_run_does_not_hold_is_refused(tmp_path, 
         load_checkpoint(tmp_path / "w.npz", "abc")
 
 
+def test_a_small_checkpoint_declaring_gigabytes_is_refused_before_it_is_read(tmp_path):
+    """Issue 80.2: every file colsim opens is bounded before it is decoded: an .npz whose array
+    declares 80 GB in a few bytes is refused, never allocated."""
+    import io as bytes_io
+    import zipfile
+
+    header = bytes_io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False, "shape": (10**10,)})
+    path = tmp_path / "huge.checkpoint"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("fingerprint.npy", header.getvalue() + bytes(8))
+    with pytest.raises(CheckpointError, match="fingerprint.npy declares 80,000,000,000 bytes but holds"):
+        load_checkpoint(path, "abc")
+
+
 def test_every_segments_commit_is_kept(tmp_path, caplog):
     """Issue 45.4: a run resumed by other code is resumed (the fingerprint holds the inputs and
     settings, which decide the steps), with a warning, and lists the commit of every segment."""

@@ -157,6 +157,34 @@ def check_checkpoint_path(path) -> None:
                               " give --checkpoint a new path, or remove the file") from None
 
 
+#: far more arrays than a checkpoint holds (about 40)
+MAX_CHECKPOINT_ARRAYS = 1000
+
+
+def _check_archive(path) -> None:
+    """ValueError unless the .npz at `path` holds at most MAX_CHECKPOINT_ARRAYS arrays, each stored
+    uncompressed (as np.savez stores them) and declaring no more bytes than it holds: a small file
+    declaring gigabytes is refused before numpy allocates them."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as archive:
+        members = archive.infolist()
+        if len(members) > MAX_CHECKPOINT_ARRAYS:
+            raise ValueError(f"it holds {len(members):,} arrays, more than a checkpoint may ({MAX_CHECKPOINT_ARRAYS:,})")
+        for member in members:
+            if member.compress_type != zipfile.ZIP_STORED or member.compress_size != member.file_size:
+                raise ValueError(f"its array {member.filename} is compressed; colsim stores checkpoints uncompressed")
+            with archive.open(member) as stream:
+                version = np.lib.format.read_magic(stream)
+                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read_header(stream)
+            declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+            if declared > member.file_size:
+                raise ValueError(f"its array {member.filename} declares {declared:,} bytes but holds"
+                                 f" {member.file_size:,}")
+
+
 def _read(path, fingerprint, restore):
     """restore(arrays) of the checkpoint at `path` if it is this run's (fingerprint), None if there is
     none; a CheckpointError for anything else at the path, or for a saved state that fails the
@@ -167,6 +195,7 @@ def _read(path, fingerprint, restore):
     if not Path(path).exists():
         return None
     try:
+        _check_archive(path)
         with np.load(path, allow_pickle=False) as archive:
             found = str(archive["fingerprint"])
             arrays = dict(archive) if found == fingerprint else None
