@@ -17,6 +17,7 @@ import yaml
 from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, cf_check_failures, copy_workflow,
                      planned_collapses, planned_outputs, planned_settings, snakemake)
 
+from colsim import io
 from colsim.study.workflow.plan import fmt
 
 
@@ -83,7 +84,7 @@ def test_paraview_series_read_back_and_leave_the_collapses_alone(tiny_study):
     assert "colsim collapse" not in result.stdout + result.stderr
     assert {path: path.stat().st_mtime_ns for path in before} == before
     for collapse in collapses:
-        trajectory = xr.load_dataset(collapse)
+        trajectory = io.open_dataset(collapse, io.TRAJECTORY_KIND)
         pvd = collapse.parent / "vtk" / "collapse.pvd"
         entries = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text())
         assert len(entries) == trajectory.sizes["time"]
@@ -254,6 +255,21 @@ def test_the_report_shows_its_caveat_on_a_laptop_screen(tiny_study, tmp_path):
     assert title and title.group(1).startswith("caveat from "), (title, done.stderr[-2000:])
     top, bottom = map(int, title.group(1).split()[2::2])
     assert 0 <= top and bottom <= height, title.group(1)
+
+
+@pytest.mark.slow
+def test_a_plotting_setting_rewrites_the_report_s_pages_too(tiny_study):
+    """Issue 79.5: figures.side_view_mu_r changes the landing table (at that mu_r) and the
+    configuration the report shows, so both are planned again with the plot (before: the plot only)
+    and nothing else; the study as it was is still up to date."""
+    (tiny_study / "side_view.yaml").write_text("figures: {side_view_mu_r: 0}\n")
+    result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml", "side_view.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = planned_outputs(result)
+    for path in (f"{TINY}/study_config.yaml", f"{TINY}/report_description.rst", f"{TINY}/figures/side_views.png"):
+        assert path in planned, (path, planned)
+    assert not [p for p in planned if p.endswith((".nc", "lube_table.md"))], planned
+    assert planned_outputs(snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml")) == []
 
 
 @pytest.mark.slow

@@ -4,6 +4,7 @@
 # job_resources.py (jobs' cluster resources and priorities), report.py (the study's files for the
 # report). Here only what needs Snakemake: its validation, its errors, the rules' wildcards.
 import functools
+import json
 
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate
@@ -15,7 +16,7 @@ from colsim.study.workflow.checks import (before_validation, cross_field_problem
                                           link_out_of, load_schema)
 from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
                                         StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, fmt, logged,
-                                        settings_text)
+                                        settings_key, settings_text)
 
 SCHEMA = os.path.join(workflow.basedir, "workflow", "schemas", "config.schema.yaml")
 
@@ -40,6 +41,8 @@ STUDY_DIR = PLAN.study_dir   # the study's summary, tables and figures (runs are
 # the report's description of the study, written with its summary (rule study_config)
 DESCRIPTION = f"{STUDY_DIR}/report_description.rst"
 DESCRIPTION_TEMPLATE = os.path.join(workflow.basedir, "workflow", "report", "workflow.rst")
+# the study's whole configuration, in a file named by its key (rule study_settings)
+STUDY_SETTINGS = f"{STUDY_DIR}/settings/{settings_key(dict(config))}.yaml"
 
 wildcard_constraints:
     r0=r"[0-9][0-9.e+-]*",
