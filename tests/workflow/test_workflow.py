@@ -105,8 +105,8 @@ def test_figures_logs_and_benchmarks_exist(tiny_study):
     logs = [p for p in (tiny_study / "results").rglob("*.log") if p.name != "export_vtk.log"]
     benchmarks = [p for p in (tiny_study / "results").rglob("*.tsv") if p.name != "export_vtk.tsv"]
     # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config; and the settings files'
-    # (a packing's, 4 runs', the analyses'), which have no benchmark
-    assert len(logs) == 14 + 6 and len(benchmarks) == 14
+    # (a packing's, 4 runs', the analyses', the study's), which have no benchmark
+    assert len(logs) == 14 + 7 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))
     collapse_logs = list((tiny_study / "results" / "logs").rglob("collapse.log"))
     assert len(collapse_logs) == 4 and all(" by apgd" in log.read_text() for log in collapse_logs)
