@@ -4,7 +4,6 @@
 # job_resources.py (jobs' cluster resources and priorities), report.py (the study's files for the
 # report). Here only what needs Snakemake: its validation, its errors, the rules' wildcards.
 import functools
-import json
 
 from snakemake.exceptions import WorkflowError
 from snakemake.utils import validate

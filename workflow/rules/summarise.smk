@@ -89,7 +89,5 @@ rule study_config:
     benchmark:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
-        with open(input.settings) as stream:
-            study = json.load(stream)
-        study_report.write_study_files(study, input.summary, input.template, output.config, output.description,
-                                       STUDY_DIR, log[0])
+        study_report.write_study_files(input.settings, input.summary, input.template, output.config,
+                                       output.description, STUDY_DIR, log[0])
