@@ -13,7 +13,7 @@ from colsim.study.workflow import job_resources
 from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, device_problem, duplicate_key,
                                           link_out_of, load_schema)
-from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
+from colsim.study.workflow.plan import (ANALYSIS, ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
                                         StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, fmt, logged,
                                         settings_key, settings_text)
 

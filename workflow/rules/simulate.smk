@@ -120,14 +120,14 @@ rule analysis_settings:
 rule analyse:
     input:
         collapse=f"{RUN_DIR}/collapse.nc",
-        settings=PLAN.analysis_settings_path(),   # changed analysis settings: a new input, and a rerun
+        settings=ANALYSIS_SETTINGS,   # {analysis}: the key of the settings, which names the output too
     output:
-        f"{RUN_DIR}/analysis.nc",
+        ANALYSIS,
     priority: job_resources.ANALYSIS_PRIORITY
     log:
-        logged(f"{RUN_DIR}/analyse.log"),
+        logged(ANALYSIS[: -len(".nc")] + ".log"),
     benchmark:
-        benchmarked(f"{RUN_DIR}/analyse.tsv")
+        benchmarked(ANALYSIS[: -len(".nc")] + ".tsv")
     shell:
         "colsim analyse --settings {input.settings:q} --input {input.collapse:q} --output {output:q} > {log:q} 2>&1"
 
