@@ -98,18 +98,10 @@ def planned_collapses(result: subprocess.CompletedProcess) -> list[dict]:
     return found
 
 
-#: what the CF checker reports that CF-1.8 does not ask of colsim's files: the IOOS checker takes a
-#: dimension named `time` for CF's time axis and wants standard_name "time" on it, but CF identifies
-#: time coordinates by units with a reference date ("s since ..."), an axis or a standard name, not by
-#: name, and colsim's `time` is the elapsed time since release in s (giving it standard_name "time"
-#: would make CF ask for a reference date, and xarray would read the times as dates)
-CF_CHECKER_NAME_HEURISTICS = ("Coordinate variable 'time' should have standard_name='time', found: 'None'",)
-
-
 def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
     """What the IOOS compliance checker (an independent CF checker, offline) finds wrong with the
-    netCDF file `path` at any priority (`--criteria strict`: errors, warnings and suggestions), less
-    :data:`CF_CHECKER_NAME_HEURISTICS`; a check that raised is a failure too."""
+    netCDF file `path` at any priority (`--criteria strict`: errors, warnings and suggestions); a check
+    that raised is a failure too."""
     from compliance_checker.base import BaseCheck
     from compliance_checker.suite import CheckSuite
 
@@ -127,9 +119,7 @@ def cf_check_failures(path, checker: str = "cf:1.8") -> list[str]:
         passed = result.value[0] == result.value[1] if isinstance(result.value, tuple) else bool(result.value)
         if passed or result.weight < BaseCheck.LOW:   # --criteria strict: low priority counts too
             continue
-        messages = [m for m in result.msgs if m not in CF_CHECKER_NAME_HEURISTICS]
-        if messages or not result.msgs:
-            failures.append(f"{result.name}: {'; '.join(messages) or 'failed'}")
+        failures.append(f"{result.name}: {'; '.join(result.msgs) or 'failed'}")
     return failures
 
 

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from colsim import io
+
 
 def _gpu_outside_the_simulator() -> bool:
     """Whether numba.cuda sees a GPU once the simulator is off (a subprocess: numba reads it at import)."""
@@ -48,7 +50,7 @@ def test_a_collapse_on_the_gpu_takes_the_cpu_s_steps(column):
         done = colsim("collapse", "--input", "column.nc", "--steps", "4", "--duration", "0.016", "--device", device,
                       "--output", f"{device}.nc", cwd=column)
         assert done.returncode == 0, done.stderr[-2000:]
-        runs[device] = xr.load_dataset(column / f"{device}.nc")
+        runs[device] = io.open_dataset(column / f"{device}.nc", io.TRAJECTORY_KIND)
     cpu, gpu = runs["cpu"], runs["cuda"]
     np.testing.assert_array_equal(gpu.step_solver_iterations.values, cpu.step_solver_iterations.values)
     assert set(gpu.step_solver_backend.values) == {"apgd"}
@@ -69,7 +71,7 @@ def test_a_collapse_stored_in_float32_on_the_gpu_stops_where_float64_does(column
         done = colsim("collapse", "--input", "column.nc", "--steps", "2", "--duration", "0.008", "--device", "cuda",
                       "--gpu-storage", storage, "--output", f"{storage}.nc", cwd=column)
         assert done.returncode == 0, done.stderr[-2000:]
-        runs[storage] = xr.load_dataset(column / f"{storage}.nc")
+        runs[storage] = io.open_dataset(column / f"{storage}.nc", io.TRAJECTORY_KIND)
     wide, narrow = runs["float64"], runs["float32"]
     assert set(narrow.step_solver_backend.values) == {"apgd"}
     diameter = 2 * float(wide.radius.mean())

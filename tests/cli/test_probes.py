@@ -234,7 +234,7 @@ def _set_values(name, spoil):
     ("column.nc", _set_attr("r0", np.array([1.0, 2.0])), "collapse", ["attribute r0", "not one number"]),
     ("analysis.nc", _set_attr("config", "[1, 2, 3]"), "collect", ["attribute config is not a JSON object"]),
     ("collapse.nc", _set_attr("r0", 0.0), "analyse", ["attribute r0 is 0", "positive"]),
-    ("collapse.nc", lambda d: d.isel(time=[]), "analyse", ["holds no frame"]),
+    ("collapse.nc", lambda d: d.isel(frame=[]), "analyse", ["holds no frame"]),   # frames as stored: io.cf.FRAME
     ("column.nc", _set_values("contact_first", lambda v: v.__setitem__(0, 10**6)), "collapse",
      ["contact names a sphere outside"]),
     ("column.nc", _set_values("contact_force", lambda v: v.__setitem__((0, 0), np.nan)), "collapse",

@@ -124,3 +124,15 @@ def test_trajectories_stack_with_their_particles_padded(results):
     small = runs.position.isel(run=int(np.argmin(sizes))).dropna("scaled_time", how="all")   # its own frames
     assert small.isel(particle=slice(min(sizes), None)).isnull().all()
     assert not small.isel(particle=slice(0, min(sizes))).isnull().any()
+
+
+def test_analyses_named_by_their_settings_key_are_found(results, tmp_path):
+    """Issue 79.4: a study's analysis is analysis_KEY.nc (KEY: its analysis settings'); open_runs reads
+    those beside an older study's analysis.nc, each one run."""
+    import shutil
+    copy = tmp_path / "results"
+    shutil.copytree(results, copy)
+    older = sorted(copy.glob("r0_*/seed_*/pack_*/a_1/mu_r_0/run_*/analysis.nc"))[0]
+    older.rename(older.with_name("analysis_0123456789.nc"))
+    runs = colsim.study.open_runs(copy)
+    assert runs.sizes["run"] == 4 and sum(p.endswith("/analysis_0123456789.nc") for p in runs.path.values) == 1

@@ -4,6 +4,7 @@ from them and never parsed from a name."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -127,6 +128,6 @@ def test_a_convergence_packing_is_just_tall_enough():
     assert {name: len(paths) for name, paths in runs.items()} == {
         "time_step": 1, "end_time": 1, "column_size": 2, "seeds": 2}
     assert "/r0_1.25/" in runs["column_size"][1] and plan.run_of(wildcards_of(
-        runs["end_time"][0].replace("analysis.nc", "collapse.nc")))["steps"] == 150
+        str(Path(runs["end_time"][0]).with_name("collapse.nc"))))["steps"] == 150
     assert StudyPlan(study_config()).convergence_runs("analysis.nc") == {}
     assert len(plan.convergence_outputs()) == 5 and StudyPlan(study_config()).convergence_outputs() == []

@@ -17,7 +17,19 @@ import yaml
 from helpers import (FIGURES, ROOT, RUN_PATH, SUMMARY_VARIABLES, TINY, cf_check_failures, copy_workflow,
                      planned_collapses, planned_outputs, planned_settings, snakemake)
 
+from colsim import io
 from colsim.study.workflow.plan import fmt
+
+
+def is_analysis(path: str) -> bool:
+    """Whether `path` is a run's analysis (analysis_KEY.nc, KEY that of its analysis settings)."""
+    return re.search(r"/run_[0-9a-f]{10}/analysis_[0-9a-f]{10}\.nc$", path) is not None
+
+
+def tiny_analyses(directory, study=TINY) -> list:
+    """The analyses a study's summary collected (its `colsim collect` inputs), in order."""
+    summary = xr.load_dataset(directory / study / "summary.nc")
+    return [directory / path for path in json.loads(summary.attrs["config"])["inputs"]]
 
 
 @pytest.fixture(scope="module")
@@ -59,8 +71,8 @@ def test_the_study_files_pass_the_cf_checker(tiny_study):
     """Bound: no error or warning of the IOOS checker's CF-1.8 suite (tests/io/test_netcdf.py) in the
     tiny study's packing, column, trajectory, analysis and summary; at_rest is a flag everywhere."""
     run = sorted(tiny_study.glob("results/r0_1/seed_1/pack_*/a_*/mu_r_0.12/run_*"))[0]
-    paths = [run.parents[2] / "packing.nc", run.parents[1] / "column.nc", run / "collapse.nc", run / "analysis.nc",
-             tiny_study / TINY / "summary.nc"]
+    paths = [run.parents[2] / "packing.nc", run.parents[1] / "column.nc", run / "collapse.nc",
+             *tiny_analyses(tiny_study)[:1], tiny_study / TINY / "summary.nc"]
     for path in paths:
         assert cf_check_failures(path) == [], path
     for path in paths[2:]:
@@ -83,7 +95,7 @@ def test_paraview_series_read_back_and_leave_the_collapses_alone(tiny_study):
     assert "colsim collapse" not in result.stdout + result.stderr
     assert {path: path.stat().st_mtime_ns for path in before} == before
     for collapse in collapses:
-        trajectory = xr.load_dataset(collapse)
+        trajectory = io.open_dataset(collapse, io.TRAJECTORY_KIND)
         pvd = collapse.parent / "vtk" / "collapse.pvd"
         entries = re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd.read_text())
         assert len(entries) == trajectory.sizes["time"]
@@ -104,8 +116,8 @@ def test_figures_logs_and_benchmarks_exist(tiny_study):
     logs = [p for p in (tiny_study / "results").rglob("*.log") if p.name != "export_vtk.log"]
     benchmarks = [p for p in (tiny_study / "results").rglob("*.tsv") if p.name != "export_vtk.tsv"]
     # pack 1, trim 2, collapse 4, analyse 4, collect, plot, study_config; and the settings files'
-    # (a packing's, 4 runs', the analyses'), which have no benchmark
-    assert len(logs) == 14 + 6 and len(benchmarks) == 14
+    # (a packing's, 4 runs', the analyses', the study's), which have no benchmark
+    assert len(logs) == 14 + 7 and len(benchmarks) == 14
     assert not list((tiny_study / "results").rglob("*.checkpoint"))
     collapse_logs = list((tiny_study / "results" / "logs").rglob("collapse.log"))
     assert len(collapse_logs) == 4 and all(" by apgd" in log.read_text() for log in collapse_logs)
@@ -173,7 +185,7 @@ def test_changed_analysis_settings_rerun_the_analyses_and_nothing_upstream(tiny_
     result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml", "analysis.yaml")
     assert result.returncode == 0, result.stderr[-3000:]
     planned = planned_outputs(result)
-    assert sum(p.endswith("/analysis.nc") for p in planned) == 4, planned
+    assert sum(map(is_analysis, planned)) == 4, planned
     assert f"{TINY}/summary.nc" in planned and f"{TINY}/study_config.yaml" in planned
     assert not any(p.endswith(("collapse.nc", "packing.nc", "column.nc")) for p in planned), planned
 
@@ -254,6 +266,48 @@ def test_the_report_shows_its_caveat_on_a_laptop_screen(tiny_study, tmp_path):
     assert title and title.group(1).startswith("caveat from "), (title, done.stderr[-2000:])
     top, bottom = map(int, title.group(1).split()[2::2])
     assert 0 <= top and bottom <= height, title.group(1)
+
+
+@pytest.mark.slow
+def test_a_plotting_setting_rewrites_the_report_s_pages_too(tiny_study):
+    """Issue 79.5: figures.side_view_mu_r changes the landing table (at that mu_r) and the
+    configuration the report shows, so both are planned again with the plot (before: the plot only)
+    and nothing else; the study as it was is still up to date."""
+    (tiny_study / "side_view.yaml").write_text("figures: {side_view_mu_r: 0}\n")
+    result = snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml", "side_view.yaml")
+    assert result.returncode == 0, result.stderr[-3000:]
+    planned = planned_outputs(result)
+    for path in (f"{TINY}/study_config.yaml", f"{TINY}/report_description.rst", f"{TINY}/figures/side_views.png"):
+        assert path in planned, (path, planned)
+    assert not [p for p in planned if p.endswith((".nc", "lube_table.md"))], planned
+    assert planned_outputs(snakemake(tiny_study, "-n", "all", "--configfile", "config/tiny.yaml")) == []
+
+
+@pytest.mark.slow
+def test_two_studies_that_analyse_alike_runs_differently_keep_both(tiny_study):
+    """Issue 79.4: a study that differs from the tiny one only in its analysis settings shares the
+    tiny study's collapses and writes its own analyses beside them (before: it overwrote the tiny
+    study's analysis.nc, which each study then planned again). Run one after the other, then again:
+    nothing is planned, and each summary holds its own analyses' numbers, made with its settings."""
+    (tiny_study / "tiny_b.yaml").write_text("study: tiny_b\nanalysis: {contact_tolerance: 0.05}\n")
+    studies = {TINY: ("config/tiny.yaml",), "results/tiny_b": ("config/tiny.yaml", "tiny_b.yaml")}
+    result = snakemake(tiny_study, "-j2", "all", "--configfile", *studies["results/tiny_b"])
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "colsim collapse" not in result.stdout + result.stderr and "colsim pack" not in result.stdout + result.stderr
+    for configs in studies.values():
+        planned = snakemake(tiny_study, "-n", "all", "--configfile", *configs)
+        assert planned.returncode == 0 and planned_outputs(planned) == [], planned.stdout[-2000:]
+    collected = {study: tiny_analyses(tiny_study, study) for study in studies}
+    assert not set(collected[TINY]) & set(collected["results/tiny_b"])
+    for study, tolerance in ((TINY, 0.01), ("results/tiny_b", 0.05)):
+        summary = xr.load_dataset(tiny_study / study / "summary.nc")
+        for path in collected[study]:
+            analysis = xr.load_dataset(path)
+            assert json.loads(analysis.attrs["config"])["contact_tolerance"] == tolerance, path
+            here = summary.sel(aspect_ratio=float(analysis.aspect_ratio), mu_r=float(analysis.mu_r),
+                               seed=int(analysis.seed))
+            assert float(here.h_inf_over_r0) == float(analysis.h_inf_over_r0)
+            assert float(here.runout_over_r0) == float(analysis.runout_over_r0)
 
 
 @pytest.mark.slow
@@ -362,7 +416,7 @@ def test_the_default_study_plans_every_run(tmp_path):
     assert sum(p.endswith("packing.nc") for p in planned) == 2
     assert sum(p.endswith("column.nc") for p in planned) == 2 * 6
     assert sum(p.endswith("collapse.nc") for p in planned) == 2 * 6 * 4
-    assert sum(p.endswith("analysis.nc") for p in planned) == 2 * 6 * 4
+    assert sum(map(is_analysis, planned)) == 2 * 6 * 4
 
 
 @pytest.mark.slow
@@ -568,7 +622,7 @@ def test_two_studies_share_a_file_only_when_it_is_the_same_computation(tmp_path,
     """Issue 28: a study that differs from the tiny one in one setting plans no collapse of the tiny
     study's; it shares the packings and columns only when their settings are the same."""
     first, second = plan_two_studies(tmp_path, other)
-    collapses = [{p for p in plan if p.endswith(("collapse.nc", "analysis.nc"))} for plan in (first, second)]
+    collapses = [{p for p in plan if p.endswith("collapse.nc") or is_analysis(p)} for plan in (first, second)]
     assert collapses[0] and collapses[1] and not collapses[0] & collapses[1]
     packings = [{p for p in plan if p.endswith(("packing.nc", "column.nc"))} for plan in (first, second)]
     assert bool(packings[0] & packings[1]) == shares_packings
@@ -614,9 +668,8 @@ def test_the_convergence_table_passes_the_cf_checker(tiny_study, tmp_path):
     passes the CF-1.8 checker at strict level, as the stages' files and the calibration's do."""
     from helpers import main_in
 
-    analyses = sorted(str(p) for key in ("2874ba662f", "a1e8f1b7ba")   # the tiny study's own runs
-                      for p in (tiny_study / "results").glob(f"r0_1/seed_1/pack_af320959e1/a_*/mu_r_*/run_{key}/analysis.nc"))
-    assert len(analyses) == 4   # other tests of this module add runs of their own beside them
+    analyses = [str(p) for p in tiny_analyses(tiny_study)]   # other tests of this module add runs beside them
+    assert len(analyses) == 4
     assert main_in(tmp_path, ["convergence", "--seeds", *analyses, "--default-end", "4",
                               "--output", "convergence.nc"]) == 0
     assert cf_check_failures(tmp_path / "convergence.nc") == []

@@ -13,7 +13,7 @@ from colsim.study.workflow import job_resources
 from colsim.study.workflow import report as study_report
 from colsim.study.workflow.checks import (before_validation, cross_field_problem, device_problem, duplicate_key,
                                           link_out_of, load_schema)
-from colsim.study.workflow.plan import (ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
+from colsim.study.workflow.plan import (ANALYSIS, ANALYSIS_SETTINGS, COLUMN, PACKING_DIR, RESULTS, RUN_DIR,
                                         StudyPlan, UnknownFolder, WRITE_SETTINGS, benchmarked, edited_setting,
                                         fmt, logged, settings_key, settings_text)
 
@@ -40,6 +40,8 @@ STUDY_DIR = PLAN.study_dir   # the study's summary, tables and figures (runs are
 # the report's description of the study, written with its summary (rule study_config)
 DESCRIPTION = f"{STUDY_DIR}/report_description.rst"
 DESCRIPTION_TEMPLATE = os.path.join(workflow.basedir, "workflow", "report", "workflow.rst")
+# the study's whole configuration, in a file named by its key (rule study_settings)
+STUDY_SETTINGS = f"{STUDY_DIR}/settings/{settings_key(dict(config))}.yaml"
 
 wildcard_constraints:
     r0=r"[0-9][0-9.e+-]*",
@@ -82,11 +84,11 @@ def settings_file(folder, lookup):
     return path
 
 
-ANALYSIS_SETTINGS_PATH = PLAN.analysis_settings_path()
-problem = edited_setting(ANALYSIS_SETTINGS_PATH, PLAN.analysis_settings())
+# the study's analysis settings file, named by their key: refused before any job where it was edited
+problem = edited_setting(ANALYSIS_SETTINGS.format(analysis=settings_key(PLAN.analysis_settings())),
+                         PLAN.analysis_settings())
 if problem:
     raise WorkflowError(problem)
-ANALYSIS_KEY = settings_key(PLAN.analysis_settings())
 # the study's files (naming one registers its packing, column and run)
 runs = PLAN.study_runs
 side_view_mu_r = PLAN.side_view_mu_r

@@ -120,18 +120,17 @@ rule analysis_settings:
 rule analyse:
     input:
         collapse=f"{RUN_DIR}/collapse.nc",
-        settings=ANALYSIS_SETTINGS_PATH,   # changed analysis settings: a new input, and a rerun
+        settings=ANALYSIS_SETTINGS,   # {analysis}: the key of the settings, which names the output too
     output:
-        f"{RUN_DIR}/analysis.nc",
+        ANALYSIS,
     priority: job_resources.ANALYSIS_PRIORITY
-    params:
-        key=ANALYSIS_KEY,
     log:
-        logged(f"{RUN_DIR}/analyse.log"),
+        logged(ANALYSIS[: -len(".nc")] + ".log"),
     benchmark:
-        benchmarked(f"{RUN_DIR}/analyse.tsv")
+        benchmarked(ANALYSIS[: -len(".nc")] + ".tsv")
     shell:
-        "colsim analyse --settings {input.settings:q} --settings-key {params.key} --input {input.collapse:q} --output {output:q} > {log:q} 2>&1"
+        "colsim analyse --settings {input.settings:q} --settings-key {wildcards.analysis} --input {input.collapse:q}"
+        " --output {output:q} > {log:q} 2>&1"
 
 
 # Not part of `all`: a ParaView time series of one collapse, on request, e.g.

@@ -54,12 +54,27 @@ rule plot:
         " --trajectories {input.trajectories:q} --output-dir {params.directory:q} > {log:q} 2>&1"
 
 
+# The study's configuration in a file named by its key: any setting changed (figures.side_view_mu_r
+# included) names another file, so study_config runs again. Snakemake's own record of a parameter did
+# not rerun it: the report kept the landing table of the old mu_r.
+rule study_settings:
+    output:
+        STUDY_SETTINGS,
+    log:
+        logged(STUDY_SETTINGS[: -len(".yaml")] + ".log"),
+    params:
+        text=settings_text(dict(config)),
+    shell:
+        WRITE_SETTINGS
+
+
 # The study's configuration and the report's description, written only once the summary they
 # describe exists (a failed run leaves the previous pair in place). The report shows these files,
 # so its text describes the study that made them, whatever configuration builds the report.
 rule study_config:
     input:
         summary=f"{STUDY_DIR}/summary.nc",
+        settings=STUDY_SETTINGS,
         template=DESCRIPTION_TEMPLATE,   # an edit of the landing page's text rewrites it
     output:
         config=report(
@@ -69,12 +84,10 @@ rule study_config:
             labels={"file": "study configuration"},
         ),
         description=DESCRIPTION,
-    params:
-        config=config,
     log:
         f"{STUDY_DIR}/logs/study_config.log",
     benchmark:
         f"{STUDY_DIR}/benchmarks/study_config.tsv"
     run:
-        study_report.write_study_files(dict(params.config), input.summary, input.template, output.config,
+        study_report.write_study_files(input.settings, input.summary, input.template, output.config,
                                        output.description, STUDY_DIR, log[0])

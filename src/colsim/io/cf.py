@@ -64,10 +64,37 @@ def labels_as_index(dataset):
     return dataset
 
 
+#: how a file stores its frames: the dimension FRAME, and their times (seconds since release) as the
+#: auxiliary coordinate ELAPSED_TIME along it. A dimension and coordinate variable named `time` would be
+#: taken by CF checkers for a calendar time axis (they ask for standard_name "time" and units
+#: "s since <date>", and xarray would then read the times as dates).
+FRAME, ELAPSED_TIME = "frame", "elapsed_time"
+
+
+def cf_time(dataset):
+    """`dataset` with its dimension `time` stored as :data:`FRAME` and its `time` coordinate (seconds
+    since release) as the auxiliary coordinate :data:`ELAPSED_TIME` (:func:`time_as_index` puts them back)."""
+    if "time" not in dataset.dims or "time" not in dataset.coords:
+        return dataset
+    stored = dataset.drop_indexes("time").rename_vars({"time": ELAPSED_TIME}).swap_dims(time=FRAME)
+    stored[ELAPSED_TIME].attrs["long_name"] = "time since release"
+    return stored
+
+
+def time_as_index(dataset):
+    """The inverse of :func:`cf_time`: the dimension :data:`FRAME` becomes `time` again, indexed by
+    :data:`ELAPSED_TIME` renamed `time` (a file written before, with `time` itself, is left as it is)."""
+    if FRAME not in dataset.dims or ELAPSED_TIME not in dataset.coords or "time" in dataset.variables:
+        return dataset
+    restored = dataset.rename_dims({FRAME: "time"}).rename_vars({ELAPSED_TIME: "time"}).set_xindex("time")
+    restored["time"].attrs["long_name"] = "time"
+    return restored
+
+
 def write_netcdf(dataset, path) -> None:
-    """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units and text
-    labels made CF (:func:`cf_units`, :func:`cf_labels`)."""
-    dataset = cf_units(cf_labels(dataset.copy()))
+    """Write an xarray Dataset to netCDF4 at `path` as it is (no temporary name), units, time and
+    text labels made CF (:func:`cf_units`, :func:`cf_time`, :func:`cf_labels`)."""
+    dataset = cf_units(cf_time(cf_labels(dataset.copy())))
     encoding = cf_encoding(dataset)
     for name, variable in dataset.variables.items():   # CF: flag_values of the type stored
         if "flag_values" in variable.attrs:

@@ -24,7 +24,7 @@ import numpy as np
 import xarray as xr
 
 from . import checks
-from .cf import SI_UNITS, labels_as_index
+from .cf import SI_UNITS, labels_as_index, time_as_index
 from .files import InputError
 
 STATE_KIND = "particle-state"
@@ -94,10 +94,11 @@ def open_dataset(path, kind: str):
     except Exception as error:  # netCDF4 raises OSError, ValueError, ... for foreign files
         raise InputError(f"input file {path} is not a readable netCDF file ({error})") from None
     try:
-        lazy = xr.open_dataset(path, engine="netcdf4")
+        stored = xr.open_dataset(path, engine="netcdf4")
     except Exception as error:  # netCDF4 raises OSError, ValueError, ... for foreign files
         raise InputError(f"input file {path} is not a readable netCDF file ({error})") from None
-    with lazy:
+    with stored:
+        lazy = time_as_index(stored)
         found = lazy.attrs.get("colsim_kind")
         if found != kind:
             raise InputError(f"input file {path} holds {found or 'no colsim data'!r}, expected {kind!r}")

@@ -7,7 +7,8 @@ coordinates, for fronts, profiles and histories across runs without globbing has
     runs.front_position.plot.line(x="scaled_time", hue="mu_r")    # over (run, scaled_time)
 
 A study (its name, or its configuration file) picks the runs its summary collected; without one,
-every run below the results folder, whichever study made it. Frames are aligned on t/sqrt(h0/g)
+every run below the results folder, whichever study made it, and each of its analyses (one a set of
+analysis settings: analysis_KEY.nc; analysis.nc in older studies). Frames are aligned on t/sqrt(h0/g)
 (`scaled_time`), rounded to 1e-9 so that the frames of runs of one time step fall on the same values
 (a frame's time is a sum of steps, 0.39999999999999997 in one run and 0.4 in the next); a run that has
 no frame at a time holds NaN there. A deposit profile is on one grid of r/r0 (`radial_bin_over_r0`),
@@ -27,6 +28,8 @@ from ..engine.state import LEVER_OF_OLDER_FILES
 
 #: where a run's files lie below a results folder (docs/study-config.md, "Run folders and their keys")
 RUN_FILES = "r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/{name}"
+#: a run's analyses: one a key of analysis settings (analysis_KEY.nc), or one analysis.nc (older studies)
+ANALYSIS_FILES = ("analysis.nc", "analysis_??????????.nc")
 RUN_DEPTH = 7   # the parts of RUN_FILES
 KINDS = {"analysis.nc": io.ANALYSIS_KIND, "collapse.nc": io.TRAJECTORY_KIND}
 #: the decimals scaled_time is rounded to, far below any time step (dt/sqrt(h0/g) >= 1e-6)
@@ -46,8 +49,9 @@ def open_runs(results="results", name: str = "analysis.nc", study=None) -> xr.Da
     `results`. A ValueError when there is none."""
     if name not in KINDS:
         raise ValueError(f"open_runs reads {' or '.join(KINDS)}, not {name!r}")
-    paths = sorted(Path(results).glob(RUN_FILES.format(name=name))) if study is None else \
-        study_runs(results, study, name)
+    names = ANALYSIS_FILES if name == "analysis.nc" else (name,)
+    paths = sorted(p for file in names for p in Path(results).glob(RUN_FILES.format(name=file))) \
+        if study is None else study_runs(results, study, name)
     if not paths:
         raise ValueError(f"no {name} under {results}/{RUN_FILES.format(name='')}")
     runs = [_one_run(io.open_dataset(path, KINDS[name]), path) for path in paths]
@@ -70,7 +74,8 @@ def study_runs(results, study, name: str = "analysis.nc") -> list[Path]:
         raise ValueError(f"no summary of study {study!r} at {summary}: run the study (snakemake) first")
     with xr.open_dataset(summary) as dataset:
         inputs = json.loads(dataset.attrs.get("config", "{}")).get("inputs", [])
-    paths = [Path(results, *Path(path).parts[-RUN_DEPTH:]).with_name(name) for path in inputs]
+    paths = [Path(results, *Path(path).parts[-RUN_DEPTH:]) for path in inputs]   # the analyses it collected
+    paths = paths if name == "analysis.nc" else [path.with_name(name) for path in paths]
     missing = [str(path) for path in paths if not path.is_file()]
     if missing:
         raise ValueError(f"{summary} collected runs whose {name} is missing: {', '.join(missing[:3])}")

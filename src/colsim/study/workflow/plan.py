@@ -23,9 +23,12 @@ RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
 COLUMN = PACKING_DIR + "/a_{a}/column.nc"
 RUN_DIR = PACKING_DIR + "/a_{a}/mu_r_{mu_r}/run_{run}"
-#: the analysis settings a run's analysis.nc was made with, by key: an input of every analysis, so
+#: the analysis settings a run's analysis was made with, by key: an input of every analysis, so
 #: that changed settings (a new key, a new input) rerun the analyses and what follows them
 ANALYSIS_SETTINGS = RESULTS + "/analysis_settings/{analysis}.yaml"
+#: a run's analysis, named by the key of its settings as the run's folder is by the run's: two studies
+#: that analyse one run differently keep both (the plan's paths ask for it as "analysis.nc")
+ANALYSIS = RUN_DIR + "/analysis_{analysis}.nc"
 
 #: settings that do not change a result (threads: by rounding only), so no key holds them
 NOT_IDENTITY = ("max_spheres", "threads", "checkpoint_every", "device", "gpu_storage")
@@ -220,7 +223,8 @@ class StudyPlan:
                  steps=None, duration=None, law=None) -> str:
         """Path of file `name` of one run (steps and end time: the study's unless given; a run of the
         study's own length goes on to rest if the study does, any other stops at its end time; the
-        friction law: the study's unless given). Its packing, column and run are registered."""
+        friction law: the study's unless given). Its packing, column and run are registered.
+        "analysis.nc" names the run's analysis under the study's analysis settings (:data:`ANALYSIS`)."""
         steps = self.length[0] if steps is None else int(steps)
         duration = self.length[1] if duration is None else float(duration)
         settings = self.run_settings(mu_r, steps, duration, law or self.friction_law)
@@ -228,6 +232,8 @@ class StudyPlan:
         self.runs[key] = settings
         packing = self.packing_key(r0, seed)
         self.columns[(packing, fmt(a))] = float(a)
+        if name == "analysis.nc":   # the analysis under this study's analysis settings
+            name = f"analysis_{settings_key(self.analysis_settings())}.nc"
         return (PACKING_DIR.format(r0=fmt(r0), seed=seed, packing=packing)
                 + f"/a_{fmt(a)}/mu_r_{fmt(mu_r)}/run_{key}/{name}")
 
@@ -308,10 +314,6 @@ class StudyPlan:
         """Everything `colsim analyse` is given besides its run: the study's analysis settings."""
         own, top = configured(self.config, "analyse", {})
         return {**top, **own}
-
-    def analysis_settings_path(self) -> str:
-        """The file that names this study's analysis settings by key (an input of every analysis)."""
-        return ANALYSIS_SETTINGS.format(analysis=settings_key(self.analysis_settings()))
 
     def analysis_settings_of(self, wildcards) -> dict:
         """This study's analysis settings, if {analysis} is their key; an UnknownFolder otherwise."""

@@ -2,6 +2,7 @@
 rendered from the configuration and the summary it describes."""
 from __future__ import annotations
 
+import json
 import os
 import re
 
@@ -39,14 +40,18 @@ def render_description(template_text: str, **values) -> str:
     return environment.from_string(template_text).render(**values)
 
 
-def write_study_files(study, summary_path, template, config_path, description_path, study_dir, log_path) -> None:
-    """Write the study's configuration (YAML) and the report's description rendered from it and from
+def write_study_files(settings_path, summary_path, template, config_path, description_path, study_dir,
+                      log_path) -> None:
+    """Write the study's configuration (YAML, from its settings file `settings_path`, JSON as the rule
+    study_settings writes it) and the report's description rendered from it and from
     the summary (its attributes, and the table against Lube at figures.side_view_mu_r), each to a
     temporary name and then renamed; then a line saying so to `log_path`."""
     import xarray
 
     from ..markdown import lube_rst
 
+    with open(settings_path) as stream:
+        study = json.load(stream)
     with xarray.open_dataset(summary_path) as summary:
         attrs = dict(summary.attrs)
         table = Markup(lube_rst(summary, study["figures"]["side_view_mu_r"]))
