@@ -301,10 +301,10 @@ def test_a_column_s_gravity_is_checked_as_the_pour_checks_it(work, gravity, word
 
 def test_a_trajectory_whose_times_go_back_is_refused(work):
     """Issue 80.6: the frames' times are checked as the collapse's steps are: finite and increasing."""
-    def back(dataset):
-        times = dataset["time"].values.copy()
+    def back(dataset):   # the frames' seconds since release, along `frame`
+        times = dataset["elapsed_time"].values.copy()
         times[-1] = times[0]
-        return dataset.assign_coords(time=("time", times, dict(dataset["time"].attrs)))
+        return dataset.assign_coords(elapsed_time=("frame", times, dict(dataset["elapsed_time"].attrs)))
     _rewrite(work / "collapse.nc", back)
     one_line_error(colsim("analyse", "--input", "collapse.nc", "--output", "out.nc", cwd=work), 2, "collapse.nc",
                    "times are not finite and increasing")

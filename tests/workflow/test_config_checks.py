@@ -155,6 +155,8 @@ JOB_TIME_REFUSALS = {
     "input file {args.input} is a pac": ("reason", "the collapse rule's input is the trim rule's column"),
     "--{law} got runs of the {', '.jo": ("reason", "the rule gives each law its own runs (plan.study_runs(law=...))"),
     "{folder} is not a folder (the ru": ("reason", "`colsim status` is no workflow job"),
+    "{root} holds no docs/data: give ": ("reason", "`colsim docs` is no workflow job"),
+    "colsim docs: tables differ from ": ("reason", "`colsim docs` is no workflow job"),
     "no analysis files to calibrate f": ("schema", {"calibration": {"r0": [2.0]}}),
     "a calibration needs at least two": ("config", {"calibration": {"r0": [2.0, 3.0]}, "mu_r": [0.12]}),
     "every (mu_r, a) needs runs at tw": ("schema", {"calibration": {"r0": [2.0]}}),

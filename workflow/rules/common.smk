@@ -27,13 +27,6 @@ if problem:
     raise WorkflowError(problem)
 
 
-onstart:
-    # device: cuda where the jobs run here without a GPU: refused before the first job. Only here, once the
-    # executor is known: a study sent to a cluster (--executor slurm) plans on a login node with no GPU.
-    if workflow.local_exec and device_problem(config):
-        raise WorkflowError(device_problem(config))
-
-
 PLAN = StudyPlan(config)   # the study's packings, columns and runs, by key (registered as they are named)
 SEEDS = PLAN.seeds
 STUDY_DIR = PLAN.study_dir   # the study's summary, tables and figures (runs are shared between studies)
@@ -175,8 +168,13 @@ localrules:
 # while the first runs; without it, each takes the other's running jobs for incomplete files. So a
 # run (not a dry run) refuses --nolock before its first job. The jobs Snakemake spawns (a cluster's)
 # run with --nolock and --no-hooks: onstart is the main process's alone.
+# And where the jobs run here, device: cuda without a GPU is refused before the first job: only here, once
+# the executor is known (a study sent to a cluster, --executor slurm, plans on a login node with no GPU).
+# One handler a workflow (a later onstart replaces an earlier one), so both checks live in it.
 onstart:
     if not workflow.execution_settings.lock:
         raise WorkflowError("--nolock: studies here share their runs, and a second snakemake without the lock takes"
                             " the first one's running jobs for incomplete files; run without --nolock, one study"
                             " after the other")
+    if workflow.local_exec and device_problem(config):
+        raise WorkflowError(device_problem(config))
