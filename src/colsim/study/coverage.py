@@ -114,3 +114,24 @@ def coverage(case: Case, studies: int = 200, replicates: int = 400, seed: int = 
             lube.best_mu_r_high.sel(measure="both"))
         held["minimax mu_r"] += float(lube.minimax_mu_r_low) <= minimax <= float(lube.minimax_mu_r_high)
     return {target: float(count) / studies for target, count in held.items()}
+
+
+#: the methods the coverage table compares: calibrate's interval options
+METHODS = {"percentile, p = 1 (before)": {"exponents": None, "student": False},
+           "p from 0.5-1.5, Student's t": {}}
+
+
+def coverage_table(studies: int = 200, replicates: int = 400) -> str:
+    """The coverage of every case and method (METHODS) as a Markdown table."""
+    lines = ["| case | method | nominal | limits | best mu_r | minimax mu_r |", "|---|---|---|---|---|---|"]
+    for case in CASES:
+        for name, method in METHODS.items():
+            held = coverage(case, studies, replicates, **method)
+            lines.append(f"| {case.name} | {name} | 95 % | " + " | ".join(f"{100 * v:.1f} %" for v in held.values()) + " |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":    # python -m colsim.study.coverage [studies]: the table of docs/validation/calibration.md
+    import sys
+
+    print(coverage_table(int(sys.argv[1]) if len(sys.argv) > 1 else 200), flush=True)
