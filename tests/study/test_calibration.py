@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from colsim.study.calibration import (MEASURES, Runs, best_mu_r, calibrate, calibration_markdown, fitting_range,
-                                      misfits, mu_r_interval, relative_errors)
+from colsim.study.calibration import (MEASURED_COVERAGE, MEASURES, Runs, best_mu_r, calibrate, calibration_markdown,
+                                      fitting_range, misfits, mu_r_interval, relative_errors)
 from colsim.study.coverage import CASES, coverage
 from colsim.study.experimental_laws import lube_height, lube_runout
 
@@ -102,9 +102,13 @@ def test_the_intervals_hold_the_truth_where_the_fit_is_wrong(case):
     size law's exponent 1.5 where the fit takes 1; limits curving in mu_r between the swept values):
     the 95 % intervals of the limits (pooled), of the best mu_r and of the minimax mu_r hold the true
     value in at least 90 % of the studies (the bound the method is held to; measured values are in
-    docs/validation/calibration.md). The draws are fixed (seed 2026), so the shares are exact."""
+    docs/validation/calibration.md, and within MEASURED_COVERAGE, which the tables print). The draws
+    are fixed (seed 2026), so the shares are exact."""
     held = coverage(case, studies=200, replicates=400)
     assert all(share >= 0.90 for share in held.values()), held
+    # and within the range the tables print beside the intervals
+    assert all(MEASURED_COVERAGE[target][0] <= share <= MEASURED_COVERAGE[target][1]
+               for target, share in held.items()), held
 
 
 def test_the_old_interval_misses_where_the_exponent_is_wrong():
@@ -128,6 +132,7 @@ def test_interval_ends_at_the_sweeps_edge_are_printed_as_bounds():
                    runs.height * (1 - 1.5 * 0.35), runs.runout)
     text = calibration_markdown(calibrate(shifted, replicates=10))   # the best height mu_r is beyond the sweep
     assert "| lube | height | 0.300 (an end of the sweep) | [0.300, >= 0.300] |" in text
+    assert "held the truth in" in text     # the measured coverage, beside the intervals
 
 
 def test_one_mu_r_for_every_a_is_a_share_of_replicates_and_a_minimax_value():
