@@ -5,8 +5,8 @@ The limit X_inf of X(r0) = X_inf + k (d/r0)^p, fitted by least squares over ever
 weighted sum of the runs, X_inf = sum_i w_i X_i, so with n_r seeds at radius r0_r, each run
 scattering by sigma_r, Var(X_inf) = sum_r n_r w_r^2 sigma_r^2 (w_r the weight of one run at r0_r,
 itself depending on every n). A seed at r0_r costs c_r of CPU (its collapses, and its pour shared
-by the mu_r it serves). For a fixed number of CPU hours C the study repeats the design C / cost times, and
-the variance falls as 1/repeats, so the design to choose minimises Var(X_inf) x cost.
+by the mu_r it serves). For a fixed number of CPU hours C the study repeats the design C / cost
+times, and the variance falls as 1/repeats, so the design to choose minimises Var(X_inf) x cost.
 """
 from __future__ import annotations
 
