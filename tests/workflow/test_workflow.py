@@ -633,8 +633,8 @@ def test_a_folder_whose_settings_the_study_does_not_have_is_an_error(tmp_path):
     folder, instead of being made with this configuration's settings."""
     directory = copy_workflow(tmp_path)
     for target, message in (
-            ("pack_0123456789/a_1/mu_r_0.12/run_0123456789/collapse.nc",   # its column's folder is unknown first
-             "no column of this study has the folder pack_0123456789/a_1"),
+            ("pack_0123456789/a_1/mu_r_0.12/run_0123456789/collapse.nc",   # its run's settings are looked up first
+             "no run of this study has the folder mu_r_0.12/run_0123456789"),
             ("pack_0123456789/packing.nc", "no packing of this study has the folder r0_1/seed_1/pack_0123456789")):
         result = snakemake(directory, "-n", f"results/r0_1/seed_1/{target}", "--configfile", "config/tiny.yaml",
                            timeout=120)

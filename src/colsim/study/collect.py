@@ -128,14 +128,18 @@ def run_key(analysis) -> tuple[float, float, int]:
 #: its solver's stopping rule (a run of another joins no summary, calibration or fit)
 SHARED = ("collapse.friction_law", "collapse.rolling_lever", "collapse.solver_tolerance",
           "collapse.solver_settings")
+#: what runs of different time steps share: auto's solver settings follow the step (its scaled step,
+#: and APGD's lengths below defaults.AUTO_APGD_LENGTHS_AT), so a time-step study does not compare them
+SHARED_ACROSS_STEPS = tuple(name for name in SHARED if name != "collapse.solver_settings")
 
 
-def check_runs(analyses, swept=SWEPT) -> list[tuple]:
+def check_runs(analyses, swept=SWEPT, shared=SHARED) -> list[tuple]:
     """The one set of checks of every command that reads runs (collect, calibrate, the column-size
     fit): each run's attributes (:func:`run_key`), its scalar results one number each, no two runs
     of the same `swept` values (the same run given twice would count twice), and one friction law,
-    rolling lever and solver tolerance (SHARED) among them. Returns each run's `swept` values;
-    ValueError naming the odd run otherwise."""
+    rolling lever and solver tolerance (`shared`: SHARED, or SHARED_ACROSS_STEPS where the runs'
+    time steps differ) among them. Returns each run's `swept` values; ValueError naming the odd run
+    otherwise."""
     keys = []
     for analysis in analyses:
         run_key(analysis)
@@ -153,10 +157,10 @@ def check_runs(analyses, swept=SWEPT) -> list[tuple]:
             raise ValueError(f"two analyses share the same ({', '.join(swept)}): {_run_name(first[key])} and"
                              f" {_run_name(analysis)}; each run counts once")
         first[key] = analysis
-    reference = {name: run_settings(analyses[0]).get(name) for name in SHARED}
+    reference = {name: run_settings(analyses[0]).get(name) for name in shared}
     for analysis in analyses[1:]:
         settings = run_settings(analysis)
-        for name in SHARED:
+        for name in shared:
             if settings.get(name) != reference[name]:
                 raise ValueError(f"runs differ in {name}: {reference[name]} in {_run_name(analyses[0])},"
                                  f" {settings.get(name)} in {_run_name(analysis)}; one study has one")

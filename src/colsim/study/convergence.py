@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..stages.settings import scaled_step
-from .collect import check_runs, means_per_size
+from .collect import SHARED, SHARED_ACROSS_STEPS, check_runs, means_per_size
 
 SUB_STUDIES = ("time_step", "end_time", "column_size", "seeds")
 #: what tells two runs of one sub-study apart
@@ -44,7 +44,7 @@ def runs_table(groups: dict, default_end: float) -> "xarray.Dataset":  # noqa: F
         raise ValueError("no analyses to tabulate")
     for study in SUB_STUDIES:
         if groups.get(study):
-            check_runs(groups[study], RUN_IDENTITY)
+            check_runs(groups[study], RUN_IDENTITY, SHARED_ACROSS_STEPS if study == "time_step" else SHARED)
     coords = {
         "study": [s for s, _ in rows],
         "r0": [float(a.attrs["r0"]) for _, a in rows],
