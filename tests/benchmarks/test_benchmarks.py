@@ -203,6 +203,7 @@ def test_study_cost_growth_is_the_log_log_slope_between_sizes():
 # scatter.py: the same-answer check's runs
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_scatter_collapses_the_column_and_its_perturbed_copies(tmp_path):
     """`benchmarks scatter` on two stacked spheres: the settings' own run, one at another APGD tolerance
     and one from moved positions, each collapsed and analysed in a child process, recorded one JSON

@@ -41,6 +41,7 @@ def test_each_device_array_made_is_counted_with_its_bytes(monkeypatch):
     assert counts == {"elsewhere": 3} and sizes == {"elsewhere": 5 * 8 + 6 * 4 + 4 * 8}
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_every_launch_of_a_collapse_step_goes_through_launch(monkeypatch):
     """A plain launch marshals each array anew (about 9 us an array on an H200, 29.5 us an empty
     launch against 10 through colsim.engine.cuda_launch.launch): the stack's GPU collapse steps,

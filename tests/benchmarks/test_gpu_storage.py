@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import gpu  # noqa: E402
@@ -35,6 +36,7 @@ def test_narrower_groups_count_their_elements_at_four_bytes():
             == 4 * (sum(saved.values()) + 15 * m) - widening)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_the_narrowed_iteration_holds_the_nearest_float32_and_the_same_int32():
     """On a 40-sphere lattice: every group narrowed ("all") holds, for its trial steps, the float64
     arrays' nearest float32 and the int64 arrays' values, and keeps the float64 contact arrays for its

@@ -127,6 +127,7 @@ def test_the_device_makes_the_host_s_arrays_bit_for_bit(monkeypatch):
     np.testing.assert_array_equal(made.copy_to_host(), midpoint)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_what_a_step_reads_of_the_device_s_arrays_is_measured_there():
     """The kinetic energy, the floor's and the cylinder's largest overlaps (a DeviceState's) and the
     stopping rule's lengths (a DeviceProgram's) are summed on the device in another order than
@@ -178,6 +179,7 @@ def test_the_inverse_masses_are_the_host_s():
     np.testing.assert_array_equal(cuda_state.inverses_on_device(cuda.to_device(mass)).copy_to_host(), 1.0 / mass)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     """The second step of a small collapse on the GPU (APGD's kernels and the detection there: 12
     spheres stacked 2 x 2 x 3 in a cylinder, nudged sideways): nothing goes to the device (the
@@ -221,6 +223,7 @@ def test_a_step_on_the_gpu_copies_no_particle_array_to_the_device(monkeypatch):
     np.testing.assert_allclose(later[-1].state.position, cpu[-1].state.position, rtol=0, atol=1e-12 * moved)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_gpu_run_goes_on_after_a_step_solved_on_the_cpu():
     """A step on the GPU whose APGD reaches its cap is solved again by Clarabel on the host (auto's
     fallback): its increments have no device copy, so its state has none, and the next GPU step

@@ -125,6 +125,7 @@ def test_a_step_times_its_phases_within_its_wall_time():
     assert d.check_time > 0.0 and sum(phases) <= d.wall_time
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_redo_on_the_gpu_takes_the_cpu_s_step():
     """The train's step on the GPU (APGD's kernels; the detection, and the redo's given pair joined to
     it, on the device: numba's simulator here) is the CPU's: the same redos, the same contacts in the

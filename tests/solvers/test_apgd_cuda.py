@@ -80,6 +80,7 @@ def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
         assert found == pytest.approx(expected, rel=1e-12, abs=1e-12)   # see the module's docstring
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_thirty_iterations_follow_the_cpu_s(program):
     """The same control flow on both kernel sets: the same restarts and backtracks, the same
     Lipschitz estimate and momentum, and the iterate to rounding."""
@@ -94,6 +95,7 @@ def test_thirty_iterations_follow_the_cpu_s(program):
     np.testing.assert_allclose(gpu.host_x(), x, rtol=0, atol=1e-10 * np.abs(x).max())
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 @pytest.mark.parametrize("row", [1, 32])
 def test_the_small_decision_block_gives_the_large_one_s_bits(row):
     """A row of at most FEW_DECIDE_THREADS block sums: the 32-thread block adds them by the same tree
@@ -178,6 +180,7 @@ def test_a_solve_stored_in_float32_agrees_with_clarabel(program):
     assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_float32_solve_that_reaches_its_cap_is_made_again_in_float64(program, monkeypatch):
     """A float32-stored solve that fails (made to, here, before it iterates) is solved again from the
     same start with float64 storage, which the solution's info names; float64's own failure is the

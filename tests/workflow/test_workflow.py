@@ -610,6 +610,7 @@ def plan_two_studies(tmp_path, other: str):
             {p for p in planned_outputs(second) if p.startswith("results/r0_")})
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 @pytest.mark.parametrize("other, shares_packings", [
     ("study: sb\nmu: 0.3\n", True),
     ("study: sb\nroot_seed: 7\n", False),
