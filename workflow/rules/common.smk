@@ -159,6 +159,7 @@ localrules:
     all,
     paraview,
     study_config,
+    study_settings,
     packing_settings,
     run_settings,
     analysis_settings,
