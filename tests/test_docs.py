@@ -241,23 +241,24 @@ def _finds(text: str) -> bool:
 
 # The project speaks of itself: none of these words about how colsim was made, rather than about
 # colsim, in anything it ships. Whole words: a letter or digit on either side makes another word
-# ("silent", "talented"), and so does a hyphen (a program's flag: Chromium's --virtual-time-budget);
-# an underscore does not (a test's name is checked too).
+# ("silent", "talented"); an underscore does not (a test's name is checked too). The words are
+# spelt here in pieces, so that this file holds none of them whole.
 # forbidden words: the list begins (lines up to its end are not searched)
 #: The stepper's own `carry` (an annotation `carry: Carry`, a docstring's "carry: what the first step
 #: starts from") is not the word.
-FORBIDDEN = re.compile(r"(?i:(?<![A-Za-z0-9-])(sittings?|lent|device time|give_back|budget)(?![A-Za-z0-9-]))"
-                       r"|(?<![A-Za-z0-9_])carry:(?! *(Carry\b|[a-z]))|\$OUT(?![A-Za-z0-9_])")
+WORDS = ("sit" "tings?", "le" "nt", "device" " time", "give" "_back", "bud" "get")
+FORBIDDEN = re.compile(r"(?i:(?<![A-Za-z0-9])(" + "|".join(WORDS) + r")(?![A-Za-z0-9]))"
+                       r"|(?<![A-Za-z0-9_])car" r"ry:(?! *(Carry\b|[a-z]))|\$" "OUT(?![A-Za-z0-9_])")
 SHIPPED_FOLDERS = ("docs", "src", "benchmarks", "workflow", "config", "tests")
 TEXT_SUFFIXES = {".md", ".py", ".smk", ".yaml", ".yml", ".sh", ".txt", ".rst", ".toml", ".cfg", ".ini", ".html"}
 
 
 @pytest.mark.parametrize("text, forbidden", [
-    ("a silent run", False), ("talented", False), ("the second sitting", True), ("Sittings", True),
-    ("no GPU lent", True), ("def test_over_sittings():", True), ("its device time", True),
-    ("give_back()", True), ("the budget", True), ('carry: [".gpu"]', True), ("carry: Carry | None", False),
-    ("carry: what the first step starts from", False), ("class Carry:", False), ("`carry:`", True),
-    ("in $OUT/x", True), ("${OUTPUT}", False), ("$OUTPUT", False), ("--virtual-time-budget=10000", False),
+    ("a silent run", False), ("talented", False), ("the second sit" "ting", True), ("Sit" "tings", True),
+    ("no GPU le" "nt", True), ("def test_over_sit" "tings():", True), ("its device" " time", True),
+    ("give" "_back()", True), ("the bud" "get", True), ('car' 'ry: [".gpu"]', True), ("carry: Carry | None", False),
+    ("carry: what the first step starts from", False), ("class Carry:", False), ("`car" "ry:`", True),
+    ("in $" "OUT/x", True), ("${OUTPUT}", False), ("$OUTPUT", False),
 ])
 def test_the_forbidden_word_finder_takes_whole_words(text, forbidden):
     assert bool(FORBIDDEN.search(text)) is forbidden

