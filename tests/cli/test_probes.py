@@ -333,9 +333,12 @@ def test_numba_s_thread_count_zero_is_refused_in_one_line(work):
 
 
 def _tbb_loads() -> bool:
-    """Whether numba's TBB layer loads in a fresh interpreter (its libtbb found by the loader)."""
-    probe = "import numba.np.ufunc.tbbpool"
-    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
+    """Whether numba starts its threads on TBB in a fresh interpreter, as colsim would: numba opens
+    libtbb by name first, so an interpreter whose own lib/ holds it (its run path; a base Python that
+    pip installed tbb into) loads the layer, and a virtual environment's lib/ alone does not."""
+    probe = "import numba; numba.set_num_threads(1); assert numba.threading_layer() == 'tbb'"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True,
+                          env={**os.environ, "NUMBA_THREADING_LAYER": "tbb"}).returncode == 0
 
 
 def test_a_tbb_layer_numba_cannot_load_is_explained_in_one_line(work):
