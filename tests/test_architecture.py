@@ -211,3 +211,12 @@ def test_no_cpu_module_imports_a_gpu_module():
 def test_the_circle_check_finds_a_circle():
     assert cycle_in({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert cycle_in({"a": {"b"}, "b": set()}) is None
+
+
+def test_no_module_reads_the_cuda_simulator_switch():
+    """numba's simulator is the tests' GPU: the tests turn it on (tests/cuda_simulator.py), and no
+    module of colsim reads NUMBA_ENABLE_CUDASIM to behave otherwise (numba reads it itself)."""
+    readers = [str(path.relative_to(PACKAGE)) for path in MODULES
+               if any(isinstance(node, ast.Constant) and node.value == "NUMBA_ENABLE_CUDASIM"
+                      for node in ast.walk(ast.parse(path.read_text())))]
+    assert readers == []

@@ -267,9 +267,9 @@ def cuda_gpu_count() -> int:
 
 def device_problem(config, gpus=cuda_gpu_count):
     """One line when `device: cuda` is set and the jobs would run where no GPU is (their every
-    pack and collapse would fail), or None. numba's simulator (NUMBA_ENABLE_CUDASIM=1) stands for a
-    GPU, as the stages take it for one. `gpus`: how many GPUs this machine has, asked only when needed."""
-    if config["device"] != "cuda" or os.environ.get("NUMBA_ENABLE_CUDASIM") == "1" or gpus() > 0:
+    pack and collapse would fail), or None. `gpus`: how many GPUs this machine has, asked only when
+    needed (numba's CUDA simulator, a test tool, is no GPU here: a study is planned for real cards)."""
+    if config["device"] != "cuda" or gpus() > 0:
         return None
     return ("config: device: cuda, but this machine has no CUDA GPU (no NVIDIA driver sees one): set device: cpu"
             " or auto, or run the study on a GPU node (--executor slurm)")
