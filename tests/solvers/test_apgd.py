@@ -61,6 +61,24 @@ def test_the_iterations_carry_their_momentum_from_one_call_to_the_next(solver_pi
     np.testing.assert_allclose(runs["numpy"].x, runs["whole"].x, rtol=0, atol=1e-9 * scale)
 
 
+def test_apgd_s_one_loop_makes_exactly_the_iterations_asked_in_rounds_of_trial_steps(solver_pile):
+    """run_iterations, the loop of every back-end: a round of k trial steps adds k to the iterations
+    and backtracks together; iterate(n) ends with exactly n more iterations, however many of its
+    trial steps backtracked (a cold start from a Lipschitz estimate that halves every step, so that
+    steps are rejected), and on the bits of the same trial steps made one round at a time."""
+    program, _ = collapse_program(mid_collapse(solver_pile))
+    solver = ApgdSolver(lipschitz_decay=0.5)
+    whole, rounds = solver.prepare(program), solver.prepare(program)
+    whole.iterate(60)
+    assert whole.iterations == 60 and whole.backtracks > 0
+    while rounds.iterations < 60:
+        before = rounds.iterations + rounds.backtracks
+        rounds.trial_round(1, check=False)
+        assert rounds.iterations + rounds.backtracks == before + 1
+    assert (rounds.iterations, rounds.backtracks, rounds.restarts) == (60, whole.backtracks, whole.restarts)
+    np.testing.assert_array_equal(rounds.x, whole.x)
+
+
 def test_collapse_ends_the_same_with_both_solvers(solver_pile):
     """A small column collapse (100 steps to t/sqrt(h0/g) = 4): h_inf and r_inf within 2 % of r0."""
     r0 = 1.2

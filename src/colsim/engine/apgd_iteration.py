@@ -31,13 +31,20 @@ class ApgdIteration(Protocol):
     """What APGD's solver asks of an iteration state (:class:`CpuIteration`, the GPU's
     :class:`colsim.engine.cuda_apgd.CudaIteration`, the tests' numpy oracle)."""
 
-    #: the Lipschitz estimate L (the trial step is 1/L) and the counts of backtracks and restarts
+    #: the Lipschitz estimate L (the trial step is 1/L), the iterations made (accepted trial steps)
+    #: and the counts of backtracks and restarts
     lip: float
+    iterations: int
     backtracks: int
     restarts: int
 
+    def trial_round(self, trials: int, check: bool) -> None:
+        """Make `trials` trial steps, each with its decision (:func:`decide`), and update `iterations`:
+        the back-end's operator that :func:`run_iterations` drives. check: a back-end that computes
+        the residual check with the round (the GPU's, read in the same copy) does so."""
+
     def iterate(self, n: int) -> None:
-        """Run n iterations."""
+        """Run n iterations (:func:`run_iterations`)."""
 
     def iterate_and_check(self, n: int, program: ConeProgram, scale: float, floor: float) -> dict[str, float]:
         """Run n iterations, then return the residuals at the iterate
@@ -147,10 +154,22 @@ def _weighted_change(h_new, hy, inv_mass, blocks):
     return total
 
 
-# APGD's decisions, written once: Nesterov's momentum, the gradient restart, the backtracking on the
-# step length (decide). The CPU's loop (apgd_iterations, compiled with the CPU's kernels below) and
-# the GPU's (colsim.engine.cuda_apgd: a kernel a trial step runs decide on the device) both make
-# them with it. The tests keep a numpy loop as their oracle (tests/solvers/apgd_oracle.py).
+# APGD's loop and decisions, written once. run_iterations drives rounds of trial steps, each step
+# with its decision (decide: Nesterov's momentum, the gradient restart, the backtracking on the step
+# length): the CPU's round is apgd_trials compiled with the CPU's kernels below, the GPU's is its
+# launches (colsim.engine.cuda_apgd: a kernel runs decide on the device). The tests keep a numpy loop
+# as their oracle (tests/solvers/apgd_oracle.py).
+
+def run_iterations(iteration: ApgdIteration, n: int, check: bool = False) -> None:
+    """n more APGD iterations (accepted trial steps) of `iteration`, the one loop of every back-end:
+    rounds of as many trial steps as iterations are left (:meth:`ApgdIteration.trial_round`), until
+    they are made; a rejected trial step (a backtrack) leaves its iteration to the next round. A GPU
+    waits for the host once a round, not once a trial step. check: each round also computes the
+    residual check where the back-end does so with its round."""
+    target = iteration.iterations + n
+    while iteration.iterations < target:
+        iteration.trial_round(target - iteration.iterations, check)
+
 
 def decide(dd, uphill, change, lip, theta, beta, lip_decay):
     """What a trial step from y with step 1/lip decides, from its sums dd = ||x_new - y||^2,
@@ -173,11 +192,11 @@ def decide(dd, uphill, change, lip, theta, beta, lip_decay):
 decide = numba.njit(cache=True)(decide)
 
 
-def apgd_iterations(trial_step, extrapolate, gradient):
-    """The function iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c,
-    mu_s, mu_r_s, inv_mass, lip_decay, reduction) that runs n_iter APGD iterations with the kernel set
-    and returns (x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts): the arrays
-    trade places (no copies), hy and g are updated in place.
+def apgd_trials(trial_step, extrapolate, gradient):
+    """The function trials(n_trials, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c,
+    mu_s, mu_r_s, inv_mass, lip_decay, reduction) that makes n_trials APGD trial steps with the kernel
+    set (a round of :func:`run_iterations`) and returns (x, x_prev, x_new, hx, h_new, theta, beta, lip,
+    accepted, backtracks, restarts): the arrays trade places (no copies), hy and g are updated in place.
 
     x, hx = T x: the iterate; the extrapolated point is y = x + beta (x - x_prev), never stored,
     hy = T y, and g = G hy + c the gradient at y; T = B' S and G = S B Mbar^-1 come from the contact
@@ -190,27 +209,28 @@ def apgd_iterations(trial_step, extrapolate, gradient):
     sets hy = h_new + beta (h_new - hx); gradient(hy, inv_mass, geometry, c, g) sets g = G hy + c.
     `reduction` is how the kernels sum (the CPU's: a count of fixed blocks)."""
 
-    def iterate(n_iter, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s,
-                inv_mass, lip_decay, reduction):
+    def trials(n_trials, x, x_prev, beta, hx, hy, g, x_new, h_new, theta, lip, geometry, c, mu_s, mu_r_s,
+               inv_mass, lip_decay, reduction):
+        accepted_steps = 0
         backtracks = 0
         restarts = 0
-        for _ in range(n_iter):
-            while True:
-                dd, uphill, change = trial_step(x, x_prev, beta, g, x_new, 1.0 / lip, h_new, hy, geometry,
-                                                mu_s, mu_r_s, inv_mass, reduction)
-                accepted, lip, theta, beta, restarted = decide(dd, uphill, change, lip, theta, beta, lip_decay)
-                if accepted:
-                    break
+        for _ in range(n_trials):
+            dd, uphill, change = trial_step(x, x_prev, beta, g, x_new, 1.0 / lip, h_new, hy, geometry,
+                                            mu_s, mu_r_s, inv_mass, reduction)
+            accepted, lip, theta, beta, restarted = decide(dd, uphill, change, lip, theta, beta, lip_decay)
+            if not accepted:
                 backtracks += 1
+                continue
+            accepted_steps += 1
             if restarted:
                 restarts += 1
             x_prev, x, x_new = x, x_new, x_prev
             extrapolate(hy, h_new, hx, beta)
             hx, h_new = h_new, hx
             gradient(hy, inv_mass, geometry, c, g)
-        return x, x_prev, x_new, hx, h_new, theta, beta, lip, backtracks, restarts
+        return x, x_prev, x_new, hx, h_new, theta, beta, lip, accepted_steps, backtracks, restarts
 
-    return iterate
+    return trials
 
 
 def _trial_step(x, x_prev, beta, g, x_new, step, h_new, hy, geometry, mu_s, mu_r_s, inv_mass, blocks):
@@ -236,7 +256,7 @@ _weighted_change = _parallel(_weighted_change)
 _extrapolate = _parallel(_extrapolate)
 _trial_step = numba.njit(cache=True)(_trial_step)
 _gradient = numba.njit(cache=True)(_gradient)
-_iterate_compiled = numba.njit(cache=True)(apgd_iterations(_trial_step, _extrapolate, _gradient))
+_trials_compiled = numba.njit(cache=True)(apgd_trials(_trial_step, _extrapolate, _gradient))
 
 
 
@@ -256,7 +276,7 @@ class CpuIteration:
         self.g = self.apply_G(self.hy, c)
         self.x_new, self.h_new = np.empty_like(x), np.empty_like(hx)
         self.theta, self.lip = 1.0, self.lipschitz_estimate()
-        self.backtracks = self.restarts = 0
+        self.iterations = self.backtracks = self.restarts = 0
         self.lip_decay = float(lip_decay)
 
     def apply_T(self, z: np.ndarray) -> np.ndarray:
@@ -314,12 +334,18 @@ class CpuIteration:
                             info)
 
     def iterate(self, n: int):
-        """n iterations, compiled (:func:`apgd_iterations` with the host's kernels)."""
-        (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, bt,
-         rs) = _iterate_compiled(n, self.x, self.x_prev, self.beta, self.hx, self.hy, self.g, self.x_new,
-                                 self.h_new, self.theta, self.lip, self.geometry, self.c, self.mu_s, self.mu_r_s,
-                                 self.inv_mass, self.lip_decay, threads())
+        """n iterations (:func:`run_iterations`)."""
+        run_iterations(self, n)
+
+    def trial_round(self, trials: int, check: bool = False):
+        """`trials` trial steps, compiled (:func:`apgd_trials` with the host's kernels). check: no
+        part of the round (the host computes the residuals when asked, :meth:`residuals`)."""
+        (self.x, self.x_prev, self.x_new, self.hx, self.h_new, theta, self.beta, lip, accepted, bt,
+         rs) = _trials_compiled(trials, self.x, self.x_prev, self.beta, self.hx, self.hy, self.g, self.x_new,
+                                self.h_new, self.theta, self.lip, self.geometry, self.c, self.mu_s, self.mu_r_s,
+                                self.inv_mass, self.lip_decay, threads())
         self.theta, self.lip = theta, lip
+        self.iterations += accepted
         self.backtracks += bt
         self.restarts += rs
 

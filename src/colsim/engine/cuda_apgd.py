@@ -10,8 +10,8 @@ followed by one block that adds its blocks' sums and decides as the CPU does, wi
 iteration's scalars kept in a small device array; an accepted step then moves the iterate (the
 roles of three slots move on, nothing is copied); the next trial step takes the gradient at its y
 itself, in the projection's kernel: three launches a trial step. So the host launches trial steps
-without waiting for any, and reads that array once a round of them
-(:meth:`CudaIteration.iterate`): a trial step used to wait for a copy of its sums to the host, which
+without waiting for any, and reads that array once a round of them (:meth:`CudaIteration.trial_round`,
+a round of APGD's one loop): a trial step used to wait for a copy of its sums to the host, which
 with the launches was most of a small column's iteration, several times its memory traffic. A
 residual check costs one more copy. A solve's start is made on the device as
 well (:meth:`CudaIteration.of_program`): the contacts' frames, the gaps, the coefficients and the
@@ -36,7 +36,7 @@ from .cones import combine_residuals, contact_residuals
 from .cuda_launch import Prepared, launch
 from .cuda_state import host_copy, increments_on_device, inverses_on_device, program_array_on_device
 from .solver_contract import ACTIVE_FRACTION, ConeSolution
-from .apgd_iteration import decide, extrapolated, lipschitz_estimate, power_start_drawn
+from .apgd_iteration import decide, extrapolated, lipschitz_estimate, power_start_drawn, run_iterations
 
 #: the iteration's control on the device (float64 entries of CudaIteration.control): the Lipschitz
 #: estimate, Nesterov's theta and beta, lip's decay an iteration, whether the last trial step was
@@ -519,21 +519,20 @@ class CudaIteration:
                                   lambda v: normalise_on_device(v, partial, square))
 
     def iterate(self, n: int, check: bool = False):
-        """n more APGD iterations (accepted trial steps): rounds of as many trial steps as iterations
-        are left, each round launched without waiting and followed by one read of the control array
-        (a rejected trial step leaves one iteration for the next round). check: each round also
-        launches the residual check at the iterate it reaches, read in the same copy, so that
-        :meth:`iterate_and_check` waits for the host once a check (a round short of its iterations
-        wastes its check: a backtrack in its last trial step)."""
-        target = self._read[ITERATIONS] + n
-        while True:
-            for _ in range(int(target - self._read[ITERATIONS])):
-                self._trial()
-            if check:
-                self._launch_check()
-            self._read_back(check)
-            if self._read[ITERATIONS] >= target:
-                return
+        """n more APGD iterations (accepted trial steps), in APGD's one loop
+        (:func:`colsim.engine.apgd_iteration.run_iterations`) of :meth:`trial_round`s."""
+        run_iterations(self, n, check)
+
+    def trial_round(self, trials: int, check: bool = False):
+        """`trials` trial steps launched without waiting, then one read of the control array. check:
+        the round also launches the residual check at the iterate it reaches, read in the same copy,
+        so that :meth:`iterate_and_check` waits for the host once a check (a round short of its
+        iterations wastes its check: a backtrack in its last trial step)."""
+        for _ in range(trials):
+            self._trial()
+        if check:
+            self._launch_check()
+        self._read_back(check)
 
     def iterate_and_check(self, n: int, program, scale: float, floor: float) -> dict[str, float]:
         """:meth:`iterate` n, then :meth:`residuals` there (with the coefficients already on the device,
@@ -614,6 +613,7 @@ class CudaIteration:
     lip = property(lambda self: self._scalar(LIP), doc="The Lipschitz estimate now (read from the device).")
     theta = property(lambda self: self._scalar(THETA), doc="Nesterov's theta now.")
     beta = property(lambda self: self._scalar(BETA), doc="Nesterov's beta now.")
+    iterations = property(lambda self: int(self._scalar(ITERATIONS)), doc="Iterations (accepted trial steps) so far.")
     backtracks = property(lambda self: int(self._scalar(BACKTRACKS)), doc="Backtracks so far.")
     restarts = property(lambda self: int(self._scalar(RESTARTS)), doc="Restarts so far.")
 
