@@ -53,6 +53,32 @@ def test_a_checkpoint_comes_back_exactly(tmp_path):
         np.testing.assert_array_equal(getattr(saved["carry"].warm_start, name), getattr(carry.warm_start, name))
 
 
+@pytest.mark.parametrize("first", [True, False])
+def test_a_checkpoint_the_disk_cannot_hold_leaves_no_orphan_frames(tmp_path, monkeypatch, first):
+    """Issue 80.7: a full disk at the first checkpoint left a frames file that no checkpoint lists.
+    Now the error comes back and the frames file goes with it; at a later checkpoint the last one and
+    its frames stay, and the run resumes from them."""
+    import errno
+    from colsim.io import checkpoint
+
+    state, frames, diagnostics, carry = _run()
+    path = tmp_path / "run.checkpoint.npz"
+    if not first:
+        save_checkpoint(path, "abc", state, frames[:1], diagnostics, carry, 1.0)
+
+    def full_disk(target, arrays):
+        raise OSError(errno.ENOSPC, "No space left on device", str(target))
+
+    monkeypatch.setattr(checkpoint, "_write", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        save_checkpoint(path, "abc", state, frames, diagnostics, carry, 2.0)
+    monkeypatch.undo()
+    if first:
+        assert sorted(p.name for p in tmp_path.iterdir()) == []
+    else:
+        assert [k for k, _ in load_checkpoint(path, "abc")["frames"]] == [0]
+
+
 def test_a_checkpoint_from_before_the_matching_and_check_times_resumes(tmp_path):
     """A checkpoint written before StepDiagnostics timed the matching and the overlap check (the
     calibration's, say) still resumes: those two come back as NaN, every other field exactly."""

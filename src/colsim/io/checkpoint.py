@@ -50,13 +50,20 @@ class CheckpointError(InputError):
 
 def save_checkpoint(path, fingerprint, state, frames, diagnostics, carry, elapsed, cpu=float("nan"), commits=()):
     """A collapse after its last step: `elapsed` and `cpu`, the wall and CPU seconds spent so far;
-    `commits`, those of the earlier segments (this one's is added)."""
-    _append_frames(path, fingerprint, state.n, frames)
-    arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed, cpu, commits)
-    arrays["frame_step"] = np.array([k for k, _ in frames], dtype=np.int64)
-    arrays["frame_time"] = np.array([f.time for _, f in frames])
-    arrays.update(_diagnostic_arrays(diagnostics))
-    _write(path, arrays)
+    `commits`, those of the earlier segments (this one's is added). A first checkpoint that cannot be
+    written (a full disk) leaves no frames file behind: no checkpoint lists its frames."""
+    first = not Path(path).exists()
+    try:
+        _append_frames(path, fingerprint, state.n, frames)
+        arrays = _common_arrays(fingerprint, state, carry.warm_start, carry.margin, elapsed, cpu, commits)
+        arrays["frame_step"] = np.array([k for k, _ in frames], dtype=np.int64)
+        arrays["frame_time"] = np.array([f.time for _, f in frames])
+        arrays.update(_diagnostic_arrays(diagnostics))
+        _write(path, arrays)
+    except OSError:
+        if first:
+            frames_path(path).unlink(missing_ok=True)
+        raise
 
 
 def load_checkpoint(path, fingerprint):
