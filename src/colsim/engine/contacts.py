@@ -1,4 +1,4 @@
-"""Contact detection: potential contacts between spheres, the floor, the cylinder and fixed spheres.
+"""Contact detection: potential contacts between spheres, the floor, the cylinder, plane walls and fixed spheres.
 
 A potential contact k joins particle i to body j (another particle, a wall, j = -1, or fixed
 sphere k, j = -2 - k: :class:`colsim.engine.state.FixedSpheres`). Its unit
@@ -17,8 +17,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .compiled import numba, prange
-from .state import (CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, pair_keys,
-                    rolling_lever)
+from .state import (CYLINDER, FLOOR, PARTICLE, PLANE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code,
+                    law_family, pair_keys, rolling_lever)
 
 WALL = -1  # index of the other body for a particle-wall contact
 
@@ -28,7 +28,7 @@ class Contacts:
     """Potential contacts, m of them.
 
     i, j: (m,) int, particle indices (j = -1 for a wall, -2 - k for fixed sphere k)
-    family: (m,) int, PARTICLE, FLOOR or CYLINDER
+    family: (m,) int, PARTICLE, FLOOR, CYLINDER or PLANE + p (plane wall p)
     normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
     gap: (m,) float, length, surface distance at the start of the step
     radius_i, radius_j: (m,) float, length (radius_j = 0 for walls, the fixed sphere's radius)
@@ -241,9 +241,24 @@ def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylind
         normal[:, 0] = np.where(on_axis, 1.0, state.position[idx, 0] / safe_rho)
         normal[:, 1] = np.where(on_axis, 0.0, state.position[idx, 1] / safe_rho)
         parts.append((idx, np.full(len(idx), CYLINDER), normal, gap[idx]))
+    for p, plane in enumerate(walls.plane_array()):
+        true_gap = plane_distance(state.position, plane) - state.radius
+        gap = true_gap + recovery_relaxation(true_gap, most_recovered)
+        idx = np.flatnonzero(gap < reach)
+        parts.append((idx, np.full(len(idx), PLANE + p), np.tile(-plane[:3], (len(idx), 1)), gap[idx]))
     if not parts:
         return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros(0)
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
+def plane_distance(position: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """(n,) the signed distance n . x - offset (length) of each centre of `position` (n, 3) from a plane
+    wall (n_x, n_y, n_z, offset) (:class:`colsim.engine.state.Walls`), the products summed in order x,
+    y, z as the GPU's kernels sum them."""
+    distance = position[:, 0] * plane[0]
+    distance += position[:, 1] * plane[1]
+    distance += position[:, 2] * plane[2]
+    return distance - plane[3]
 
 
 def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndarray):
@@ -316,7 +331,7 @@ def other_rows(state: ParticleState, walls: Walls, law: ContactLaw, predicted, m
                cylinder_margin, most_recovered: float) -> dict:
     """The contacts of :func:`detect` with `walls`' walls and fixed spheres, by name (:func:`_other_contacts`)."""
     fixed = walls.fixed is not None and walls.fixed.n > 0
-    if walls.floor or walls.cylinder_radius is not None or fixed:
+    if walls.floor or walls.cylinder_radius is not None or walls.planes or fixed:
         reach = margin + (1.0 + slack) * row_lengths(np.asarray(predicted))
     else:
         reach = np.zeros(state.n)   # no wall: none asked
@@ -350,7 +365,7 @@ DEVICE_ARRAYS = ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "r
 
 def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: np.ndarray, cylinder_margin,
                     most_recovered: float) -> dict:
-    """The contacts with the floor, the cylinder and the fixed spheres (see :func:`detect`), by name:
+    """The contacts with the floor, the cylinder, the planes and the fixed spheres (see :func:`detect`), by name:
     i, j, family, normal, tangent1, tangent2, gap, radius_i, radius_j, mu, mu_r (the lever is made
     with the pairs' one)."""
     wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
@@ -364,7 +379,7 @@ def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: 
             "gap": np.concatenate([wgap, fgap + recovery_relaxation(fgap, most_recovered)]),
             "radius_i": state.radius[i],
             "radius_j": np.concatenate([np.zeros(len(wi)), walls.fixed.radius[fk] if len(fk) else np.zeros(0)]),
-            "mu": np.asarray(law.mu)[family], "mu_r": np.asarray(law.mu_r)[family]}
+            "mu": np.asarray(law.mu)[law_family(family)], "mu_r": np.asarray(law.mu_r)[law_family(family)]}
 
 
 @dataclass
@@ -372,8 +387,8 @@ class Overlaps:
     """Overlaps (length, >= 0) after a step.
 
     pairs: (i, j, normal (k, 3)) particle pairs that overlap by more than `tolerance`
-    largest_pair, largest_floor, largest_fixed: largest particle-particle, particle-floor and
-    particle-fixed sphere overlap
+    largest_pair, largest_floor, largest_fixed, largest_plane: largest particle-particle,
+    particle-floor, particle-fixed sphere and particle-plane wall overlap
     cylinder: (n,) overlap of each particle with the cylinder, or None where only the largest was
     measured (`largest_cylinder`: a state on the device whose overlaps are all within the tolerance)
     """
@@ -384,11 +399,12 @@ class Overlaps:
     cylinder: np.ndarray | None
     largest_fixed: float = 0.0
     largest_cylinder: float | None = None
+    largest_plane: float = 0.0
 
     @property
     def largest(self) -> float:
         cylinder = float(self.cylinder.max(initial=0.0)) if self.cylinder is not None else self.largest_cylinder
-        return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder)
+        return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder, self.largest_plane)
 
 
 def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0,
@@ -415,7 +431,7 @@ def detected_overlaps(detected: Contacts, state: ParticleState, tolerance: float
 
 def wall_overlaps(state: ParticleState, walls: Walls, largest_pair: float, pairs: tuple) -> Overlaps:
     """The :class:`Overlaps` of `state` with its particle pairs' (largest_pair, pairs) given: the
-    floor's, each particle's with the cylinder and the fixed spheres' measured here."""
+    floor's, each particle's with the cylinder, the planes' and the fixed spheres' measured here."""
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))
@@ -424,7 +440,17 @@ def wall_overlaps(state: ParticleState, walls: Walls, largest_pair: float, pairs
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
     _, _, _, fixed_gap = fixed_pairs(state, walls.fixed, np.zeros(state.n))
-    return Overlaps(pairs, max(0.0, largest_pair), largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))))
+    return Overlaps(pairs, max(0.0, largest_pair), largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))),
+                    largest_plane=largest_plane_overlap(state, walls))
+
+
+def largest_plane_overlap(state: ParticleState, walls: Walls) -> float:
+    """The largest overlap R_i - (n . x_i - offset) (length, >= 0) of `state` with `walls`' planes."""
+    largest = 0.0
+    for plane in walls.plane_array():
+        if state.n:
+            largest = max(largest, float(np.max(state.radius - plane_distance(state.position, plane))))
+    return largest
 
 
 def pair_overlaps(state: ParticleState, pi: np.ndarray, pj: np.ndarray, d: np.ndarray, tolerance: float) -> tuple:

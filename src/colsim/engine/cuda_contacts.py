@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close
-from .state import CYLINDER, FLOOR, PARTICLE, pair_key
+from .state import CYLINDER, FLOOR, PARTICLE, PLANE, pair_key
 from .cuda_launch import launch
 from .cuda_state import (DeviceParticleArray, axis_distance, midpoints_on_device, particle_array_on_device,
                          state_array_on_device)
@@ -419,31 +419,36 @@ def _put_tangents(k, n0, n1, n2, tangent1, tangent2):
 
 
 class _WallContacts:
-    """The floor's and the cylinder's contacts of the particles of `found` (a :class:`_SweptPairs`), made
-    on the device as :func:`colsim.engine.contacts._wall_contacts` makes them with no cylinder margin:
-    particle i touches the floor where z_i - R_i is below its reach margin + (1 + slack) |u_i| (u: the
-    predicted motion), and the cylinder where its gap R - rho_i - R_i, relaxed by
-    :func:`colsim.engine.contacts.recovery_relaxation`, is; the floor's contacts first, then the
-    cylinder's, each in the particles' order. `count` (the one number copied to the host) of them."""
+    """The floor's, the cylinder's and the plane walls' contacts of the particles of `found` (a
+    :class:`_SweptPairs`), made on the device as :func:`colsim.engine.contacts._wall_contacts` makes
+    them with no cylinder margin: particle i touches the floor where z_i - R_i is below its reach
+    margin + (1 + slack) |u_i| (u: the predicted motion), the cylinder where its gap R - rho_i - R_i,
+    relaxed by :func:`colsim.engine.contacts.recovery_relaxation`, is, and plane p where its gap
+    n_p . x_i - offset_p - R_i, relaxed alike, is; the floor's contacts first, then the cylinder's,
+    then each plane's, each in the particles' order. `count` (the one number copied to the host) of them."""
 
     def __init__(self, found: "_SweptPairs", margin: float, slack: float, most_recovered: float, walls):
         n = found.radius.shape[0]
         self.found, self.most_recovered = found, float(most_recovered)
         self.cylinder_radius = math.nan if walls.cylinder_radius is None else float(walls.cylinder_radius)
-        flags = cuda.device_array(2 * n, dtype=np.int64)
+        planes = walls.plane_array()
+        self.n_planes = len(planes)   # a (1, 4) array of zeros stands for none: no empty array on a device
+        self.planes = cuda.to_device(planes if len(planes) else np.zeros((1, 4)))
+        flags = cuda.device_array((2 + self.n_planes) * n, dtype=np.int64)
         launch(_wall_flags_kernel, blocks_for(n), THREADS, found.position, found.radius, found.predicted,
-               bool(walls.floor), self.cylinder_radius, float(margin), float(slack), self.most_recovered, flags)
+               bool(walls.floor), self.cylinder_radius, self.planes, self.n_planes, float(margin), float(slack),
+               self.most_recovered, flags)
         self.start = prefix_sums_on_device(flags)
-        self.count = int(self.start[2 * n:].copy_to_host()[0])
+        self.count = int(self.start[flags.shape[0]:].copy_to_host()[0])
 
     def fill(self, rows: "ContactRows", first: int, law) -> None:
         """Their rows of `rows`, from row `first` on (all but the levers and keys)."""
         mu, mu_r = np.asarray(law.mu, dtype=float), np.asarray(law.mu_r, dtype=float)
         found = self.found
         launch(_wall_rows_kernel, blocks_for(found.radius.shape[0]), THREADS, found.position, found.radius,
-               self.start, self.cylinder_radius, self.most_recovered, first, float(mu[FLOOR]),
-               float(mu_r[FLOOR]), float(mu[CYLINDER]), float(mu_r[CYLINDER]), rows.frames[0], rows.frames[1],
-               rows.frames[2], rows.numbers, rows.bodies)
+               self.start, self.cylinder_radius, self.planes, self.n_planes, self.most_recovered, first,
+               float(mu[FLOOR]), float(mu_r[FLOOR]), float(mu[CYLINDER]), float(mu_r[CYLINDER]), rows.frames[0],
+               rows.frames[1], rows.frames[2], rows.numbers, rows.bodies)
 
 
 @cuda.jit(device=True)
@@ -465,10 +470,24 @@ def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered):
     return true_gap + max(0.0, -true_gap - most_recovered), rho
 
 
+@cuda.jit(device=True)
+def _plane_gap(i, position, radius, planes, p, most_recovered):
+    """Particle i's gap n . x_i - offset - R_i to plane wall p of `planes` (p, 4), relaxed as
+    :func:`colsim.engine.contacts.recovery_relaxation` relaxes it, in the arithmetic of
+    :func:`colsim.engine.contacts.plane_distance`."""
+    distance = position[i, 0] * planes[p, 0]
+    distance += position[i, 1] * planes[p, 1]
+    distance += position[i, 2] * planes[p, 2]
+    true_gap = (distance - planes[p, 3]) - radius[i]
+    return true_gap + max(0.0, -true_gap - most_recovered)
+
+
 @cuda.jit
-def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, margin, slack, most_recovered, flags):
-    """flags (2n,): 1 where particle i touches the floor (entry i) or the cylinder (entry n + i, none
-    for a cylinder_radius of nan), else 0 (:class:`_WallContacts`); one thread a particle."""
+def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, planes, n_planes, margin, slack,
+                       most_recovered, flags):
+    """flags ((2 + p) n,): 1 where particle i touches the floor (entry i), the cylinder (entry n + i,
+    none for a cylinder_radius of nan) or plane wall q < p = n_planes of `planes` (entry (2 + q) n + i), else 0
+    (:class:`_WallContacts`); one thread a particle."""
     i = cuda.grid(1)
     n = position.shape[0]
     if i >= n:
@@ -479,15 +498,18 @@ def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, marg
     if not math.isnan(cylinder_radius):
         gap, _ = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered)
         flags[n + i] = 1 if gap < reach else 0
+    for q in range(n_planes):
+        flags[(2 + q) * n + i] = 1 if _plane_gap(i, position, radius, planes, q, most_recovered) < reach else 0
 
 
 @cuda.jit
-def _wall_rows_kernel(position, radius, start, cylinder_radius, most_recovered, first, mu_floor, mu_r_floor,
-                      mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies):
-    """Particle i's floor and cylinder rows (one thread a particle), at first + start[i] and first +
-    start[n + i] where flagged (start: the flags' prefix sums): the normal out of the particle, the
-    tangents, the gap relaxed as on the host, the bodies (i, WALL), the family, the radii (R_i, 0)
-    and the wall's coefficients."""
+def _wall_rows_kernel(position, radius, start, cylinder_radius, planes, n_planes, most_recovered, first, mu_floor,
+                      mu_r_floor, mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies):
+    """Particle i's floor, cylinder and plane rows (one thread a particle), at first + start[i], first +
+    start[n + i] and first + start[(2 + q) n + i] where flagged (start: the flags' prefix sums): the
+    normal out of the particle, the tangents, the gap relaxed as on the host, the bodies (i, WALL), the
+    family (PLANE + q for plane q), the radii (R_i, 0) and the wall's coefficients (the cylinder's for
+    the planes: colsim.engine.state.law_family)."""
     i = cuda.grid(1)
     n = position.shape[0]
     if i >= n:
@@ -503,6 +525,12 @@ def _wall_rows_kernel(position, radius, start, cylinder_radius, most_recovered, 
         n0, n1 = (1.0, 0.0) if rho < 1e-12 else (position[i, 0] / rho, position[i, 1] / rho)
         _put_wall_row(k, i, CYLINDER, n0, n1, 0.0, gap, radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1,
                       tangent2, numbers, bodies)
+    for q in range(n_planes):
+        at = (2 + q) * n + i
+        if start[at + 1] > start[at]:
+            gap = _plane_gap(i, position, radius, planes, q, most_recovered)
+            _put_wall_row(first + start[at], i, PLANE + q, -planes[q, 0], -planes[q, 1], -planes[q, 2], gap,
+                          radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies)
 
 
 @cuda.jit(device=True)

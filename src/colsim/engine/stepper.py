@@ -155,7 +155,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
                  step_number, overlap.largest, tolerance, len(overlap.pairs[0]))
         margin *= settings.margin_growth
         missed += (len(overlap.pairs[0]) + int(overlap.largest_floor > tolerance)
-                   + int(overlap.largest_fixed > tolerance))
+                   + int(overlap.largest_fixed > tolerance) + int(overlap.largest_plane > tolerance))
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
         if solver.uses_warm_start:   # the redo's contacts hold the attempt's, with the missed ones added
