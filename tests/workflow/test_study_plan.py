@@ -131,3 +131,17 @@ def test_a_convergence_packing_is_just_tall_enough():
         str(Path(runs["end_time"][0]).with_name("collapse.nc"))))["steps"] == 150
     assert StudyPlan(study_config()).convergence_runs("analysis.nc") == {}
     assert len(plan.convergence_outputs()) == 5 and StudyPlan(study_config()).convergence_outputs() == []
+
+
+def test_the_default_cylinder_study_keeps_its_keys():
+    """config.yaml's own study (the cylinder, no channel setting) names the packings and runs it
+    named before the channel geometry existed: its keys, and so its folders and files, are unchanged."""
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    validate(config, str(SCHEMA))
+    plan = StudyPlan(config)
+    paths = plan.study_runs("collapse.nc")
+    assert len(paths) == 48
+    assert paths[0] == "results/r0_3/seed_1/pack_3d781f786e/a_0.5/mu_r_0/run_f56bf2a142/collapse.nc"
+    assert paths[-1] == "results/r0_3/seed_2/pack_2d924268af/a_5/mu_r_0.2/run_01bd302409/collapse.nc"
+    assert sorted(plan.packings) == ["2d924268af", "3d781f786e"]
+    assert sorted(plan.runs) == ["01bd302409", "078ce84642", "404261461e", "f56bf2a142"]
