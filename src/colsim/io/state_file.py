@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..engine.state import CYLINDER, ParticleState
+from ..engine.state import CYLINDER, ParticleState, channel_planes
 from ..engine.warm_start import WarmStart
 from . import checks
 from .cf import write_dataset
@@ -105,7 +105,9 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
         k = int(np.argmax(below))
         raise InputError(f"input file {path}: sphere {k} reaches below the floor (z = {state.position[k, 2]:g},"
                          f" radius {state.radius[k]:g})")
-    if "r0" in dataset.attrs:
+    if dataset.attrs.get("geometry") == "channel":
+        check_inside_channel(state, dataset.attrs, tolerance, path)
+    elif "r0" in dataset.attrs:
         r0 = float(dataset.attrs["r0"])
         outside = np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius > r0 + tolerance
         if outside.any():
@@ -118,6 +120,17 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
         i, j, gap = int(pairs[0][k]), int(pairs[1][k]), float(gaps[k])
         raise InputError(f"input file {path}: spheres {i} and {j} overlap by {-gap:g} (length), more than"
                          f" 1 % of the smallest diameter")
+
+
+def check_inside_channel(state: ParticleState, attrs, tolerance: float, path) -> None:
+    """InputError naming the first sphere that reaches through a wall of the channel's box (its
+    back wall, sidewalls or gate: attributes channel_length, channel_width) by more than `tolerance`."""
+    length, width = float(attrs["channel_length"]), float(attrs["channel_width"])
+    for plane in channel_planes(length, width, gate=True):
+        outside = state.position @ np.array(plane[:3]) - plane[3] - state.radius < -tolerance
+        if outside.any():
+            raise InputError(f"input file {path}: sphere {int(np.argmax(outside))} reaches outside the channel's "
+                             f"box (length {length:g}, width {width:g})")
 
 
 def family_flags(family) -> dict:
