@@ -247,7 +247,8 @@ def test_a_redo_on_the_gpu_with_no_pair_found():
 def test_a_channel_s_plane_walls_on_the_gpu_are_the_cpu_s():
     """A channel's walls (colsim.engine.state.channel_planes: back wall, sidewalls, gate) round a
     60-sphere cloud, each plane 0.004 inside its outermost sphere (an overlap beyond the step's
-    recovery, most_recovered = 0.002, so the relaxation counts): the GPU's detection lists the CPU's
+    recovery, most_recovered = 0.002, and beyond the overlap kept, 0.003, so that both parts of the
+    relaxation count, and the pairs' overlaps under 0.003 are kept): the GPU's detection lists the CPU's
     contacts in the CPU's order, each plane's family PLANE + q and the wall's coefficients, the normals
     and gaps to 1e-14 as the floor's (a GPU may fuse the plane's multiply-adds); the overlap check
     finds the CPU's largest plane overlap (measured on the host: the same number)."""
@@ -263,8 +264,8 @@ def test_a_channel_s_plane_walls_on_the_gpu_are_the_cpu_s():
     walls = Walls(floor=True, planes=channel_planes(length, width, gate=True))
     law = ContactLaw(mu=(0.5, 0.6, 0.3), mu_r=(0.1, 0.12, 0.05))
     predicted = _moving(state, 0.02, seed=8)
-    gpu = CUDA.detect(state, walls, law, predicted, 0.05, most_recovered=0.002)
-    cpu = detect(state, walls, law, predicted, 0.05, most_recovered=0.002)
+    gpu = CUDA.detect(state, walls, law, predicted, 0.05, most_recovered=0.002, kept=0.003)
+    cpu = detect(state, walls, law, predicted, 0.05, most_recovered=0.002, kept=0.003)
     assert {PLANE, PLANE + 1, PLANE + 2, PLANE + 3} <= set(cpu.family.tolist())
     for name in ("i", "j", "family", "radius_i", "radius_j", "lever", "mu", "mu_r", "keys"):
         np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name), err_msg=name)

@@ -170,3 +170,39 @@ def test_a_sidewall_s_friction_is_clarabel_s_and_apgd_s():
     du = np.linalg.norm(apgd.increments - clarabel.increments) / np.linalg.norm(clarabel.increments)
     net, net_ref = (program.jacobian.T @ f.ravel() for f in (apgd.forces, clarabel.forces))
     assert du <= 1e-4 and np.linalg.norm(net - net_ref) / np.linalg.norm(net_ref) <= 1e-4
+
+
+def test_an_overlap_up_to_the_kept_one_is_kept_and_not_asked_back():
+    """recovery_relaxation with kept: an overlap up to `kept` is kept as it is (g_eff = 0), a larger
+    one shrinks towards it by at most most_recovered, a gap is left alone; kept 0 is the plain
+    relaxation, bit for bit."""
+    from colsim.engine.contacts import recovery_relaxation
+
+    gap = np.array([0.01, -0.001, -0.003, -0.01])
+    np.testing.assert_array_equal(gap + recovery_relaxation(gap, 0.002, kept=0.003), [0.01, 0.0, 0.0, -0.002])
+    np.testing.assert_array_equal(recovery_relaxation(gap, 0.002, kept=0.0), np.maximum(0.0, -gap - 0.002))
+
+
+def test_a_chain_from_sidewall_to_sidewall_keeps_its_overlap_instead_of_failing():
+    """Two spheres on the floor of a slot just under two diameters wide, each touching a sidewall,
+    overlapping each other by 1e-4 of a diameter along the slot's width. Under the associated law with
+    wall friction, each sphere can leave its wall only by dilating, so the walls' constraints allow
+    no motion that parts the two: asking their overlap back leaves the step no solution (Clarabel:
+    infeasible). With the overlap kept (overlap_kept 0.005 of a diameter, a channel's collapse's), the
+    step keeps it as it is (to Clarabel's 1e-8) and the spheres stay at rest."""
+    from colsim.engine.solver_contract import SolverError
+
+    overlap = 1e-4 * 2 * RADIUS
+    width = 4 * RADIUS - overlap
+    state = ParticleState.at_rest([[1.0, -width / 2 + RADIUS, RADIUS], [1.0, width / 2 - RADIUS, RADIUS]],
+                                  [RADIUS, RADIUS])
+    walls = Walls(floor=True, planes=channel_planes(2.0, width, gate=False)[1:])
+    law = ContactLaw(mu=(0.577, 0.577, 0.577), mu_r=(0.12, 0.12, 0.12))
+    asked_back = StepSettings(dt=0.01, walls=walls, law=law, overlap_recovery=None)
+    with pytest.raises(SolverError, match="nfeasible"):
+        list(run(state, asked_back, 1, ClarabelSolver()))
+    kept = StepSettings(dt=0.01, walls=walls, law=law, overlap_recovery=None, overlap_kept=0.005)
+    last = list(run(state, kept, 3, ClarabelSolver(tolerance=1e-10)))[-1].state
+    distance = np.linalg.norm(last.position[1] - last.position[0])
+    assert 2 * RADIUS - distance == pytest.approx(overlap, abs=1e-8 * RADIUS)
+    assert np.abs(last.velocity).max() <= 1e-6 * G * 0.03

@@ -36,7 +36,7 @@ class CudaBackend(CpuBackend):
         return predicted_on_device(state, settings.dt, settings.gravity)
 
     def detect(self, state, walls, law, predicted, margin, slack=0.5, cylinder_margin=0.0, renormal=None,
-               most_recovered=np.inf):
+               most_recovered=np.inf, kept=0.0):
         """The swept pairs, their frames and, where no cylinder margin is asked for (a first attempt's),
         the floor's, the cylinder's and the planes' rows made on the device; the fixed spheres' rows and a redo's given
         pairs made on the host and joined there (:func:`colsim.engine.cuda_contacts.join_given_pairs`).
@@ -45,12 +45,12 @@ class CudaBackend(CpuBackend):
         on_device = walls if has_walls and not np.any(cylinder_margin) else None
         host_walls = Walls(floor=False, fixed=walls.fixed) if on_device else walls
         others = contact_detection.other_rows(state, host_walls, law, predicted, margin, slack, cylinder_margin,
-                                              most_recovered)
-        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law, on_device)
-        given = contact_detection.given_rows(state, law, renormal, most_recovered)
+                                              most_recovered, kept)
+        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law, on_device, kept)
+        given = contact_detection.given_rows(state, law, renormal, most_recovered, kept)
         if found is None:
             found = super().detect(state, walls, law, predicted, margin, slack, cylinder_margin, renormal,
-                                   most_recovered)
+                                   most_recovered, kept)
             if given is None:   # nothing kept on the device: no pair overlaps
                 found.largest_pair_overlap = -np.inf
             return found

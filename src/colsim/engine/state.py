@@ -299,6 +299,11 @@ class StepSettings:
     overlap_recovery: the most speed at which an overlap present at the start of a step is removed,
     as a fraction of sqrt(|g| d), d the mean diameter (:func:`recovery_speed`); None removes it
     within one step, whatever the step (a speed of overlap/dt, which grows as dt shrinks).
+    overlap_kept: an overlap present at the start of a step up to this fraction of the smallest
+    diameter is kept (it never grows) and not asked back; a larger one shrinks towards it
+    (:func:`colsim.engine.contacts.recovery_relaxation`). 0: every overlap is asked back. A channel's
+    collapse keeps half the overlap tolerance: between its sidewalls a chain of grains from wall to wall
+    may have no motion but dilating ones, and asking its overlap back leaves the step no solution.
     """
 
     dt: float
@@ -312,6 +317,7 @@ class StepSettings:
     max_redo: int = 4
     margin_growth: float = 2.0
     overlap_recovery: float | None = 0.01
+    overlap_kept: float = 0.0
 
     def __post_init__(self):
         if not (self.dt > 0 and np.isfinite(self.dt)):
@@ -322,6 +328,9 @@ class StepSettings:
             raise ValueError("overlap_tolerance must be > 0, detection_margin_fraction and detection_slack >= 0")
         if self.overlap_recovery is not None and not (self.overlap_recovery > 0 and np.isfinite(self.overlap_recovery)):
             raise ValueError(f"overlap_recovery must be a positive finite fraction or None, got {self.overlap_recovery}")
+        if not 0.0 <= self.overlap_kept < self.overlap_tolerance:
+            raise ValueError(f"overlap_kept must lie in [0, overlap_tolerance {self.overlap_tolerance}), got "
+                             f"{self.overlap_kept}")
         if self.walls.cylinder_radius is not None and self.walls.cylinder_radius <= 0:
             raise ValueError(f"cylinder radius must be positive, got {self.walls.cylinder_radius}")
 

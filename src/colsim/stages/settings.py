@@ -215,6 +215,11 @@ class TrimSettings:
             raise ValueError("a trim needs its aspect ratio (--aspect-ratio, or aspect_ratio: in the settings file)")
 
 
+#: a channel's collapse keeps the overlaps of a step's start up to this fraction of the smallest
+#: diameter, half the stepper's overlap tolerance (StepSettings.overlap_kept): between the sidewalls a
+#: chain of grains from wall to wall may have no motion but dilating ones under the walls' friction,
+#: and asking its overlap back left the first step of a slot 1.6 diameters wide with no solution
+CHANNEL_OVERLAP_KEPT = 0.005
 #: the smallest step dt/sqrt(h0/g) a collapse takes: 4e-5 of the default step, far below any use;
 #: at 1e-300 the step's masses over dt^2 overflow
 SMALLEST_SCALED_STEP = 1e-9
@@ -309,12 +314,16 @@ class CollapseSettings:
 
     def step_settings(self, h0: float, channel: Channel | None = None) -> StepSettings:
         """The engine's settings for one step of the collapse of a column of height h0: the
-        floor and no cylinder (or a channel's back wall and sidewalls, its gate removed), gravity, the
-        contact and friction laws, dt from `time_step`."""
-        planes = () if channel is None else channel_planes(channel.length, channel.width, gate=False)
-        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity),
-                            walls=Walls(floor=True, cylinder_radius=None, planes=planes),
-                            law=self.law(channel is not None), friction=self.friction())
+        floor and no cylinder (or a channel's back wall and sidewalls, its gate removed, and the
+        overlaps it keeps: CHANNEL_OVERLAP_KEPT), gravity, the contact and friction laws, dt from
+        `time_step`."""
+        if channel is None:
+            walls, kept = Walls(floor=True, cylinder_radius=None), 0.0
+        else:
+            walls = Walls(floor=True, planes=channel_planes(channel.length, channel.width, gate=False))
+            kept = CHANNEL_OVERLAP_KEPT
+        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity), walls=walls,
+                            law=self.law(channel is not None), friction=self.friction(), overlap_kept=kept)
 
     def scaled_time(self, steps: int) -> float:
         """t / sqrt(h0/g) after `steps` steps."""
