@@ -114,7 +114,8 @@ LOG_INTERVAL_S = 60.0
 
 def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
          checkpoint: str | Path | None = None, progress=None, backend: Backend = HOST) -> PackingResult:
-    """Fill a cylinder of radius settings.r0 until the settled packing is taller than
+    """Fill a cylinder of radius settings.r0 (or a channel's box: settings.footprint) until the settled
+    packing is taller than
     settings.height (length), solving each step with `solver`; `rng` places the spheres. A
     ValueError names a setting the pour cannot use, before anything is allocated (a packing
     expected to hold more than settings.max_spheres included: :func:`expected_spheres`).

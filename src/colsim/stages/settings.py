@@ -132,8 +132,8 @@ class PackSettings:
                             "collapse removes)", kind="choice", choices=GEOMETRIES, recorded_when_set=True)
     channel_length: float | None = setting(None, "a channel's box length L0 along its axis, r0's role: h0 = a L0 "
                                            "(geometry channel)", unit=LENGTH, optional=True, recorded_when_set=True)
-    channel_width: float | None = setting(None, "a channel's width W between its sidewalls, at least the largest "
-                                          "diameter (geometry channel)", unit=LENGTH, optional=True,
+    channel_width: float | None = setting(None, "a channel's width W between its sidewalls, at least 1.04 largest "
+                                          "diameters (geometry channel)", unit=LENGTH, optional=True,
                                           recorded_when_set=True)
     seed: int = setting(0, "run seed", kind="integer")
     root_seed: int = setting(2024, "study seed (the default study's); the stream is numpy "
@@ -203,6 +203,7 @@ def check_geometry(geometry: str, length, width, diameter_max: float) -> None:
         if not (value >= cell and np.isfinite(value)):
             raise ValueError(f"{name} = {value} is below {LATTICE_FACTOR:g} times the largest diameter "
                              f"{diameter_max}: the pour's lattice cell ({cell:g}) does not fit in the box")
+
 
 @dataclass(frozen=True)
 class TrimSettings:
