@@ -242,3 +242,65 @@ def test_a_redo_on_the_gpu_with_no_pair_found():
     for name in ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "radius_i", "radius_j", "lever",
                  "mu", "mu_r", "keys"):
         np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name), err_msg=name)
+
+
+def test_a_channel_s_plane_walls_on_the_gpu_are_the_cpu_s():
+    """A channel's walls (colsim.engine.state.channel_planes: back wall, sidewalls, gate) round a
+    60-sphere cloud, each plane 0.004 inside its outermost sphere (an overlap beyond the step's
+    recovery, most_recovered = 0.002, and beyond the overlap kept, 0.003, so that both parts of the
+    relaxation count, and the pairs' overlaps under 0.003 are kept): the GPU's detection lists the CPU's
+    contacts in the CPU's order, each plane's family PLANE + q and the wall's coefficients, the normals
+    and gaps to 1e-14 as the floor's (a GPU may fuse the plane's multiply-adds); the overlap check
+    finds the CPU's largest plane overlap (measured on the host: the same number)."""
+    from colsim.engine.contacts import detect, overlaps
+    from colsim.engine.state import PLANE, ContactLaw, Walls, channel_planes
+
+    state = starting_cloud(60, 1.0, seed=3)
+    state.position[:, 2] *= 0.45
+    state.position[:, 2] -= (state.position[:, 2] - state.radius).min() - 0.01
+    state.position[:, 0] -= (state.position[:, 0] - state.radius).min() + 0.004   # the back wall x = 0
+    length = float((state.position[:, 0] + state.radius).max()) - 0.004
+    width = 2.0 * float((np.abs(state.position[:, 1]) + state.radius).max()) - 0.008
+    walls = Walls(floor=True, planes=channel_planes(length, width, gate=True))
+    law = ContactLaw(mu=(0.5, 0.6, 0.3), mu_r=(0.1, 0.12, 0.05))
+    predicted = _moving(state, 0.02, seed=8)
+    gpu = CUDA.detect(state, walls, law, predicted, 0.05, most_recovered=0.002, kept=0.003)
+    cpu = detect(state, walls, law, predicted, 0.05, most_recovered=0.002, kept=0.003)
+    assert {PLANE, PLANE + 1, PLANE + 2, PLANE + 3} <= set(cpu.family.tolist())
+    for name in ("i", "j", "family", "radius_i", "radius_j", "lever", "mu", "mu_r", "keys"):
+        np.testing.assert_array_equal(getattr(gpu, name), getattr(cpu, name), err_msg=name)
+    for name in ("normal", "tangent1", "tangent2", "gap"):
+        np.testing.assert_allclose(getattr(gpu, name), getattr(cpu, name), rtol=0, atol=1e-14, err_msg=name)
+    gpu_overlap, cpu_overlap = CUDA.overlaps(state, walls, 1.0, detected=gpu), overlaps(state, walls, 1.0)
+    assert gpu_overlap.largest_plane == cpu_overlap.largest_plane == pytest.approx(0.004, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_a_channel_s_steps_on_the_gpu_are_the_cpu_s():
+    """Three steps of a box of 12 spheres sliding along a channel between its sidewalls (the gate
+    gone, the wall friction 0.3, a channel collapse's overlap kept), APGD on the GPU's back-end
+    (numba's simulator, about a minute) against the CPU's: the same iterations a step and positions
+    within 1e-9 of a diameter (the GPU's sums differ from the CPU's by rounding only)."""
+    from colsim.engine.state import ContactLaw, StepSettings, Walls, channel_planes
+    from colsim.engine.stepper import run
+    from colsim.solvers.registry import make_solver
+
+    radius = 0.2
+    grid = np.stack(np.meshgrid(np.arange(3), np.arange(2), np.arange(2), indexing="ij"), -1).reshape(-1, 3)
+    # two rows, each against a sidewall, 0.08 apart: room for the associated law's dilation (a chain
+    # fitting wall to wall exactly could not slide at all)
+    width = 4.4 * radius
+    position = (grid + 0.5) * 2 * radius - [0.0, 2 * radius, 0.0]
+    position[:, 1] = np.sign(position[:, 1]) * (width / 2 - radius)
+    moving = np.tile([0.5, 0.0, 0.0], (len(grid), 1))   # along the channel: sliding on its floor and sidewalls
+    state = ParticleState(position, moving, np.zeros_like(position), np.full(len(grid), radius))
+    walls = Walls(floor=True, planes=channel_planes(6 * radius, width, gate=False))
+    settings = StepSettings(dt=0.01, walls=walls, law=ContactLaw(mu=(0.577, 0.577, 0.3), mu_r=(0.12, 0.12, 0.12)),
+                            overlap_kept=0.005)
+    runs = {device: list(run(state, settings, 3, make_solver("apgd", backend=backend), backend=backend))
+            for device, backend in BACKENDS.items()}
+    cpu, gpu = runs["cpu"], runs["cuda"]
+    assert cpu[-1].diagnostics.n_contacts == gpu[-1].diagnostics.n_contacts > 12
+    assert [r.diagnostics.solver_iterations for r in gpu] == [r.diagnostics.solver_iterations for r in cpu]
+    assert np.abs(gpu[-1].state.position - cpu[-1].state.position).max() <= 1e-9 * 2 * radius
+    assert np.abs(cpu[-1].state.position - state.position).max() > 1e-3   # it moved: real steps

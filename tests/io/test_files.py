@@ -92,3 +92,35 @@ def test_a_full_disk_names_the_file_it_could_not_write(tmp_path):
         write_all({output: full})
     assert caught.value.filename == str(output) and caught.value.errno == errno.ENOSPC
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_channel_s_paraview_series_shows_its_walls(tmp_path):
+    """A channel's run (geometry channel, L0 = 1, W = 0.6, h0 = 0.8) exports its floor, back wall and
+    sidewalls as four quadrilaterals, as far as its farthest grain (x + R = 2.2 in the second frame),
+    part 1 of each time step; meshio (an independent reader) reads them back on their planes. A
+    cylinder's run has none."""
+    import meshio
+
+    from colsim.io.vtk import export_trajectory
+
+    position = np.array([[[0.5, 0.0, 0.2]], [[2.0, 0.1, 0.2]]])
+    attrs = {"geometry": "channel", "channel_length": 1.0, "channel_width": 0.6, "h0": 0.8}
+    trajectory = xr.Dataset({"position": (("time", "particle", "xyz"), position),
+                             "velocity": (("time", "particle", "xyz"), np.zeros_like(position)),
+                             "angular_velocity": (("time", "particle", "xyz"), np.zeros_like(position)),
+                             "radius": ("particle", [0.2]), "initial_height": ("particle", [0.2]),
+                             "scaled_time": ("time", [0.0, 1.0])}, coords={"time": [0.0, 0.3]}, attrs=attrs)
+    pvd = export_trajectory(trajectory, tmp_path).read_text()
+    assert pvd.count('part="1" file="collapse_walls.vtu"') == 2
+    walls = meshio.read(tmp_path / "collapse_walls.vtu")
+    quads = walls.points[walls.cells_dict["quad"]]
+    assert quads.shape == (4, 4, 3)
+    np.testing.assert_array_equal(quads[0, :, 2], 0.0)                  # the floor
+    np.testing.assert_array_equal(quads[1, :, 0], 0.0)                  # the back wall
+    np.testing.assert_array_equal(quads[2:, :, 1], [[-0.3] * 4, [0.3] * 4])   # the sidewalls
+    assert walls.points[:, 0].max() == pytest.approx(2.2) and walls.points[:, 2].max() == 0.8
+    cylinder = tmp_path / "cylinder"
+    cylinder.mkdir()
+    trajectory.attrs = {}
+    assert 'part="1"' not in export_trajectory(trajectory, cylinder).read_text()
+    assert not (cylinder / "collapse_walls.vtu").exists()

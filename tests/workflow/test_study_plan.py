@@ -131,3 +131,35 @@ def test_a_convergence_packing_is_just_tall_enough():
         str(Path(runs["end_time"][0]).with_name("collapse.nc"))))["steps"] == 150
     assert StudyPlan(study_config()).convergence_runs("analysis.nc") == {}
     assert len(plan.convergence_outputs()) == 5 and StudyPlan(study_config()).convergence_outputs() == []
+
+
+def test_the_default_cylinder_study_keeps_its_keys():
+    """config.yaml's own study (the cylinder, no channel setting) names the packings and runs it
+    named before the channel geometry existed: its keys, and so its folders and files, are unchanged."""
+    config = yaml.safe_load((ROOT / "config.yaml").read_text())
+    validate(config, str(SCHEMA))
+    plan = StudyPlan(config)
+    paths = plan.study_runs("collapse.nc")
+    assert len(paths) == 48
+    assert paths[0] == "results/r0_3/seed_1/pack_3d781f786e/a_0.5/mu_r_0/run_f56bf2a142/collapse.nc"
+    assert paths[-1] == "results/r0_3/seed_2/pack_2d924268af/a_5/mu_r_0.2/run_01bd302409/collapse.nc"
+    assert sorted(plan.packings) == ["2d924268af", "3d781f786e"]
+    assert sorted(plan.runs) == ["01bd302409", "078ce84642", "404261461e", "f56bf2a142"]
+
+
+def test_a_channel_study_names_its_length_where_a_cylinder_s_names_r0():
+    """geometry channel: a packing's settings hold channel_length L0 (the folder's r0_ names it) and
+    channel_width, not the cylinder's r0; its height is the largest a times L0; a run's hold wall_mu;
+    the folder gives L0 back, and a job's size is the box's (L0 W), not a cylinder's (pi L0^2)."""
+    from colsim.stages.pour_geometry import Channel
+
+    plan = StudyPlan(study_config({"geometry": "channel", "channel_length": 2.0, "channel_width": 0.8,
+                                   "wall_mu": 0.3}))
+    path = plan.study_runs("collapse.nc")[0]
+    assert path.startswith("results/r0_2/seed_1/pack_")
+    wildcards = wildcards_of(path)
+    packing = plan.packing_of(wildcards)
+    assert "r0" not in packing and (packing["geometry"], packing["channel_length"], packing["channel_width"],
+                                    packing["height"]) == ("channel", 2.0, 0.8, 2.0)
+    assert plan.run_of(wildcards)["wall_mu"] == 0.3
+    assert plan.footprint(2.0) == Channel(2.0, 0.8) and StudyPlan(study_config()).footprint(2.0) == 2.0

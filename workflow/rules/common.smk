@@ -96,7 +96,8 @@ DIAMETERS = (config["diameter_min"], config["diameter_max"])
 
 def column_spheres(wildcards):
     """About how many spheres a column holds (job_resources.py)."""
-    return job_resources.spheres_of(float(wildcards.r0), column_of(wildcards) * float(wildcards.r0), DIAMETERS)
+    return job_resources.spheres_of(PLAN.footprint(float(wildcards.r0)), column_of(wildcards) * float(wildcards.r0),
+                                    DIAMETERS)
 
 
 def collapse_runtime(wildcards):
@@ -108,7 +109,7 @@ def collapse_runtime(wildcards):
 def pack_spheres(wildcards):
     """About how many spheres a packing's pour holds (job_resources.py)."""
     packing = packing_of(wildcards)
-    return job_resources.spheres_of(packing["r0"], packing["height"], DIAMETERS)
+    return job_resources.spheres_of(PLAN.footprint(float(wildcards.r0)), packing["height"], DIAMETERS)
 
 
 def pack_gpus(wildcards):

@@ -23,7 +23,7 @@ from ..solvers.registry import make_solver
 from ..stages.devices import device_for
 from ..stages.collapse import collapse as run_collapse
 from ..stages import pack as packing
-from ..stages.pour_geometry import expected_spheres, solid_fraction
+from ..stages.pour_geometry import Channel, expected_spheres, footprint_of, geometry_attributes, solid_fraction
 from ..stages.settings import (AnalysisSettings, CollapseSettings, PackSettings, SolverSettings, TrimSettings,
                                by_name, declared, external_name)
 from ..stages.trim import kept_by_trim
@@ -171,7 +171,7 @@ def _pack_solver(solver: SolverSettings, backend=HOST):
 
 def pack(args):
     settings, solving = stage_settings(args, PackSettings, SolverSettings)
-    spheres = expected_spheres(settings.r0, settings.height, (settings.diameter_min, settings.diameter_max))
+    spheres = expected_spheres(settings.footprint, settings.height, (settings.diameter_min, settings.diameter_max))
     solving = _what_runs(solving, spheres)
     rng = np.random.default_rng([settings.seed, settings.root_seed])
     use_threads(solving.threads)
@@ -182,7 +182,8 @@ def pack(args):
     attrs = io.global_attributes(io.STATE_KIND, "colsim packing",
                                  {**_recorded(args, settings, solving), "solver_settings": solver.describe()},
                                  settings.seed)
-    attrs.update({"r0": settings.r0, "packing_height": result.height, "solid_fraction": result.solid_fraction,
+    attrs.update({"r0": settings.length_scale, **geometry_attributes(settings.footprint),
+                  "packing_height": result.height, "solid_fraction": result.solid_fraction,
                   "steps": result.steps, "wall_time": result.wall_time, "cpu_time": result.cpu_time,
                   "gravity": settings.gravity,
                   "clouds": result.clouds, "most_fixed": result.most_fixed, "threading_layer": threading_layer(),
@@ -234,8 +235,10 @@ def trim(args):
     attrs = io.global_attributes(io.STATE_KIND, "colsim column before release",
                                  {**_recorded(args, settings), "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
-    fraction = solid_fraction(column, r0, h0)
-    attrs.update({"r0": r0, "h0": h0, "aspect_ratio": settings.aspect_ratio, "solid_fraction": fraction,
+    footprint = footprint_of(source.attrs)
+    fraction = solid_fraction(column, footprint, h0)
+    attrs.update({"r0": r0, **geometry_attributes(footprint), "h0": h0, "aspect_ratio": settings.aspect_ratio,
+                  "solid_fraction": fraction,
                   "gravity": float(source.attrs.get("gravity", 9.81)),
                   "packing_wall_time": float(source.attrs.get("wall_time", np.nan)),
                   "packing_cpu_time": float(source.attrs.get("cpu_time", np.nan))})
@@ -251,6 +254,11 @@ def collapse(args):
     if "h0" not in source.attrs:
         raise io.InputError(f"input file {args.input} is a packing, not a trimmed column (run colsim trim)")
     h0, r0 = float(source.attrs["h0"]), float(source.attrs["r0"])
+    footprint = footprint_of(source.attrs)
+    channel = footprint if isinstance(footprint, Channel) else None
+    if channel is None and settings.wall_mu is not None:
+        raise io.InputError(f"--wall-mu is the friction of a channel's walls, but {args.input} is a cylinder's column"
+                            " (leave wall_mu out)")
     settings = replace(settings, gravity=float(source.attrs.get("gravity", 9.81)))
     solving = _what_runs(solving, column.n)
     use_threads(solving.threads)
@@ -262,7 +270,7 @@ def collapse(args):
     solver = _solver(solving, settings.scaled_step, backend)
     try:
         run = run_collapse(column, h0, settings, solver, io.contact_forces_of(source),
-                           checkpoint=checkpoint, progress=progress, backend=backend)
+                           checkpoint=checkpoint, progress=progress, backend=backend, channel=channel)
     finally:
         progress.close()
     # the back-end's settings in full (defaults included), so that a summary never mixes runs
@@ -271,6 +279,8 @@ def collapse(args):
                                  {**_recorded(args, settings, solving), "solver_settings": solver.describe(),
                                   "input_config": io.config_of(source)},
                                  source.attrs.get("seed"))
+    if channel is not None:   # the walls of a channel's run; a cylinder's file keeps its attributes
+        attrs.update({**geometry_attributes(channel), "wall_mu": settings.law(channel=True).mu[2]})
     attrs.update({"column_solid_fraction": float(source.attrs["solid_fraction"]),
                   "n_particles": column.n, "resumed_from_step": run.resumed_from, "threading_layer": threading_layer(),
                   "colsim_commits": "; ".join(run.commits)})

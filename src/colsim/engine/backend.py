@@ -41,7 +41,8 @@ class Backend(Protocol):
         """(n, 3) the free-flight displacement v dt + g dt^2 of each particle over one step (length)."""
 
     def detect(self, state: ParticleState, walls: Walls, law: ContactLaw, predicted, margin: float, slack: float = 0.5,
-               cylinder_margin=0.0, renormal=None, most_recovered: float = np.inf) -> contact_detection.Contacts:
+               cylinder_margin=0.0, renormal=None, most_recovered: float = np.inf,
+               kept: float = 0.0) -> contact_detection.Contacts:
         """The potential contacts (:func:`colsim.engine.contacts.detect`, its arguments)."""
 
     def assemble(self, state: ParticleState, found: contact_detection.Contacts, dt: float, gravity) -> ConeProgram:
@@ -94,9 +95,9 @@ class CpuBackend:
         return predicted_displacement(state, settings)
 
     def detect(self, state, walls, law, predicted, margin, slack=0.5, cylinder_margin=0.0, renormal=None,
-               most_recovered=np.inf):
+               most_recovered=np.inf, kept=0.0):
         return contact_detection.detect(state, walls, law, predicted, margin, slack, cylinder_margin, renormal,
-                                        most_recovered)
+                                        most_recovered, kept)
 
     def assemble(self, state, found, dt, gravity):
         return assemble(state, found, dt, gravity)

@@ -1,4 +1,4 @@
-"""Contact detection: potential contacts between spheres, the floor, the cylinder and fixed spheres.
+"""Contact detection: potential contacts between spheres, the floor, the cylinder, plane walls and fixed spheres.
 
 A potential contact k joins particle i to body j (another particle, a wall, j = -1, or fixed
 sphere k, j = -2 - k: :class:`colsim.engine.state.FixedSpheres`). Its unit
@@ -17,8 +17,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .compiled import numba, prange
-from .state import (CYLINDER, FLOOR, PARTICLE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code, pair_keys,
-                    rolling_lever)
+from .state import (CYLINDER, FLOOR, PARTICLE, PLANE, ContactLaw, FixedSpheres, ParticleState, Walls, fixed_code,
+                    law_family, pair_keys, rolling_lever)
 
 WALL = -1  # index of the other body for a particle-wall contact
 
@@ -28,7 +28,7 @@ class Contacts:
     """Potential contacts, m of them.
 
     i, j: (m,) int, particle indices (j = -1 for a wall, -2 - k for fixed sphere k)
-    family: (m,) int, PARTICLE, FLOOR or CYLINDER
+    family: (m,) int, PARTICLE, FLOOR, CYLINDER or PLANE + p (plane wall p)
     normal, tangent1, tangent2: (m, 3) float, unit vectors, normal from i to j
     gap: (m,) float, length, surface distance at the start of the step
     radius_i, radius_j: (m,) float, length (radius_j = 0 for walls, the fixed sphere's radius)
@@ -205,35 +205,45 @@ lever_of = numba.njit(cache=True, inline="always")(lever_of)
 _levers = numba.njit(cache=True, parallel=True)(_levers)
 
 
-def recovery_relaxation(true_gap: np.ndarray, most_recovered: float) -> np.ndarray:
+def recovery_relaxation(true_gap: np.ndarray, most_recovered: float, kept: float = 0.0) -> np.ndarray:
     """(m,) length added to each constraint's gap so that a step removes at most `most_recovered`
-    (length) of an overlap that is already there: max(0, -true_gap - most_recovered).
+    (length) of an overlap that is already there: max(0, -true_gap - most_recovered), and with
+    `kept` (length) > 0 none of an overlap up to `kept`: max(that, min(-true_gap, kept)).
 
     An overlap g < 0 at the start of a step is otherwise removed within the step, as a velocity
     -g/dt: a kinetic energy that grows like 1/dt^2 as the step shrinks. With the relaxation the
     constraint asks for g_eff + du_n >= ..., g_eff = max(g, -most_recovered): an overlap never grows
-    and shrinks by at least most_recovered a step, at a speed that does not depend on dt."""
-    return np.maximum(0.0, -np.asarray(true_gap) - most_recovered)
+    and shrinks by at least most_recovered a step, at a speed that does not depend on dt.
+
+    kept: an overlap up to it is kept as it is (it never grows) and not asked back; a larger one
+    shrinks towards it by at most most_recovered a step. Between rigid walls a chain of grains from
+    wall to wall may have no motion but dilating ones under the associated law's friction, so that
+    asking an overlap back leaves the step no solution (a one-grain slot's first step did)."""
+    relaxation = np.maximum(0.0, -np.asarray(true_gap) - most_recovered)
+    if kept > 0:
+        relaxation = np.maximum(relaxation, np.minimum(-np.asarray(true_gap), kept))
+    return relaxation
 
 
 def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0,
-                   most_recovered: float = np.inf):
+                   most_recovered: float = np.inf, kept: float = 0.0):
     """(i, family, normal (m,3), gap) for particle-wall contacts with gap below reach (n,) (length).
 
     cylinder_margin: (n,) or scalar length subtracted from the cylinder gaps (see :func:`detect`).
-    most_recovered: the most of an existing overlap that a step removes (:func:`recovery_relaxation`).
+    most_recovered, kept: the most of an existing overlap that a step removes, and the overlap it
+    keeps (:func:`recovery_relaxation`).
     """
     parts = []
     if walls.floor:
         gap = state.position[:, 2] - state.radius
         idx = np.flatnonzero(gap < reach)
         normal = np.tile([0.0, 0.0, -1.0], (len(idx), 1))
-        gap = gap + recovery_relaxation(gap, most_recovered)
+        gap = gap + recovery_relaxation(gap, most_recovered, kept)
         parts.append((idx, np.full(len(idx), FLOOR), normal, gap[idx]))
     if walls.cylinder_radius is not None:
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         true_gap = walls.cylinder_radius - rho - state.radius
-        gap = true_gap + recovery_relaxation(true_gap, most_recovered) - cylinder_margin
+        gap = true_gap + recovery_relaxation(true_gap, most_recovered, kept) - cylinder_margin
         idx = np.flatnonzero(gap < reach)
         normal = np.zeros((len(idx), 3))
         on_axis = rho[idx] < 1e-12
@@ -241,9 +251,24 @@ def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylind
         normal[:, 0] = np.where(on_axis, 1.0, state.position[idx, 0] / safe_rho)
         normal[:, 1] = np.where(on_axis, 0.0, state.position[idx, 1] / safe_rho)
         parts.append((idx, np.full(len(idx), CYLINDER), normal, gap[idx]))
+    for p, plane in enumerate(walls.plane_array()):
+        true_gap = plane_distance(state.position, plane) - state.radius
+        gap = true_gap + recovery_relaxation(true_gap, most_recovered, kept)
+        idx = np.flatnonzero(gap < reach)
+        parts.append((idx, np.full(len(idx), PLANE + p), np.tile(-plane[:3], (len(idx), 1)), gap[idx]))
     if not parts:
         return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros(0)
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
+def plane_distance(position: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """(n,) the signed distance n . x - offset (length) of each centre of `position` (n, 3) from a plane
+    wall (n_x, n_y, n_z, offset) (:class:`colsim.engine.state.Walls`), the products summed in order x,
+    y, z as the GPU's kernels sum them."""
+    distance = position[:, 0] * plane[0]
+    distance += position[:, 1] * plane[1]
+    distance += position[:, 2] * plane[2]
+    return distance - plane[3]
 
 
 def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndarray):
@@ -262,7 +287,7 @@ def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndar
 
 
 def pair_frames(state: ParticleState, i: np.ndarray, j: np.ndarray, normal: np.ndarray | None = None,
-                most_recovered: float = np.inf):
+                most_recovered: float = np.inf, kept: float = 0.0):
     """(normal, tangent1, tangent2 (m, 3), gap (m,)) of particle pairs (i, j): the unit normal from
     i to j (or the `normal` given), the tangents of :func:`tangent_basis` and the gap along the
     normal (length), relaxed by :func:`recovery_relaxation` of the centre-distance gap."""
@@ -272,14 +297,14 @@ def pair_frames(state: ParticleState, i: np.ndarray, j: np.ndarray, normal: np.n
         normal = d / distance[:, None]
     gap = np.einsum("ij,ij->i", normal, d) - state.radius[i] - state.radius[j]
     true_gap = distance - state.radius[i] - state.radius[j]
-    gap += recovery_relaxation(true_gap, most_recovered)
+    gap += recovery_relaxation(true_gap, most_recovered, kept)
     t1, t2 = tangent_basis(np.reshape(normal, (-1, 3)))
     return normal, t1, t2, gap
 
 
 def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.ndarray,
            margin: float, slack: float = 0.5, cylinder_margin=0.0, renormal=None,
-           most_recovered: float = np.inf) -> Contacts:
+           most_recovered: float = np.inf, kept: float = 0.0) -> Contacts:
     """Potential contacts of a step in which the particles are predicted to move predicted (n, 3).
 
     margin (length): gap allowed beyond the predicted motion; slack: fraction of each pair's (or
@@ -293,14 +318,15 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
     most_recovered (length): the most of an overlap present at the start that the step removes; the
     gaps are relaxed by :func:`recovery_relaxation` of the true (centre-distance) gaps, so the
     linearisation and the cylinder margin keep their effect. inf: the whole overlap (no cap).
+    kept (length): an overlap up to it is kept and not asked back (:func:`recovery_relaxation`).
     The swept pairs come from a k-d tree (:func:`swept_pairs`) and their frames from
     :func:`pair_frames`; a back-end may find them elsewhere (:mod:`colsim.engine.backend`).
     """
-    others = other_rows(state, walls, law, predicted, margin, slack, cylinder_margin, most_recovered)
-    given = given_rows(state, law, renormal, most_recovered)
+    others = other_rows(state, walls, law, predicted, margin, slack, cylinder_margin, most_recovered, kept)
+    given = given_rows(state, law, renormal, most_recovered, kept)
     predicted = np.asarray(predicted)   # a predicted motion made elsewhere: its host copy
     pi, pj = swept_pairs(state, predicted, margin, slack)
-    pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered))
+    pairs = pair_rows(state, law, pi, pj, pair_frames(state, pi, pj, None, most_recovered, kept))
     parts = [pairs, others]
     if given is not None:   # these pairs, with the normals given, replace those found and go last
         keep = ~np.isin(pi.astype(np.int64) * state.n + pj, given["i"].astype(np.int64) * state.n + given["j"])
@@ -313,22 +339,23 @@ def detect(state: ParticleState, walls: Walls, law: ContactLaw, predicted: np.nd
 
 
 def other_rows(state: ParticleState, walls: Walls, law: ContactLaw, predicted, margin: float, slack: float,
-               cylinder_margin, most_recovered: float) -> dict:
+               cylinder_margin, most_recovered: float, kept: float = 0.0) -> dict:
     """The contacts of :func:`detect` with `walls`' walls and fixed spheres, by name (:func:`_other_contacts`)."""
     fixed = walls.fixed is not None and walls.fixed.n > 0
-    if walls.floor or walls.cylinder_radius is not None or fixed:
+    if walls.floor or walls.cylinder_radius is not None or walls.planes or fixed:
         reach = margin + (1.0 + slack) * row_lengths(np.asarray(predicted))
     else:
         reach = np.zeros(state.n)   # no wall: none asked
-    return _other_contacts(state, walls, law, reach, cylinder_margin, most_recovered)
+    return _other_contacts(state, walls, law, reach, cylinder_margin, most_recovered, kept)
 
 
-def given_rows(state: ParticleState, law: ContactLaw, renormal, most_recovered: float) -> dict | None:
+def given_rows(state: ParticleState, law: ContactLaw, renormal, most_recovered: float,
+               kept: float = 0.0) -> dict | None:
     """The rows of :func:`detect`'s pairs with given normals (`renormal`: (i, j, normal), or None)."""
     if renormal is None:
         return None
     return pair_rows(state, law, renormal[0], renormal[1],
-                     pair_frames(state, renormal[0], renormal[1], renormal[2], most_recovered))
+                     pair_frames(state, renormal[0], renormal[1], renormal[2], most_recovered, kept))
 
 
 def pair_rows(state: ParticleState, law: ContactLaw, i: np.ndarray, j: np.ndarray, frames) -> dict:
@@ -349,11 +376,11 @@ DEVICE_ARRAYS = ("i", "j", "family", "normal", "tangent1", "tangent2", "gap", "r
 
 
 def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: np.ndarray, cylinder_margin,
-                    most_recovered: float) -> dict:
-    """The contacts with the floor, the cylinder and the fixed spheres (see :func:`detect`), by name:
+                    most_recovered: float, kept: float = 0.0) -> dict:
+    """The contacts with the floor, the cylinder, the planes and the fixed spheres (see :func:`detect`), by name:
     i, j, family, normal, tangent1, tangent2, gap, radius_i, radius_j, mu, mu_r (the lever is made
     with the pairs' one)."""
-    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered)
+    wi, wfamily, wnormal, wgap = _wall_contacts(state, walls, reach, cylinder_margin, most_recovered, kept)
     fi, fk, fnormal, fgap = fixed_pairs(state, walls.fixed, reach)
     normal = np.concatenate([wnormal, fnormal]).reshape(-1, 3)
     tangent1, tangent2 = tangent_basis(normal)
@@ -361,10 +388,10 @@ def _other_contacts(state: ParticleState, walls: Walls, law: ContactLaw, reach: 
     i = np.concatenate([wi, fi]).astype(np.int64)
     return {"i": i, "j": np.concatenate([np.full(len(wi), WALL), fixed_code(fk)]).astype(np.int64),
             "family": family, "normal": normal, "tangent1": tangent1, "tangent2": tangent2,
-            "gap": np.concatenate([wgap, fgap + recovery_relaxation(fgap, most_recovered)]),
+            "gap": np.concatenate([wgap, fgap + recovery_relaxation(fgap, most_recovered, kept)]),
             "radius_i": state.radius[i],
             "radius_j": np.concatenate([np.zeros(len(wi)), walls.fixed.radius[fk] if len(fk) else np.zeros(0)]),
-            "mu": np.asarray(law.mu)[family], "mu_r": np.asarray(law.mu_r)[family]}
+            "mu": np.asarray(law.mu)[law_family(family)], "mu_r": np.asarray(law.mu_r)[law_family(family)]}
 
 
 @dataclass
@@ -372,8 +399,8 @@ class Overlaps:
     """Overlaps (length, >= 0) after a step.
 
     pairs: (i, j, normal (k, 3)) particle pairs that overlap by more than `tolerance`
-    largest_pair, largest_floor, largest_fixed: largest particle-particle, particle-floor and
-    particle-fixed sphere overlap
+    largest_pair, largest_floor, largest_fixed, largest_plane: largest particle-particle,
+    particle-floor, particle-fixed sphere and particle-plane wall overlap
     cylinder: (n,) overlap of each particle with the cylinder, or None where only the largest was
     measured (`largest_cylinder`: a state on the device whose overlaps are all within the tolerance)
     """
@@ -384,11 +411,12 @@ class Overlaps:
     cylinder: np.ndarray | None
     largest_fixed: float = 0.0
     largest_cylinder: float | None = None
+    largest_plane: float = 0.0
 
     @property
     def largest(self) -> float:
         cylinder = float(self.cylinder.max(initial=0.0)) if self.cylinder is not None else self.largest_cylinder
-        return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder)
+        return max(self.largest_pair, self.largest_floor, self.largest_fixed, cylinder, self.largest_plane)
 
 
 def overlaps(state: ParticleState, walls: Walls, tolerance: float = 0.0,
@@ -415,7 +443,7 @@ def detected_overlaps(detected: Contacts, state: ParticleState, tolerance: float
 
 def wall_overlaps(state: ParticleState, walls: Walls, largest_pair: float, pairs: tuple) -> Overlaps:
     """The :class:`Overlaps` of `state` with its particle pairs' (largest_pair, pairs) given: the
-    floor's, each particle's with the cylinder and the fixed spheres' measured here."""
+    floor's, each particle's with the cylinder, the planes' and the fixed spheres' measured here."""
     largest_floor = 0.0
     if walls.floor and state.n:
         largest_floor = max(0.0, float(-(state.position[:, 2] - state.radius).min()))
@@ -424,7 +452,17 @@ def wall_overlaps(state: ParticleState, walls: Walls, largest_pair: float, pairs
         rho = np.hypot(state.position[:, 0], state.position[:, 1])
         cylinder = np.maximum(rho + state.radius - walls.cylinder_radius, 0.0)
     _, _, _, fixed_gap = fixed_pairs(state, walls.fixed, np.zeros(state.n))
-    return Overlaps(pairs, max(0.0, largest_pair), largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))))
+    return Overlaps(pairs, max(0.0, largest_pair), largest_floor, cylinder, max(0.0, float(-fixed_gap.min(initial=0.0))),
+                    largest_plane=largest_plane_overlap(state, walls))
+
+
+def largest_plane_overlap(state: ParticleState, walls: Walls) -> float:
+    """The largest overlap R_i - (n . x_i - offset) (length, >= 0) of `state` with `walls`' planes."""
+    largest = 0.0
+    for plane in walls.plane_array():
+        if state.n:
+            largest = max(largest, float(np.max(state.radius - plane_distance(state.position, plane))))
+    return largest
 
 
 def pair_overlaps(state: ParticleState, pi: np.ndarray, pj: np.ndarray, d: np.ndarray, tolerance: float) -> tuple:

@@ -36,21 +36,21 @@ class CudaBackend(CpuBackend):
         return predicted_on_device(state, settings.dt, settings.gravity)
 
     def detect(self, state, walls, law, predicted, margin, slack=0.5, cylinder_margin=0.0, renormal=None,
-               most_recovered=np.inf):
+               most_recovered=np.inf, kept=0.0):
         """The swept pairs, their frames and, where no cylinder margin is asked for (a first attempt's),
-        the floor's and the cylinder's rows made on the device; the fixed spheres' rows and a redo's given
+        the floor's, the cylinder's and the planes' rows made on the device; the fixed spheres' rows and a redo's given
         pairs made on the host and joined there (:func:`colsim.engine.cuda_contacts.join_given_pairs`).
         Fewer than two particles, or no contact: the host's detection."""
-        has_walls = walls.floor or walls.cylinder_radius is not None
+        has_walls = walls.floor or walls.cylinder_radius is not None or bool(walls.planes)
         on_device = walls if has_walls and not np.any(cylinder_margin) else None
         host_walls = Walls(floor=False, fixed=walls.fixed) if on_device else walls
         others = contact_detection.other_rows(state, host_walls, law, predicted, margin, slack, cylinder_margin,
-                                              most_recovered)
-        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law, on_device)
-        given = contact_detection.given_rows(state, law, renormal, most_recovered)
+                                              most_recovered, kept)
+        found = swept_contacts(state, predicted, margin, slack, most_recovered, others, law, on_device, kept)
+        given = contact_detection.given_rows(state, law, renormal, most_recovered, kept)
         if found is None:
             found = super().detect(state, walls, law, predicted, margin, slack, cylinder_margin, renormal,
-                                   most_recovered)
+                                   most_recovered, kept)
             if given is None:   # nothing kept on the device: no pair overlaps
                 found.largest_pair_overlap = -np.inf
             return found
@@ -80,14 +80,15 @@ class CudaBackend(CpuBackend):
         """The pairs' overlaps from `detected`, or the GPU's pairs at rest with no margin; a state made
         on the device has the floor's and the cylinder's largest overlaps measured there, and only
         where an overlap exceeds the tolerance (a redo, which needs each particle's) are its positions
-        copied to the host and measured there."""
+        copied to the host and measured there; with plane walls (a channel) or fixed spheres they are
+        measured on the host."""
         if detected is not None:
             largest_pair, pairs = contact_detection.detected_overlaps(detected, state, tolerance)
         else:
             pi, pj = swept_pairs_on_device(state, np.zeros_like(state.position), 0.0, 0.0)
             largest_pair, pairs = contact_detection.pair_overlaps(state, pi, pj, state.position[pj] - state.position[pi],
                                                                   tolerance)
-        extents = measured_on_device(state) if walls.fixed is None or walls.fixed.n == 0 else None
+        extents = measured_on_device(state) if (walls.fixed is None or walls.fixed.n == 0) and not walls.planes else None
         if extents is not None:
             largest_floor = max(0.0, extents[2]) if walls.floor else 0.0
             largest_cylinder = (max(0.0, extents[3] - walls.cylinder_radius) if walls.cylinder_radius is not None

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close
-from .state import CYLINDER, FLOOR, PARTICLE, pair_key
+from .state import CYLINDER, FLOOR, PARTICLE, PLANE, pair_key
 from .cuda_launch import launch
 from .cuda_state import (DeviceParticleArray, axis_distance, midpoints_on_device, particle_array_on_device,
                          state_array_on_device)
@@ -167,14 +167,15 @@ class ContactRows:
 
 
 def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, most_recovered: float,
-                   others: dict, law, walls=None) -> DeviceContacts | None:
+                   others: dict, law, walls=None, kept: float = 0.0) -> DeviceContacts | None:
     """The contacts of :func:`colsim.engine.contacts.detect`'s first attempt, made on the GPU
     (:class:`DeviceContacts`), or None for fewer than two particles or no contacts (detect then makes
     them on the host).
 
     The particle pairs are :func:`swept_pairs_on_device`'s. Each gets the unit normal from i to j,
     the tangents of :func:`colsim.engine.contacts.tangent_basis` and the gap along the normal, relaxed
-    by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none), in
+    by :func:`colsim.engine.contacts.recovery_relaxation` with most_recovered (length; inf: none) and
+    kept (length), in
     the CPU's arithmetic (to rounding: a GPU fuses some multiply-adds), and its bodies, family,
     radii and coefficients (from `law`, a ContactLaw).
 
@@ -191,7 +192,7 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     if state.n < 2:
         return None
     found = _SweptPairs(state, predicted, margin, slack)
-    on_walls = _WallContacts(found, margin, slack, most_recovered, walls) if walls is not None else None
+    on_walls = _WallContacts(found, margin, slack, most_recovered, walls, kept) if walls is not None else None
     m, made = found.m, on_walls.count if on_walls is not None else 0
     total = m + made + len(others["i"])
     if total == 0:   # no zero-length arrays on the device
@@ -203,7 +204,8 @@ def swept_contacts(state, predicted: np.ndarray, margin: float, slack: float, mo
     blocks = blocks_for(state.n)
     largest = cuda.device_array(blocks, dtype=np.float64)   # each block's largest pair overlap
     launch(_frames_kernel, blocks, THREADS, found.position, found.radius, found.offsets, found.partners,
-           float(most_recovered), rows.frames[0], rows.numbers[GAP], rows.frames[1], rows.frames[2], largest)
+           float(most_recovered), float(kept), rows.frames[0], rows.numbers[GAP], rows.frames[1], rows.frames[2],
+           largest)
     mu, mu_r = (float(np.asarray(values)[PARTICLE]) for values in (law.mu, law.mu_r))
     launch(_pair_rows_kernel, blocks, THREADS, found.offsets, found.partners, found.radius, mu, mu_r, rows.bodies,
            rows.numbers)
@@ -366,9 +368,10 @@ class _SweptPairs:
 
 
 @cuda.jit
-def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2, largest):
+def _frames_kernel(position, radius, offsets, partners, most_recovered, kept, normal, gap, tangent1, tangent2,
+                   largest):
     """Each pair (i, j) of particle i (one thread a particle): the unit normal from i to j, the gap
-    along it relaxed by max(0, -(|d| - R_i - R_j) - most_recovered), and the tangents of
+    along it relaxed as :func:`_relaxation` relaxes |d| - R_i - R_j, and the tangents of
     colsim.engine.contacts.tangent_basis (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
     normalised; t2 = n x t1), in the CPU's arithmetic; and largest[b] the largest overlap
     R_i + R_j - |d| of block b's particles' pairs (-inf: none)."""
@@ -377,15 +380,15 @@ def _frames_kernel(position, radius, offsets, partners, most_recovered, normal, 
     t = cuda.threadIdx.x
     cache[t] = -math.inf
     if i < offsets.shape[0] - 1:
-        cache[t] = _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1,
-                                tangent2)
+        cache[t] = _pair_frames(i, position, radius, offsets, partners, most_recovered, kept, normal, gap,
+                                tangent1, tangent2)
     block_reduce(cache, t, True)
     if t == 0:
         largest[cuda.blockIdx.x] = cache[0]
 
 
 @cuda.jit(device=True)
-def _pair_frames(i, position, radius, offsets, partners, most_recovered, normal, gap, tangent1, tangent2):
+def _pair_frames(i, position, radius, offsets, partners, most_recovered, kept, normal, gap, tangent1, tangent2):
     """:func:`_frames_kernel`'s work for particle i's pairs; returns their largest overlap."""
     largest = -math.inf
     for k in range(offsets[i], offsets[i + 1]):
@@ -397,10 +400,17 @@ def _pair_frames(i, position, radius, offsets, partners, most_recovered, normal,
         largest = max(largest, radius[i] + radius[j] - distance)
         n0, n1, n2 = d0 / distance, d1 / distance, d2 / distance
         g = n0 * d0 + n1 * d1 + n2 * d2 - radius[i] - radius[j]
-        gap[k] = g + max(0.0, -(distance - radius[i] - radius[j]) - most_recovered)
+        gap[k] = g + _relaxation(distance - radius[i] - radius[j], most_recovered, kept)
         normal[k, 0], normal[k, 1], normal[k, 2] = n0, n1, n2
         _put_tangents(k, n0, n1, n2, tangent1, tangent2)
     return largest
+
+
+@cuda.jit(device=True)
+def _relaxation(true_gap, most_recovered, kept):
+    """:func:`colsim.engine.contacts.recovery_relaxation` of one gap: max(0, -g - most_recovered,
+    min(-g, kept)), the same number as the host's (kept 0 adds nothing: min(-g, 0) <= max(0, ...))."""
+    return max(0.0, -true_gap - most_recovered, min(-true_gap, kept))
 
 
 @cuda.jit(device=True)
@@ -419,31 +429,37 @@ def _put_tangents(k, n0, n1, n2, tangent1, tangent2):
 
 
 class _WallContacts:
-    """The floor's and the cylinder's contacts of the particles of `found` (a :class:`_SweptPairs`), made
-    on the device as :func:`colsim.engine.contacts._wall_contacts` makes them with no cylinder margin:
-    particle i touches the floor where z_i - R_i is below its reach margin + (1 + slack) |u_i| (u: the
-    predicted motion), and the cylinder where its gap R - rho_i - R_i, relaxed by
-    :func:`colsim.engine.contacts.recovery_relaxation`, is; the floor's contacts first, then the
-    cylinder's, each in the particles' order. `count` (the one number copied to the host) of them."""
+    """The floor's, the cylinder's and the plane walls' contacts of the particles of `found` (a
+    :class:`_SweptPairs`), made on the device as :func:`colsim.engine.contacts._wall_contacts` makes
+    them with no cylinder margin: particle i touches the floor where z_i - R_i is below its reach
+    margin + (1 + slack) |u_i| (u: the predicted motion), the cylinder where its gap R - rho_i - R_i,
+    relaxed by :func:`colsim.engine.contacts.recovery_relaxation`, is, and plane p where its gap
+    n_p . x_i - offset_p - R_i, relaxed alike, is; the floor's contacts first, then the cylinder's,
+    then each plane's, each in the particles' order. `count` (the one number copied to the host) of them."""
 
-    def __init__(self, found: "_SweptPairs", margin: float, slack: float, most_recovered: float, walls):
+    def __init__(self, found: "_SweptPairs", margin: float, slack: float, most_recovered: float, walls,
+                 kept: float = 0.0):
         n = found.radius.shape[0]
-        self.found, self.most_recovered = found, float(most_recovered)
+        self.found, self.most_recovered, self.kept = found, float(most_recovered), float(kept)
         self.cylinder_radius = math.nan if walls.cylinder_radius is None else float(walls.cylinder_radius)
-        flags = cuda.device_array(2 * n, dtype=np.int64)
+        planes = walls.plane_array()
+        self.n_planes = len(planes)   # a (1, 4) array of zeros stands for none: no empty array on a device
+        self.planes = cuda.to_device(planes if len(planes) else np.zeros((1, 4)))
+        flags = cuda.device_array((2 + self.n_planes) * n, dtype=np.int64)
         launch(_wall_flags_kernel, blocks_for(n), THREADS, found.position, found.radius, found.predicted,
-               bool(walls.floor), self.cylinder_radius, float(margin), float(slack), self.most_recovered, flags)
+               bool(walls.floor), self.cylinder_radius, self.planes, self.n_planes, float(margin), float(slack),
+               self.most_recovered, self.kept, flags)
         self.start = prefix_sums_on_device(flags)
-        self.count = int(self.start[2 * n:].copy_to_host()[0])
+        self.count = int(self.start[flags.shape[0]:].copy_to_host()[0])
 
     def fill(self, rows: "ContactRows", first: int, law) -> None:
         """Their rows of `rows`, from row `first` on (all but the levers and keys)."""
         mu, mu_r = np.asarray(law.mu, dtype=float), np.asarray(law.mu_r, dtype=float)
         found = self.found
         launch(_wall_rows_kernel, blocks_for(found.radius.shape[0]), THREADS, found.position, found.radius,
-               self.start, self.cylinder_radius, self.most_recovered, first, float(mu[FLOOR]),
-               float(mu_r[FLOOR]), float(mu[CYLINDER]), float(mu_r[CYLINDER]), rows.frames[0], rows.frames[1],
-               rows.frames[2], rows.numbers, rows.bodies)
+               self.start, self.cylinder_radius, self.planes, self.n_planes, self.most_recovered, self.kept, first,
+               float(mu[FLOOR]), float(mu_r[FLOOR]), float(mu[CYLINDER]), float(mu_r[CYLINDER]), rows.frames[0],
+               rows.frames[1], rows.frames[2], rows.numbers, rows.bodies)
 
 
 @cuda.jit(device=True)
@@ -457,18 +473,32 @@ def _motion_length(predicted, i):
 
 
 @cuda.jit(device=True)
-def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered):
+def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered, kept):
     """(particle i's gap to the cylinder, relaxed as :func:`colsim.engine.contacts.recovery_relaxation`
     relaxes it; its distance rho from the axis, :func:`colsim.engine.cuda_state.axis_distance`)."""
     rho = axis_distance(position, i)
     true_gap = cylinder_radius - rho - radius[i]
-    return true_gap + max(0.0, -true_gap - most_recovered), rho
+    return true_gap + _relaxation(true_gap, most_recovered, kept), rho
+
+
+@cuda.jit(device=True)
+def _plane_gap(i, position, radius, planes, p, most_recovered, kept):
+    """Particle i's gap n . x_i - offset - R_i to plane wall p of `planes` (p, 4), relaxed as
+    :func:`colsim.engine.contacts.recovery_relaxation` relaxes it, in the arithmetic of
+    :func:`colsim.engine.contacts.plane_distance`."""
+    distance = position[i, 0] * planes[p, 0]
+    distance += position[i, 1] * planes[p, 1]
+    distance += position[i, 2] * planes[p, 2]
+    true_gap = (distance - planes[p, 3]) - radius[i]
+    return true_gap + _relaxation(true_gap, most_recovered, kept)
 
 
 @cuda.jit
-def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, margin, slack, most_recovered, flags):
-    """flags (2n,): 1 where particle i touches the floor (entry i) or the cylinder (entry n + i, none
-    for a cylinder_radius of nan), else 0 (:class:`_WallContacts`); one thread a particle."""
+def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, planes, n_planes, margin, slack,
+                       most_recovered, kept, flags):
+    """flags ((2 + p) n,): 1 where particle i touches the floor (entry i), the cylinder (entry n + i,
+    none for a cylinder_radius of nan) or plane wall q < p = n_planes of `planes` (entry (2 + q) n + i), else 0
+    (:class:`_WallContacts`); one thread a particle."""
     i = cuda.grid(1)
     n = position.shape[0]
     if i >= n:
@@ -477,17 +507,20 @@ def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, marg
     flags[i] = 1 if floor and position[i, 2] - radius[i] < reach else 0
     flags[n + i] = 0
     if not math.isnan(cylinder_radius):
-        gap, _ = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered)
+        gap, _ = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered, kept)
         flags[n + i] = 1 if gap < reach else 0
+    for q in range(n_planes):
+        flags[(2 + q) * n + i] = 1 if _plane_gap(i, position, radius, planes, q, most_recovered, kept) < reach else 0
 
 
 @cuda.jit
-def _wall_rows_kernel(position, radius, start, cylinder_radius, most_recovered, first, mu_floor, mu_r_floor,
-                      mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies):
-    """Particle i's floor and cylinder rows (one thread a particle), at first + start[i] and first +
-    start[n + i] where flagged (start: the flags' prefix sums): the normal out of the particle, the
-    tangents, the gap relaxed as on the host, the bodies (i, WALL), the family, the radii (R_i, 0)
-    and the wall's coefficients."""
+def _wall_rows_kernel(position, radius, start, cylinder_radius, planes, n_planes, most_recovered, kept, first,
+                      mu_floor, mu_r_floor, mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies):
+    """Particle i's floor, cylinder and plane rows (one thread a particle), at first + start[i], first +
+    start[n + i] and first + start[(2 + q) n + i] where flagged (start: the flags' prefix sums): the
+    normal out of the particle, the tangents, the gap relaxed as on the host, the bodies (i, WALL), the
+    family (PLANE + q for plane q), the radii (R_i, 0) and the wall's coefficients (the cylinder's for
+    the planes: colsim.engine.state.law_family)."""
     i = cuda.grid(1)
     n = position.shape[0]
     if i >= n:
@@ -495,14 +528,20 @@ def _wall_rows_kernel(position, radius, start, cylinder_radius, most_recovered, 
     if start[i + 1] > start[i]:
         k = first + start[i]
         gap = position[i, 2] - radius[i]
-        _put_wall_row(k, i, FLOOR, 0.0, 0.0, -1.0, gap + max(0.0, -gap - most_recovered), radius[i], mu_floor,
+        _put_wall_row(k, i, FLOOR, 0.0, 0.0, -1.0, gap + _relaxation(gap, most_recovered, kept), radius[i], mu_floor,
                       mu_r_floor, normal, tangent1, tangent2, numbers, bodies)
     if start[n + i + 1] > start[n + i]:
         k = first + start[n + i]
-        gap, rho = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered)
+        gap, rho = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered, kept)
         n0, n1 = (1.0, 0.0) if rho < 1e-12 else (position[i, 0] / rho, position[i, 1] / rho)
         _put_wall_row(k, i, CYLINDER, n0, n1, 0.0, gap, radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1,
                       tangent2, numbers, bodies)
+    for q in range(n_planes):
+        at = (2 + q) * n + i
+        if start[at + 1] > start[at]:
+            gap = _plane_gap(i, position, radius, planes, q, most_recovered, kept)
+            _put_wall_row(first + start[at], i, PLANE + q, -planes[q, 0], -planes[q, 1], -planes[q, 2], gap,
+                          radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies)
 
 
 @cuda.jit(device=True)

@@ -9,8 +9,20 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-#: Contact families, used to pick friction coefficients per contact.
+#: Contact families, used to pick friction coefficients per contact: a ContactLaw's (particle, floor,
+#: wall) coefficients. The wall family is the cylinder's, and a channel's plane walls take its
+#: coefficients too; each plane p has a family of its own, PLANE + p (:func:`law_family`), so that a
+#: sphere in a corner touches two walls that a warm start tells apart (:func:`pair_keys`).
 PARTICLE, FLOOR, CYLINDER = 0, 1, 2
+#: the family of a Walls' first plane; plane p's is PLANE + p
+PLANE = 3
+#: the most planes a Walls holds: the wall codes of a pair key are 8 (:func:`pair_keys`)
+MOST_PLANES = 5
+
+
+def law_family(family):
+    """The ContactLaw entry of each contact family (array or scalar): a plane's is the wall's (CYLINDER)."""
+    return np.minimum(family, CYLINDER)
 
 
 @dataclass
@@ -157,23 +169,51 @@ def pair_key(i, j, family):
 
 @dataclass(frozen=True)
 class Walls:
-    """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder
-    and a set of fixed spheres.
+    """Bodies that never move: the floor z = 0 and, optionally, the inside of a vertical cylinder,
+    plane walls and a set of fixed spheres.
 
     cylinder_radius: radius r0 of the cylinder about the z axis (length), or None when it is removed.
+    planes: plane walls, each (n_x, n_y, n_z, offset): the spheres stay in the half-space
+        n . x >= offset + R, n a unit normal into it (offset: length); at most MOST_PLANES. Plane p's
+        contacts have family PLANE + p, the lever R_i and the law's wall coefficients.
     fixed: spheres that never move (:class:`FixedSpheres`), or None.
     """
 
     floor: bool = True
     cylinder_radius: float | None = None
     fixed: FixedSpheres | None = None
+    planes: tuple = ()
+
+    def __post_init__(self):
+        planes = tuple(tuple(float(v) for v in plane) for plane in self.planes)
+        if len(planes) > MOST_PLANES or any(len(plane) != 4 for plane in planes):
+            raise ValueError(f"walls take at most {MOST_PLANES} planes of 4 numbers (n_x, n_y, n_z, offset), "
+                             f"got {planes}")
+        for plane in planes:
+            if not (np.all(np.isfinite(plane)) and abs(np.linalg.norm(plane[:3]) - 1.0) < 1e-12):
+                raise ValueError(f"a plane wall needs a finite unit normal and offset, got {plane}")
+        object.__setattr__(self, "planes", planes)
+
+    def plane_array(self) -> np.ndarray:
+        """(p, 4) the planes' (n_x, n_y, n_z, offset), p = 0 without planes."""
+        return np.array(self.planes, dtype=float).reshape(-1, 4)
+
+
+def channel_planes(length: float, width: float, gate: bool) -> tuple:
+    """The plane walls of a channel along +x (:class:`Walls`' planes): the back wall x = 0, the
+    sidewalls y = -width/2 and y = +width/2 and, with `gate`, the gate x = length that holds the box
+    0 < x < length while it fills (length, width: length units)."""
+    half = 0.5 * width
+    planes = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, -half), (0.0, -1.0, 0.0, -half))
+    return planes + (((-1.0, 0.0, 0.0, -length),) if gate else ())
 
 
 @dataclass(frozen=True)
 class ContactLaw:
     """Sliding (mu) and rolling (mu_r) coefficients for each contact family, and the rolling lever.
 
-    Each tuple is (particle-particle, particle-floor, particle-cylinder). The paper uses
+    Each tuple is (particle-particle, particle-floor, particle-wall): the wall's are the cylinder's and
+    a channel's plane walls' (:func:`law_family`). The paper uses
     mu = mu_r = 0 while filling and mu = 0.577, mu_r = 0.12 for the collapse; its cylinder is frictionless.
     rolling_lever: the lever arm L of the rolling moment L r between two spheres (:func:`rolling_lever`):
     "paper" (its Eqs. 6 and 9) or "effective" (R_eff, the common DEM convention).
@@ -189,7 +229,7 @@ class ContactLaw:
         for name in ("mu", "mu_r"):
             values = tuple(float(v) for v in getattr(self, name))
             if len(values) != 3:
-                raise ValueError(f"{name} needs 3 values (particle, floor, cylinder), got {values}")
+                raise ValueError(f"{name} needs 3 values (particle, floor, wall), got {values}")
             if any(v < 0 or not np.isfinite(v) for v in values):
                 raise ValueError(f"friction coefficient {name} must be finite and >= 0, got {values}")
             object.__setattr__(self, name, values)
@@ -259,6 +299,11 @@ class StepSettings:
     overlap_recovery: the most speed at which an overlap present at the start of a step is removed,
     as a fraction of sqrt(|g| d), d the mean diameter (:func:`recovery_speed`); None removes it
     within one step, whatever the step (a speed of overlap/dt, which grows as dt shrinks).
+    overlap_kept: an overlap present at the start of a step up to this fraction of the smallest
+    diameter is kept (it never grows) and not asked back; a larger one shrinks towards it
+    (:func:`colsim.engine.contacts.recovery_relaxation`). 0: every overlap is asked back. A channel's
+    collapse keeps half the overlap tolerance: between its sidewalls a chain of grains from wall to wall
+    may have no motion but dilating ones, and asking its overlap back leaves the step no solution.
     """
 
     dt: float
@@ -272,6 +317,7 @@ class StepSettings:
     max_redo: int = 4
     margin_growth: float = 2.0
     overlap_recovery: float | None = 0.01
+    overlap_kept: float = 0.0
 
     def __post_init__(self):
         if not (self.dt > 0 and np.isfinite(self.dt)):
@@ -282,6 +328,9 @@ class StepSettings:
             raise ValueError("overlap_tolerance must be > 0, detection_margin_fraction and detection_slack >= 0")
         if self.overlap_recovery is not None and not (self.overlap_recovery > 0 and np.isfinite(self.overlap_recovery)):
             raise ValueError(f"overlap_recovery must be a positive finite fraction or None, got {self.overlap_recovery}")
+        if not 0.0 <= self.overlap_kept < self.overlap_tolerance:
+            raise ValueError(f"overlap_kept must lie in [0, overlap_tolerance {self.overlap_tolerance}), got "
+                             f"{self.overlap_kept}")
         if self.walls.cylinder_radius is not None and self.walls.cylinder_radius <= 0:
             raise ValueError(f"cylinder radius must be positive, got {self.walls.cylinder_radius}")
 

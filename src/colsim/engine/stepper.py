@@ -99,10 +99,10 @@ def _next_margin(missed: int, margin: float, base: float) -> float:
 
 
 def _first_detection(backend: Backend, state: ParticleState, settings: StepSettings, predicted, margin: float,
-                     most_recovered: float) -> contact_detection.Contacts:
+                     most_recovered: float, kept: float) -> contact_detection.Contacts:
     """The contacts of a step's first attempt (no cylinder margin, no given normals)."""
     return backend.detect(state, settings.walls, settings.law, predicted, margin, settings.detection_slack,
-                          np.zeros(state.n), None, most_recovered)
+                          np.zeros(state.n), None, most_recovered, kept)
 
 
 def step(state: ParticleState, settings: StepSettings, solver: Solver, step_number: int = 0,
@@ -120,6 +120,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
     mean_diameter = 2.0 * float(np.mean(state.radius)) if state.n else 1.0
     tolerance = settings.overlap_tolerance * smallest_diameter
     most_recovered = recovery_speed(settings, mean_diameter) * settings.dt
+    kept = settings.overlap_kept * smallest_diameter
     base = base_margin(state, settings)
     margin = base if margin is None else margin
     started = time.perf_counter()
@@ -134,7 +135,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
             found = ahead.contacts
         else:
             found = backend.detect(state, settings.walls, settings.law, predicted, margin,
-                                   settings.detection_slack, cylinder_margin, renormal, most_recovered)
+                                   settings.detection_slack, cylinder_margin, renormal, most_recovered, kept)
         t1 = time.perf_counter()
         program = backend.assemble(state, found, settings.dt, settings.gravity)
         t2 = time.perf_counter()
@@ -146,7 +147,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
         following_margin = _next_margin(missed, margin, base)   # the next step's, if this attempt holds
         following_motion = backend.predicted(new_state, settings)
         following = Upcoming(new_state, following_margin, _first_detection(
-            backend, new_state, settings, following_motion, following_margin, most_recovered), following_motion)
+            backend, new_state, settings, following_motion, following_margin, most_recovered, kept), following_motion)
         overlap = backend.overlaps(new_state, settings.walls, tolerance, detected=following.contacts)
         t5 = time.perf_counter()
         if overlap.largest <= tolerance:
@@ -155,7 +156,7 @@ def step(state: ParticleState, settings: StepSettings, solver: Solver, step_numb
                  step_number, overlap.largest, tolerance, len(overlap.pairs[0]))
         margin *= settings.margin_growth
         missed += (len(overlap.pairs[0]) + int(overlap.largest_floor > tolerance)
-                   + int(overlap.largest_fixed > tolerance))
+                   + int(overlap.largest_fixed > tolerance) + int(overlap.largest_plane > tolerance))
         cylinder_margin += 1.5 * overlap.cylinder
         renormal = _merge_pairs(renormal, overlap.pairs, state.n)
         if solver.uses_warm_start:   # the redo's contacts hold the attempt's, with the missed ones added

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from ..engine.state import ParticleState
+from ..engine.state import CYLINDER, ParticleState, channel_planes
 from ..engine.warm_start import WarmStart
 from . import checks
 from .cf import write_dataset
@@ -105,7 +105,9 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
         k = int(np.argmax(below))
         raise InputError(f"input file {path}: sphere {k} reaches below the floor (z = {state.position[k, 2]:g},"
                          f" radius {state.radius[k]:g})")
-    if "r0" in dataset.attrs:
+    if dataset.attrs.get("geometry") == "channel":
+        check_inside_channel(state, dataset.attrs, tolerance, path)
+    elif "r0" in dataset.attrs:
         r0 = float(dataset.attrs["r0"])
         outside = np.hypot(state.position[:, 0], state.position[:, 1]) + state.radius > r0 + tolerance
         if outside.any():
@@ -120,6 +122,25 @@ def check_geometry(state: ParticleState, dataset, path) -> None:
                          f" 1 % of the smallest diameter")
 
 
+def check_inside_channel(state: ParticleState, attrs, tolerance: float, path) -> None:
+    """InputError naming the first sphere that reaches through a wall of the channel's box (its
+    back wall, sidewalls or gate: attributes channel_length, channel_width) by more than `tolerance`."""
+    length, width = float(attrs["channel_length"]), float(attrs["channel_width"])
+    for plane in channel_planes(length, width, gate=True):
+        outside = state.position @ np.array(plane[:3]) - plane[3] - state.radius < -tolerance
+        if outside.any():
+            raise InputError(f"input file {path}: sphere {int(np.argmax(outside))} reaches outside the channel's "
+                             f"box (length {length:g}, width {width:g})")
+
+
+def family_flags(family) -> dict:
+    """The CF flags of the contact families (colsim.engine.state): particle, floor, cylinder, and
+    plane_0 ... for a channel's plane walls (PLANE + p) where the contacts hold any."""
+    most = int(np.max(family, initial=CYLINDER))
+    meanings = ["particle", "floor", "cylinder"] + [f"plane_{p}" for p in range(most - CYLINDER)]
+    return {"flag_values": np.arange(len(meanings)), "flag_meanings": " ".join(meanings)}
+
+
 def contact_force_variables(forces: WarmStart) -> dict:
     """The variables (over dims contact, xyz) that store a stage's last contact forces, as `extra`
     for :func:`state_dataset`."""
@@ -130,8 +151,7 @@ def contact_force_variables(forces: WarmStart) -> dict:
         "contact_first": variable("contact", forces.i, "1", "first particle of the contact pair"),
         "contact_second": variable("contact", forces.j, "1", "second particle of the contact pair",
                                    comment="-1: a wall (see contact_family)"),
-        "contact_family": variable("contact", forces.family, "1", "kind of contact",
-                                   flag_values=np.array([0, 1, 2]), flag_meanings="particle floor cylinder"),
+        "contact_family": variable("contact", forces.family, "1", "kind of contact", **family_flags(forces.family)),
         "contact_force": variable(("contact", "xyz"), forces.force, "mass length/time^2",
                                   "contact force of the pair (normal from the first to the second body)"),
         "contact_rolling_force": variable(("contact", "xyz"), forces.rolling, "mass length/time^2",

@@ -1,5 +1,8 @@
 """Stage 3: remove the cylinder and let the column collapse (SPEC section 3).
 
+A channel's column (a :class:`colsim.stages.pour_geometry.Channel`) collapses along +x when its gate
+is removed: the back wall and the sidewalls stay, with the settings' wall_mu (or mu) and mu_r.
+
 The column of height h0 is released at t = 0 with sliding coefficient mu and rolling coefficient
 mu_r, and integrated to t / sqrt(h0/g) = duration in n_steps equal steps (the paper: 4 and 100).
 The friction law is the paper's associated one unless friction_law = 'coulomb' (:mod:`colsim.engine.friction`).
@@ -31,6 +34,7 @@ from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_checkpoint, save_checkpoint, segment_commits
 from .analyse import measure_deposit
+from .pour_geometry import Channel
 from .settings import CollapseSettings, SMALLEST_SCALED_STEP  # noqa: F401 (the stage's settings, here too)
 from .stopwatch import Stopwatch
 
@@ -108,30 +112,38 @@ class DepositHistory:
 
 
 def _fingerprint(column: ParticleState, settings: CollapseSettings, h0: float, solver: Solver,
-                 warm_start: WarmStart | None) -> str:
+                 warm_start: WarmStart | None, channel: Channel | None = None) -> str:
     digest = hashlib.sha256()
     arrays = [column.position, column.velocity, column.angular_velocity, column.radius]
     if warm_start is not None:
         arrays += [warm_start.i, warm_start.j, warm_start.family, warm_start.force, warm_start.rolling]
     for array in arrays:
         digest.update(np.ascontiguousarray(array).tobytes())
-    described = {k: v for k, v in asdict(settings).items() if k not in NOT_IN_FINGERPRINT}
+    described = {k: v for k, v in asdict(settings).items()
+                 if k not in NOT_IN_FINGERPRINT and not (k == "wall_mu" and v is None)}
+    if channel is not None:   # a cylinder's checkpoints keep their fingerprint
+        described["channel"] = asdict(channel)
     digest.update(json.dumps([described, h0, solver.describe()], sort_keys=True, default=str).encode())
     return digest.hexdigest()
 
 
 def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solver: Solver,
              warm_start: WarmStart | None = None, checkpoint: str | Path | None = None, progress=None,
-             stop_after: int | None = None, backend: Backend = HOST) -> CollapseRun:
+             stop_after: int | None = None, backend: Backend = HOST,
+             channel: Channel | None = None) -> CollapseRun:
     """Release `column` (height h0) and integrate it with `solver`; see the module docstring.
 
+    channel: the column's channel (its gate removed at release), or None for a cylinder's column.
     warm_start: the column's contact forces before release (from its packing), for the first step.
     progress: optional callable(diagnostics) after each step.
     stop_after: stop (as if killed) after this many steps in this call, for tests of resuming.
     backend: where the steps run (:mod:`colsim.engine.backend`; the solver's must be the same).
     """
-    step_settings = settings.step_settings(h0)
-    fingerprint = _fingerprint(column, settings, h0, solver, warm_start)
+    if channel is None and settings.wall_mu is not None:
+        raise ValueError("wall_mu is the friction of a channel's walls; this column is a cylinder's, whose walls "
+                         "are gone at release (leave wall_mu out)")
+    step_settings = settings.step_settings(h0, channel)
+    fingerprint = _fingerprint(column, settings, h0, solver, warm_start, channel)
     saved = load_checkpoint(checkpoint, fingerprint)
     if saved:
         state, frames, diagnostics, carry = (saved[k] for k in ("state", "frames", "diagnostics", "carry"))

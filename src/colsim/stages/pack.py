@@ -1,5 +1,9 @@
 """Stages 1 and 2: fill the cylinder by free fall (pack), then cut the column at h0 = a r0 (trim).
 
+A channel (geometry channel) is filled the same way: its box 0 < x < L0, |y| < W/2, between the
+back wall, the sidewalls and the gate (plane walls, :func:`colsim.engine.state.channel_planes`),
+frictionless as the cylinder is; L0 plays r0's role.
+
 Filling follows the paper: spheres with diameters uniform in [d_min, d_max] are created at random
 non-overlapping places uniformly across the cylinder, above what is already there, and fall under
 gravity with mu = mu_r = 0 until they are at rest. (`mu` sets a sliding friction while filling,
@@ -32,12 +36,12 @@ from ..engine.contacts import fixed_pairs
 from ..engine.records import Carry
 from ..engine.backend import HOST, Backend
 from ..engine.solver_contract import Solver, SolverError
-from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls
+from ..engine.state import ContactLaw, FixedSpheres, ParticleState, StepSettings, Walls, channel_planes
 from ..engine.stepper import run
 from ..engine.warm_start import WarmStart
 from ..io.checkpoint import load_packing_checkpoint, save_packing_checkpoint, segment_commits
 from .settings import POUR_STEP_RANGE, PackSettings
-from .pour_geometry import cloud_spheres, column_height, expected_spheres, lattice_cloud, solid_fraction
+from .pour_geometry import Channel, cloud_spheres, column_height, expected_spheres, lattice_cloud, solid_fraction
 from .stopwatch import Stopwatch
 
 log = logging.getLogger(__name__)
@@ -66,9 +70,10 @@ class PackingResult:
     commits: tuple = ()
 
 
-def starting_cloud(n: int, r0: float, seed: int | np.random.Generator = 0, z_bottom: float = 0.0,
+def starting_cloud(n: int, r0, seed: int | np.random.Generator = 0, z_bottom: float = 0.0,
                    diameter_range=(0.25, 0.5), density: float = 1.0) -> ParticleState:
-    """Exactly n spheres at rest, none overlapping, inside radius r0 above z_bottom: the first n of
+    """Exactly n spheres at rest, none overlapping, inside radius r0 (or the box of the footprint r0,
+    a :class:`colsim.stages.pour_geometry.Channel`) above z_bottom: the first n of
     :func:`lattice_cloud` (its lowest layers; the top layer is filled from its first cells).
 
     seed: a seed or a numpy Generator. For the same generator this is the pack stage's own first cloud
@@ -109,7 +114,8 @@ LOG_INTERVAL_S = 60.0
 
 def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
          checkpoint: str | Path | None = None, progress=None, backend: Backend = HOST) -> PackingResult:
-    """Fill a cylinder of radius settings.r0 until the settled packing is taller than
+    """Fill a cylinder of radius settings.r0 (or a channel's box: settings.footprint) until the settled
+    packing is taller than
     settings.height (length), solving each step with `solver`; `rng` places the spheres. A
     ValueError names a setting the pour cannot use, before anything is allocated (a packing
     expected to hold more than settings.max_spheres included: :func:`expected_spheres`).
@@ -177,7 +183,7 @@ def pack(settings: PackSettings, rng: np.random.Generator, solver: Solver,
     # new arrays, not zeroed in place: a GPU's steps keep device copies of theirs (engine/cuda_state)
     state = replace(state, velocity=np.zeros_like(state.velocity), angular_velocity=np.zeros_like(state.velocity),
                     time=0.0)
-    return PackingResult(state, column_height(state), solid_fraction(state, settings.r0, settings.height),
+    return PackingResult(state, column_height(state), solid_fraction(state, settings.footprint, settings.height),
                          steps, pour.clock.wall(), warm, clouds, most_fixed, pour.clock.cpu(), pour.history,
                          tuple(segment_commits(earlier)))
 
@@ -197,7 +203,7 @@ def _check(settings: PackSettings) -> None:
     d_min, d_max, gravity = settings.diameter_min, settings.diameter_max, settings.gravity
     if not 0 < d_min <= d_max:
         raise ValueError(f"diameter range must satisfy 0 < min <= max, got {(d_min, d_max)}")
-    if settings.r0 < d_max:
+    if settings.geometry == "cylinder" and settings.r0 < d_max:
         raise ValueError(f"cylinder radius r0 = {settings.r0} is smaller than the largest particle (diameter {d_max})")
     if not settings.height > 0:
         raise ValueError(f"packing height must be positive, got {settings.height}")
@@ -206,9 +212,11 @@ def _check(settings: PackSettings) -> None:
         raise ValueError(f"layer height must be positive (or None: one cloud), got {settings.layer_height}")
     if not settings.freeze_depth >= 0:
         raise ValueError(f"freeze depth must be >= 0, got {settings.freeze_depth}")
-    expected = expected_spheres(settings.r0, settings.height, (d_min, d_max))
+    expected = expected_spheres(settings.footprint, settings.height, (d_min, d_max))
     if settings.max_spheres is not None and expected > settings.max_spheres:
-        raise ValueError(f"the packing of r0 = {settings.r0:g} to height {settings.height:g} would hold about "
+        size = (f"channel L0 = {settings.channel_length:g}, W = {settings.channel_width:g}"
+                if settings.geometry == "channel" else f"r0 = {settings.r0:g}")
+        raise ValueError(f"the packing of {size} to height {settings.height:g} would hold about "
                          f"{expected:,.0f} spheres (diameters {d_min:g}-{d_max:g}), above the bound of "
                          f"{settings.max_spheres:,} (raise it with --max-spheres, or pack.max_spheres in a study)")
 
@@ -221,6 +229,8 @@ def _fingerprint(rng: np.random.Generator, solver: Solver, settings: PackSetting
                 "diameter_range": (settings.diameter_min, settings.diameter_max), "density": settings.density,
                 "gravity": settings.gravity, "dt": settings.dt, "rest_energy": settings.rest_energy,
                 "mu": settings.mu, "layer_height": settings.layer_height, "freeze_depth": settings.freeze_depth}
+    if settings.geometry != "cylinder":   # a cylinder's checkpoints keep their fingerprint
+        stepping |= {"geometry": settings.geometry, "channel": (settings.channel_length, settings.channel_width)}
     described = [rng.bit_generator.state, solver.describe(), stepping]
     return hashlib.sha256(json.dumps(described, sort_keys=True, default=str).encode()).hexdigest()
 
@@ -235,11 +245,11 @@ def _pour_cloud(state: ParticleState, fixed: np.ndarray, settings: PackSettings,
     last = settings.layer_height is None or missing <= settings.layer_height + 2 * d_max
     thickness = missing if last else settings.layer_height
     diameter_range = (settings.diameter_min, d_max)
-    n_new = int(np.ceil(cloud_spheres(settings.r0, thickness, diameter_range)))
+    n_new = int(np.ceil(cloud_spheres(settings.footprint, thickness, diameter_range)))
     z_bottom = float(np.max(state.position[:, 2] + state.radius, initial=0.0))
     if settings.layer_height is not None:
         fixed = fixed | _buried_at_rest(state, surface - settings.freeze_depth, settings.gravity, settings.rest_energy)
-    position, radius = lattice_cloud(settings.r0, n_new, z_bottom, diameter_range, rng)
+    position, radius = lattice_cloud(settings.footprint, n_new, z_bottom, diameter_range, rng)
     state = _add(state, position, radius)
     fixed = np.concatenate([fixed, np.zeros(len(radius), dtype=bool)])
     log.info("pouring %d spheres (%d in all, %d fixed) from z = %.2f", len(radius), state.n,
@@ -266,7 +276,7 @@ class _Pour:
     def __init__(self, settings: PackSettings, solver: Solver, progress=None, backend: Backend = HOST):
         self.settings, self.solver, self.progress, self.backend = settings, solver, progress, backend
         self.step = StepSettings(dt=settings.dt, gravity=(0.0, 0.0, -settings.gravity),
-                                 walls=Walls(cylinder_radius=settings.r0), law=ContactLaw.uniform(settings.mu, 0.0))
+                                 walls=pour_walls(settings.footprint), law=ContactLaw.uniform(settings.mu, 0.0))
         self.clock, self.history = Stopwatch(), []
 
     def settle(self, state: ParticleState, fixed: np.ndarray, warm: WarmStart | None, steps: int,
@@ -320,6 +330,14 @@ class _Pour:
                  diagnostics.n_contacts, diagnostics.kinetic_energy + diagnostics.rotational_energy,
                  diagnostics.solve_time)
         return time.perf_counter()
+
+
+def pour_walls(footprint) -> Walls:
+    """The walls a pour fills (besides the floor): the cylinder of radius `footprint`, or a
+    :class:`Channel`'s back wall, sidewalls and gate."""
+    if isinstance(footprint, Channel):
+        return Walls(planes=channel_planes(footprint.length, footprint.width, gate=True))
+    return Walls(cylinder_radius=footprint)
 
 
 def _place(state: ParticleState, moving: np.ndarray, sub: ParticleState) -> ParticleState:

@@ -18,8 +18,9 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, ContactLaw, FrictionLaw, StepSettings, Walls
+from ..engine.state import FRICTION_LAWS, ROLLING_LEVERS, ContactLaw, FrictionLaw, StepSettings, Walls, channel_planes
 from ..solvers import defaults
+from .pour_geometry import GEOMETRIES, LATTICE_FACTOR, Channel
 
 #: the kinds of value a setting takes (colsim.cli.flags parses each)
 KINDS = ("positive", "non_negative", "integer", "positive_int", "choice")
@@ -30,15 +31,18 @@ DEVICES = ("cpu", "cuda", "auto")
 
 
 def setting(default, help: str, *, unit: str = "1", kind: str = "positive", name: str | None = None,
-            choices: tuple | None = None, optional: bool = False, many: bool = False, flag: bool = True):
+            choices: tuple | None = None, optional: bool = False, many: bool = False, flag: bool = True,
+            recorded_when_set: bool = False):
     """A settings dataclass field: `default` (None with `optional`: a value meaning 'not set'),
     `help` (one phrase, the CLI's help), `unit` (UDUNITS; '1': dimensionless), `kind` (KINDS),
     `name` (on the command line and in settings files; the field's own name if None), `choices`
-    (kind 'choice'), `many` (a list of values), `flag` (False: not a CLI flag; the stage sets it)."""
+    (kind 'choice'), `many` (a list of values), `flag` (False: not a CLI flag; the stage sets it),
+    `recorded_when_set` (a file and a key hold it only at a value other than its default: a setting
+    added later, whose default keeps the files and keys made before it, :func:`by_name`)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r} of a setting (one of {', '.join(KINDS)})")
     metadata = {"help": help, "unit": unit, "kind": kind, "name": name, "choices": choices,
-                "optional": optional, "many": many, "flag": flag}
+                "optional": optional, "many": many, "flag": flag, "recorded_when_set": recorded_when_set}
     return field(default=tuple(default) if many else default, metadata=metadata)
 
 
@@ -62,10 +66,17 @@ def declared(cls) -> list:
 
 def by_name(settings) -> dict:
     """{external name: value} of the declared fields of a settings object (lists for tuples): what a
-    file records of the settings it was made with."""
+    file records of the settings it was made with (a `recorded_when_set` field only when not at its
+    default: :func:`unrecorded`)."""
     return {external_name(item): (list(value) if isinstance(value := getattr(settings, item.name), tuple)
                                   else value)
-            for item in declared(type(settings))}
+            for item in declared(type(settings)) if not unrecorded(item, getattr(settings, item.name))}
+
+
+def unrecorded(item, value) -> bool:
+    """Whether a field at `value` stays out of files and keys: a `recorded_when_set` field at its
+    default (the cylinder's geometry, a channel's settings left unset)."""
+    return bool(item.metadata.get("recorded_when_set")) and value == item.default
 
 
 @dataclass(frozen=True)
@@ -109,12 +120,21 @@ POUR_STEP_RANGE = (1e-4, 2.0)
 
 @dataclass(frozen=True)
 class PackSettings:
-    """The pour: a cylinder of radius r0 filled by free fall (mu_r = 0) until the settled packing is
-    taller than `height` (SPEC section 3)."""
+    """The pour: a cylinder of radius r0, or a channel's box of length channel_length and width
+    channel_width behind its gate, filled by free fall (mu_r = 0) until the settled packing is taller
+    than `height` (SPEC section 3)."""
 
     height: float | None = setting(None, "the settled packing must be taller than this; the tallest "
-                                   "h0 = a r0 needed (required)", unit=LENGTH, optional=True)
+                                   "h0 = a r0 (a channel: a L0) needed (required)", unit=LENGTH, optional=True)
     r0: float = setting(3.0, "cylinder radius (the default study's)", unit=LENGTH)
+    geometry: str = setting("cylinder", "what the pour fills: cylinder (radius r0) or channel (the box 0 < x < "
+                            "channel_length, |y| < channel_width/2 of a channel along +x, behind a gate that the "
+                            "collapse removes)", kind="choice", choices=GEOMETRIES, recorded_when_set=True)
+    channel_length: float | None = setting(None, "a channel's box length L0 along its axis, r0's role: h0 = a L0 "
+                                           "(geometry channel)", unit=LENGTH, optional=True, recorded_when_set=True)
+    channel_width: float | None = setting(None, "a channel's width W between its sidewalls, at least 1.04 largest "
+                                          "diameters (geometry channel)", unit=LENGTH, optional=True,
+                                          recorded_when_set=True)
     seed: int = setting(0, "run seed", kind="integer")
     root_seed: int = setting(2024, "study seed (the default study's); the stream is numpy "
                              "default_rng([seed, root_seed])", kind="integer")
@@ -149,6 +169,40 @@ class PackSettings:
             raise ValueError("a packing needs its height (--height, or height: in the settings file)")
         if self.diameter_min > self.diameter_max:
             raise ValueError(f"diameter_min {self.diameter_min} exceeds diameter_max {self.diameter_max}")
+        check_geometry(self.geometry, self.channel_length, self.channel_width, self.diameter_max)
+
+    @property
+    def footprint(self):
+        """What the pour fills, seen from above: the cylinder's radius r0, or the channel's :class:`Channel`."""
+        return self.r0 if self.geometry == "cylinder" else Channel(self.channel_length, self.channel_width)
+
+    @property
+    def length_scale(self) -> float:
+        """r0, or a channel's L0: h0 = a times it (length)."""
+        return self.r0 if self.geometry == "cylinder" else self.channel_length
+
+
+def check_geometry(geometry: str, length, width, diameter_max: float) -> None:
+    """ValueError (one line) naming the first channel setting that `geometry` cannot take: a channel
+    needs a length L0 > 0, and a length and a width that hold the pour's lattice cell (LATTICE_FACTOR
+    times the largest diameter: a little more than one diameter); a cylinder takes neither."""
+    if geometry not in GEOMETRIES:
+        raise ValueError(f"geometry must be one of {', '.join(GEOMETRIES)}, got {geometry!r}")
+    given = [name for name, value in (("channel_length", length), ("channel_width", width)) if value is not None]
+    if geometry == "cylinder":
+        if given:
+            raise ValueError(f"{' and '.join(given)} set a channel, but geometry is cylinder (set geometry: "
+                             "channel, or leave them out)")
+        return
+    if length is None or width is None:
+        raise ValueError("geometry channel needs channel_length (L0) and channel_width (W)")
+    if not (length > 0 and np.isfinite(length)):
+        raise ValueError(f"channel_length L0 must be positive, got {length}")
+    cell = LATTICE_FACTOR * diameter_max   # the pour's lattice cell: the box must hold one
+    for name, value in (("channel_width W", width), ("channel_length L0", length)):
+        if not (value >= cell and np.isfinite(value)):
+            raise ValueError(f"{name} = {value} is below {LATTICE_FACTOR:g} times the largest diameter "
+                             f"{diameter_max}: the pour's lattice cell ({cell:g}) does not fit in the box")
 
 
 @dataclass(frozen=True)
@@ -162,6 +216,11 @@ class TrimSettings:
             raise ValueError("a trim needs its aspect ratio (--aspect-ratio, or aspect_ratio: in the settings file)")
 
 
+#: a channel's collapse keeps the overlaps of a step's start up to this fraction of the smallest
+#: diameter, half the stepper's overlap tolerance (StepSettings.overlap_kept): between the sidewalls a
+#: chain of grains from wall to wall may have no motion but dilating ones under the walls' friction,
+#: and asking its overlap back left the first step of a slot 1.6 diameters wide with no solution
+CHANNEL_OVERLAP_KEPT = 0.005
 #: the smallest step dt/sqrt(h0/g) a collapse takes: 4e-5 of the default step, far below any use;
 #: at 1e-300 the step's masses over dt^2 overflow
 SMALLEST_SCALED_STEP = 1e-9
@@ -186,6 +245,9 @@ class CollapseSettings:
                                      optional=True)
     floor_mu_r: float | None = setting(None, "the floor's mu_r (none: the same as mu_r)", kind="non_negative",
                                        optional=True)
+    wall_mu: float | None = setting(None, "a channel's sidewalls' and back wall's sliding friction (glass is "
+                                    "smoother than the floor; none: the same as mu); their rolling resistance is "
+                                    "mu_r", kind="non_negative", optional=True, recorded_when_set=True)
     friction_law: str = setting("associated", "associated (the paper's: a sliding contact opens by mu |du_t| "
                                 "a step) or coulomb (non-associated: it does not; a fixed point of cone "
                                 "programs)", kind="choice", choices=FRICTION_LAWS)
@@ -211,8 +273,8 @@ class CollapseSettings:
     gravity: float = setting(9.81, "gravity (the column file's)", unit="length/time^2", flag=False)
 
     def __post_init__(self):
-        for name in ("mu", "mu_r"):
-            if getattr(self, name) < 0:
+        for name in ("mu", "mu_r", "wall_mu"):
+            if getattr(self, name) is not None and not getattr(self, name) >= 0:
                 raise ValueError(f"friction coefficient {name} must be >= 0, got {getattr(self, name)}")
         if self.duration <= 0 or self.n_steps < 1 or self.frame_every < 1:
             raise ValueError(f"need duration > 0, n_steps >= 1, frame_every >= 1; got "
@@ -239,21 +301,30 @@ class CollapseSettings:
     def friction(self) -> FrictionLaw:
         return FrictionLaw(self.friction_law, self.friction_tolerance)
 
-    def law(self) -> ContactLaw:
+    def law(self, channel: bool = False) -> ContactLaw:
+        """The contacts' coefficients: (particle, floor, wall). No wall is left after a cylinder's
+        release; a channel's sidewalls and back wall take wall_mu (or mu) and mu_r."""
         floor_mu = self.mu if self.floor_mu is None else self.floor_mu
         floor_mu_r = self.mu_r if self.floor_mu_r is None else self.floor_mu_r
-        return ContactLaw(mu=(self.mu, floor_mu, 0.0), mu_r=(self.mu_r, floor_mu_r, 0.0),
+        wall_mu, wall_mu_r = (self.mu if self.wall_mu is None else self.wall_mu, self.mu_r) if channel else (0.0, 0.0)
+        return ContactLaw(mu=(self.mu, floor_mu, wall_mu), mu_r=(self.mu_r, floor_mu_r, wall_mu_r),
                           rolling_lever=self.rolling_lever)
 
     def time_step(self, h0: float) -> float:
         return self.scaled_step * np.sqrt(h0 / self.gravity)
 
-    def step_settings(self, h0: float) -> StepSettings:
+    def step_settings(self, h0: float, channel: Channel | None = None) -> StepSettings:
         """The engine's settings for one step of the collapse of a column of height h0: the
-        floor and no cylinder, gravity, the contact and friction laws, dt from `time_step`."""
-        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity),
-                            walls=Walls(floor=True, cylinder_radius=None), law=self.law(),
-                            friction=self.friction())
+        floor and no cylinder (or a channel's back wall and sidewalls, its gate removed, and the
+        overlaps it keeps: CHANNEL_OVERLAP_KEPT), gravity, the contact and friction laws, dt from
+        `time_step`."""
+        if channel is None:
+            walls, kept = Walls(floor=True, cylinder_radius=None), 0.0
+        else:
+            walls = Walls(floor=True, planes=channel_planes(channel.length, channel.width, gate=False))
+            kept = CHANNEL_OVERLAP_KEPT
+        return StepSettings(dt=self.time_step(h0), gravity=(0.0, 0.0, -self.gravity), walls=walls,
+                            law=self.law(channel is not None), friction=self.friction(), overlap_kept=kept)
 
     def scaled_time(self, steps: int) -> float:
         """t / sqrt(h0/g) after `steps` steps."""

@@ -11,8 +11,8 @@ import jsonschema
 import yaml
 
 from ...solvers.defaults import DEFAULT_GPU_STORAGE
-from ...stages.settings import POUR_STEP_RANGE, SMALLEST_SCALED_STEP
-from ...stages.pour_geometry import expected_spheres
+from ...stages.settings import POUR_STEP_RANGE, SMALLEST_SCALED_STEP, check_geometry
+from ...stages.pour_geometry import Channel, expected_spheres
 
 #: far above any study's configuration (the default has about 100)
 CONFIG_MAX_ITEMS = 100_000
@@ -101,7 +101,13 @@ def cross_field_problem(config):
     d_min, d_max, r0 = config["diameter_min"], config["diameter_max"], config["r0"]
     if d_min > d_max:
         return f"config: diameter_min {d_min} exceeds diameter_max {d_max}"
-    if r0 < d_max:
+    problem = geometry_problem(config)
+    if problem:
+        return problem
+    channel = config["geometry"] == "channel"
+    if channel:   # L0 in r0's place
+        r0 = config["channel_length"]
+    elif r0 < d_max:
         return f"config: r0 {r0} is below diameter_max {d_max}: the largest particle does not fit in the cylinder"
     columns = [(a, r0) for a in config["aspect_ratios"]]
     study = config.get("convergence") or {}
@@ -112,7 +118,7 @@ def cross_field_problem(config):
     calibration = config.get("calibration") or {}
     columns += [(a, r) for r in calibration.get("r0", []) for a in config["aspect_ratios"]]
     for a, radius in columns:
-        if radius < d_max:
+        if radius < d_max and not channel:
             return f"config: convergence r0 {radius} is below diameter_max {d_max}"
         if a * radius < d_max:
             return (f"config: aspect ratio {a} at r0 {radius} gives h0 = {a * radius:g}, below diameter_max {d_max}:"
@@ -132,10 +138,24 @@ def cross_field_problem(config):
         return f"config: pack_aspect_ratio {pack} is below the largest aspect ratio {max(config['aspect_ratios'])}"
     limit = config["pack"]["max_spheres"]
     for a, radius in [(pack or max(config["aspect_ratios"]), r0)] + columns:
-        spheres = expected_spheres(radius, a * radius, (d_min, d_max))
+        spheres = expected_spheres(Channel(radius, config["channel_width"]) if channel else radius, a * radius,
+                                   (d_min, d_max))
         if spheres > limit:
             return (f"config: a packing of r0 {radius:g} for a = {a:g} would hold about {spheres:,.0f} spheres,"
                     f" above pack.max_spheres {limit:,} (raise it if the machine has the memory)")
+    return None
+
+
+def geometry_problem(config):
+    """One line naming the first channel setting the study's geometry cannot take (a channel's length
+    or width with geometry cylinder, a channel without them, a width below diameter_max, wall_mu on a
+    cylinder), or None (colsim.stages.settings.check_geometry, the stages' own check)."""
+    try:
+        check_geometry(config["geometry"], config["channel_length"], config["channel_width"], config["diameter_max"])
+    except ValueError as error:
+        return f"config: {error}"
+    if config["geometry"] == "cylinder" and config["wall_mu"] is not None:
+        return "config: wall_mu is the friction of a channel's walls, but geometry is cylinder (set geometry: channel)"
     return None
 
 

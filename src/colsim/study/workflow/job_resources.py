@@ -37,12 +37,13 @@ def collapse_runtime(run: dict, study_length: tuple[int, float], spheres: float 
     return min(LONGEST_RUNTIME, int(np.ceil(base * larger)))
 
 
-def spheres_of(r0: float, height: float, diameter_range) -> float:
-    """About how many spheres a pour of radius r0 to `height` (lengths) holds: the pack stage's
-    own count of its cloud (imported here, when a job's resources are asked for)."""
-    from colsim.stages.pour_geometry import expected_spheres
+def spheres_of(r0, height: float, diameter_range) -> float:
+    """About how many spheres a pour of radius r0 (or a channel's box, the footprint r0:
+    colsim.stages.pour_geometry.Channel) to `height` (lengths) holds: the pack stage's own count of
+    its cloud (imported here, when a job's resources are asked for)."""
+    from colsim.stages.pour_geometry import Channel, expected_spheres
 
-    return float(expected_spheres(float(r0), float(height), diameter_range))
+    return float(expected_spheres(r0 if isinstance(r0, Channel) else float(r0), float(height), diameter_range))
 
 
 def pack_resources(spheres: float) -> dict:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import json
 
-from ...stages.settings import STAGES, SOLVING_STAGES, SolverSettings, declared, external_name, settings_key
+from ...stages.pour_geometry import Channel
+from ...stages.settings import STAGES, SOLVING_STAGES, SolverSettings, declared, external_name, settings_key, unrecorded
 
 RESULTS = "results"
 PACKING_DIR = RESULTS + "/r0_{r0}/seed_{seed}/pack_{packing}"
@@ -48,7 +49,9 @@ def configured(config, stage: str, given: dict, skip=NOT_IDENTITY) -> tuple[dict
     """The settings of `stage` (and of its solver) as the configuration holds them:
     ({name: value} from the stage's section, {name: value} from the top level), each value as its
     setting's kind has it (integers int, numbers float, lists lists); `given` values (a sweep's,
-    a folder's) come first, in the top level; names in `skip` are left out."""
+    a folder's) come first, in the top level; names in `skip` are left out, and so is a setting
+    added later at its default (:func:`colsim.stages.settings.unrecorded`: a cylinder's geometry, a
+    channel's settings unset), which keeps the keys made before it."""
     section = config.get(SECTIONS[stage]) or {}
     classes = (STAGES[stage], SolverSettings) if stage in SOLVING_STAGES else (STAGES[stage],)
     own, top = {}, {}
@@ -57,11 +60,15 @@ def configured(config, stage: str, given: dict, skip=NOT_IDENTITY) -> tuple[dict
         if name in skip:
             continue
         if name in given:
-            top[name] = _as_kind(item, given[name])
+            value, into = given[name], top
         elif name in section:
-            own[name] = _as_kind(item, section[name])
+            value, into = section[name], own
         elif name in config and ONE_STAGE.get(name, stage) == stage:
-            top[name] = _as_kind(item, config[name])
+            value, into = config[name], top
+        else:
+            continue
+        if not unrecorded(item, value):
+            into[name] = _as_kind(item, value)
     return own, top
 
 
@@ -149,7 +156,9 @@ class StudyPlan:
 
     def __init__(self, config):
         self.config = config
-        self.r0 = float(config["r0"])
+        #: a channel's study: its L0 takes r0's place (the folders' r0_ names it, h0 = a L0)
+        self.channel = config.get("geometry", "cylinder") == "channel"
+        self.r0 = float(config["channel_length"] if self.channel else config["r0"])
         self.aspect_ratios = [float(a) for a in config["aspect_ratios"]]
         self.mu_r = [float(m) for m in config["mu_r"]]
         self.seeds = list(config["seeds"])
@@ -164,6 +173,11 @@ class StudyPlan:
         self.runs = {}       # key -> collapse settings, of every run this study names
 
     # -- packings
+
+    def footprint(self, r0: float):
+        """What a packing of this study named r0 fills: the cylinder of radius r0, or in a channel's
+        study the box of length r0 (L0) and the study's channel_width (colsim.stages.pour_geometry)."""
+        return Channel(float(r0), float(self.config["channel_width"])) if self.channel else float(r0)
 
     def pack_height(self, r0: float, seed: int) -> float:
         """Height (length) the packing of radius r0 and seed `seed` must exceed: pack_aspect_ratio
@@ -186,7 +200,11 @@ class StudyPlan:
         section's settings under "pack" (as the configuration writes them), the others at the top."""
         config = self.config
         not_identity = NOT_IDENTITY if config["pack"]["layer_height"] is not None else ONE_CLOUD_NOT_IDENTITY
-        given = {"r0": r0, "seed": seed, "height": self.pack_height(r0, seed)}
+        given = {"seed": seed, "height": self.pack_height(r0, seed)}
+        if self.channel:   # r0 (L0 here) is the channel's length, and the cylinder's radius has no part
+            given["channel_length"], not_identity = r0, not_identity + ("r0",)
+        else:
+            given["r0"] = r0
         own, top = configured(config, "pack", given, not_identity)
         return {**top, "pack": {key: config["pack"][key] for key in own}}
 
@@ -328,7 +346,8 @@ class StudyPlan:
         """The settings of the packing that {packing} names (wildcards: r0, seed, packing, as in
         its folder); a key this study does not name is an UnknownFolder."""
         settings = self.packings.get(wildcards.packing)
-        if settings is None or fmt(settings["r0"]) != wildcards.r0 or str(settings["seed"]) != wildcards.seed:
+        length = None if settings is None else settings["channel_length" if self.channel else "r0"]
+        if settings is None or fmt(length) != wildcards.r0 or str(settings["seed"]) != wildcards.seed:
             raise UnknownFolder(f"no packing of this study has the folder r0_{wildcards.r0}/seed_{wildcards.seed}/"
                                 f"pack_{wildcards.packing}: its settings.yaml says what made it")
         return settings
