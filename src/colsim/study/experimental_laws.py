@@ -175,10 +175,25 @@ in the sources available, so no law of theirs is encoded."""
 
 
 def laws_for(geometry: str) -> dict:
-    """The value laws that a study of `geometry` ("cylinder" or "channel") is compared with."""
-    if geometry not in ("cylinder", "channel"):
+    """The value laws that a study of `geometry` ("cylinder" or "channel") is compared with; the
+    first of each variable's laws is the reference (:data:`REFERENCE`)."""
+    if geometry not in REFERENCE:
         raise ValueError(f"geometry {geometry!r} is not one of cylinder, channel")
     return CHANNEL_LAWS if geometry == "channel" else LAWS
+
+
+REFERENCE = {"cylinder": "Lube et al. (2004)", "channel": "Lube et al. (2005)"}
+"""The law a study's tables and figures measure errors against, by geometry."""
+
+BREAKPOINTS = {"cylinder": (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK),
+               "channel": (LUBE_2005_LINEAR_BELOW, LUBE_2005_POWER_ABOVE, LUBE_2005_HEIGHT_BREAK,
+                           LAJEUNESSE_2005_RUNOUT_BREAK, LAJEUNESSE_2005_HEIGHT_BREAK)}
+"""Where each geometry's laws change branch (a figure leaves a gap there rather than draw a jump)."""
+
+
+def geometry_of(dataset) -> str:
+    """The geometry a summary or analysis holds: its `geometry` attribute, "cylinder" where absent."""
+    return str(dataset.attrs.get("geometry", "cylinder"))
 
 
 def power_law_exponent(a, values) -> float:
