@@ -79,3 +79,40 @@ def test_the_channel_law_figure_draws_the_channel_laws(tmp_path):
     x, y = (np.asarray(v, dtype=float) for v in lube.get_data())
     gap = (x > 1.8) & (x < 2.8)
     assert gap.any() and np.isnan(y[gap]).all()   # nothing drawn between Lube's two regimes
+
+
+def _channel_run(a: float, mu_r: float, seed: int):
+    """(analysis, trajectory) of a channel run shaped as colsim writes them, with no r0 attribute:
+    a deposit falling from H0 at the back wall to the floor at 3 L0, grains spread in 0 < x < L0."""
+    length, h0 = CHANNEL["channel_length"], a * CHANNEL["channel_length"]
+    attrs = {"aspect_ratio": a, "mu_r": mu_r, "seed": seed, "h0": h0, "mu": 0.577, **CHANNEL}
+    bins = np.arange(0.25, 3 * length, 0.5)
+    analysis = xr.Dataset({"deposit_height": ("radial_bin", np.clip(h0 - h0 * bins / (3 * length), 0, None)),
+                           "front_position": ("time", np.linspace(0, 2, 5)),
+                           "scaled_time": ("time", np.linspace(0, 4, 5))},
+                          coords={"radial_bin": bins}, attrs=attrs)
+    rng = np.random.default_rng(seed)
+    start = np.c_[rng.uniform(0.25, length, 40), rng.uniform(-0.75, 0.75, 40), rng.uniform(0.25, h0, 40)]
+    end = start * [2.0, 1.0, 0.5]
+    trajectory = xr.Dataset({"position": (("time", "particle", "xyz"), np.stack([start, end])),
+                             "radius": ("particle", np.full(40, 0.2)),
+                             "initial_height": ("particle", start[:, 2]),
+                             "scaled_time": ("time", [0.0, 4.0])}, attrs=attrs)
+    return analysis, trajectory
+
+
+def test_the_single_run_figures_measure_a_channel_along_it_in_box_lengths(tmp_path):
+    """The deposit profile and the side view of channel runs (no r0) scale by L0 and say so; the side
+    view starts at the back wall, x = 0."""
+    from colsim.study.figures import runs as run_figures
+
+    analysis, trajectory = _channel_run(2.0, 0.12, 1)
+    KEPT.clear()
+    with matplotlib.rc_context({"figure.hooks": ["test_channel_study:keep_figure"]}):
+        run_figures.deposit_profile_figure([analysis], tmp_path / "profiles.png")
+        run_figures.side_view_figure([trajectory], tmp_path / "side.png")
+    profile, side = KEPT
+    assert profile.axes[0].get_xlabel() == "x / L0" and profile.axes[0].get_ylabel() == "deposit height / L0"
+    x, y = profile.axes[0].get_lines()[0].get_data()
+    assert y[0] == pytest.approx(2.0, rel=0.05)    # H0/L0 = a = 2 at the back wall
+    assert side.axes[0].get_xlim()[0] == 0.0 and side.axes[1].get_xlabel() == "x / L0"
