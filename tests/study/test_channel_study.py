@@ -61,6 +61,8 @@ def test_the_channel_table_is_against_the_2005_laws():
     assert "| 1 | 1.000 | 0.000 | 1.000 | +0 % | 1.200 | 0.000 | 1.200 | +0 % | 1.000 | +0 % | 1.800 | -33 % |" in text
     row = next(line for line in text.splitlines() if line.startswith("| 2 |"))
     assert row.split(" | ")[7:9] == ["-", "-"]   # Lube 2005's run-out and its error at a = 2: none
+    assert "### Exponents against the channel laws" in text
+    assert "Exponents" not in lube_markdown(collect_analyses([_analysis(1.0, 1, r0=3.0)]))
     rst = lube_rst(_channel_summary(), 0.12)
     assert "against Lube et al. (2005)" in rst and "2004" not in rst
 

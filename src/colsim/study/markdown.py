@@ -121,6 +121,10 @@ def lube_markdown(summary) -> str:
                   runout_measures_markdown(summary)]
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    if geometry_of(summary) == "channel":
+        from .channel import exponents_markdown
+
+        lines += ["### Exponents against the channel laws (fitted over every seed)", "", exponents_markdown(summary)]
     return "\n".join(lines)
 
 
