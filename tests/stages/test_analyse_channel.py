@@ -69,7 +69,8 @@ def test_the_back_wall_band_is_one_mean_diameter_from_the_wall():
     """Two towers joined on the floor: one with its back edge exactly one mean diameter from the wall
     (x - R = D: inside the band), one 1e-9 beyond it (outside). All grains have the same radius, so the mean diameter is D."""
     tower = lambda x, n: [[x, 0, (2 * k + 1) * R] for k in range(n)]
-    inside = ParticleState.at_rest(np.array(tower(R + D, 3) + [[R + 2 * D, 0, R]], float), np.full(4, R))
+    inside = ParticleState.at_rest(np.array(tower(R + D, 3) + [[R + 2 * D, 0, R]], float),
+                                   np.full(4, R))
     assert analysis.height_at_back_wall(inside, np.ones(4, bool)) == pytest.approx(6 * R, abs=EXACT)
     outside = ParticleState.at_rest(np.array(tower(R + D + 1e-9, 3), float), np.full(3, R))
     assert analysis.height_at_back_wall(outside, np.ones(3, bool)) == 0.0

@@ -106,8 +106,9 @@ def lube_2005_runout(a):
     1.2 a for a < 1.8, 1.9 a^(2/3) for 2.8 <= a < 10; NaN in between, where the two regimes meet
     and no law is given.
 
-    Source: the paper's abstract (read) says the collapse "divides in two main flow regimes at
-    a ~ 1.8"; its full text was not available. The coefficients and the break points 1.8 and 2.8
+    Source: the paper's abstract (read as the bibliography of Kumar's thesis, Cambridge 2015,
+    reproduces it) says the collapse "divides in two main flow regimes at a ~ 1.8"; its full text
+    was not available. The coefficients and the break points 1.8 and 2.8
     are those that Lagrée, Staron & Popinet (2011), J. Fluid Mech. 686, 378, Eq. (3.1), quote for
     it (lambda_1 = 1.2, lambda_2 = 1.9, exponent 2/3, 1.8 <= a0 <= 2.8), as reproduced in a public
     validation page; Lagrée et al.'s own text was not read either. Other secondary sources
@@ -132,8 +133,9 @@ def lajeunesse_2005_runout(a):
     """(L_inf - L0) / L0 of Lajeunesse, Monnier & Homsy (2005), Phys. Fluids 17, 103302
     (rectangular channel, glass beads): 1.8 a for a < 3, 2.3 a^(2/3) for a >= 3.
 
-    Source: the paper's abstract (read) says the run-out and height "exhibit simple power laws whose
-    exponents depend on a and on the flow geometry", without numbers. The coefficients and the
+    Source: the paper's abstract (read as Kumar's thesis bibliography reproduces it) says the
+    run-out and height "exhibit simple power laws whose exponents depend on a and on the flow
+    geometry", without numbers. The coefficients and the
     break a0 = 3 are those quoted from Lagrée, Staron & Popinet (2011), Eq. (3.1), in a public
     validation page (lambda_1 = 1.8, lambda_2 = 2.3). As encoded the law steps down at a = 3 (from
     5.4 to 4.78), as a fit of each regime separately would. Kumar (2015) attributes 1.2 a and
@@ -162,16 +164,17 @@ BALMFORTH_KERSWELL = {
     "wide": {"runout_over_r0": (0.9, 0.1), "h_inf_over_r0": (0.4, None)},
     "narrow": {"runout_over_r0": (0.65, 0.05), "h_inf_over_r0": (0.5, None)},
 }
-"""Balmforth & Kerswell (2005), J. Fluid Mech. 538, 399, abstract (read): the exponents, with the
-authors' uncertainty where they give one, of (l_inf - L)/L ~ a^0.9+-0.1 (wide channels) and
-a^0.65+-0.05 (narrow slots; also l_inf/L ~ a^0.55+-0.05), and of H/h_inf ~ a^0.6 (wide) and a^0.5
-(narrow), that is h_inf/L ~ a^0.4 and a^0.5. The authors give no coefficient: "the numerical
-constant of proportionality ... shows clear material dependence"; so these are exponents to
-compare fitted slopes with, not values. Widths: the abstract says "relatively wide channels" and
-"much narrower slots"; Kumar (2015, chapter 2) gives about 200 and 10 grain diameters, not checked
-against the primary text. Lacaze, Phillips & Kerswell (2008), Phys. Fluids 20(6), one grain
-deep (abstract read): the run-out follows a power law of a; no exponent or coefficient was found
-in the sources available, so no law of theirs is encoded."""
+"""Balmforth & Kerswell (2005), J. Fluid Mech. 538, 399, abstract (read on a copy of the paper's
+first page): the exponents, with the authors' uncertainty where they give one, of
+(l_inf - L)/L ~ a^0.9+-0.1 (wide channels) and a^0.65+-0.05 (narrow slots; also
+l_inf/L ~ a^0.55+-0.05), and of H/h_inf ~ a^0.6 (wide) and a^0.5 (narrow), that is
+h_inf/L ~ a^0.4 and a^0.5. The authors give no coefficient: "the numerical constant of
+proportionality ... shows clear material dependence"; so these are exponents to compare fitted
+slopes with, not values. Widths: the abstract says "relatively wide channels" and "much narrower
+slots"; Kumar (2015, chapter 2) gives about 200 and 10 grain diameters, not checked against the
+primary text. Lacaze, Phillips & Kerswell (2008), Phys. Fluids 20(6), one grain deep (abstract
+read in Kumar's thesis bibliography): the run-out follows a power law of a; no exponent or
+coefficient was found in the sources available, so no law of theirs is encoded."""
 
 
 def laws_for(geometry: str) -> dict:
