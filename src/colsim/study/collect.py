@@ -172,6 +172,7 @@ def collect_analyses(analyses) -> xr.Dataset:
     if not analyses:
         raise ValueError("no analysis files to collect")
     keys = [(a, m, int(s)) for a, m, s in check_runs(analyses)]
+    column = _geometry_attributes(analyses)
     check_same_settings(analyses)
     ratios, mu_rs, seeds = (sorted(set(values)) for values in zip(*keys))
     dims = ("aspect_ratio", "mu_r", "seed")
@@ -207,12 +208,33 @@ def collect_analyses(analyses) -> xr.Dataset:
         "seed": ("seed", seeds, {"units": "1", "long_name": "packing seed"}),
     }
     first = analyses[0].attrs
-    attrs = {"r0": float(first["r0"]), "mu": float(first["mu"]),
+    attrs = {**column, "mu": float(first["mu"]),
              "friction_law": str(first.get("friction_law", "associated")),
              "rolling_lever": str(first.get("rolling_lever", LEVER_OF_OLDER_FILES)),
              "solver_backends": json.dumps(solver_backends(analyses)),
              "run_configs": json.dumps([json.loads(a.attrs.get("config", "{}")) for a in analyses])}
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+GEOMETRY_ATTRIBUTES = {"cylinder": ("r0",), "channel": ("channel_length", "channel_width", "wall_mu")}
+"""The attributes of a run's column that its summary carries, by geometry (a cylinder's radius; a
+channel's box length L0, width and wall friction)."""
+
+
+def _geometry_attributes(analyses) -> dict:
+    """The runs' geometry ("cylinder" where an analysis has no attribute, as every file written
+    before channels) and its GEOMETRY_ATTRIBUTES, from the first run; ValueError where the runs
+    hold more than one geometry (a study compares one with its own laws)."""
+    geometries = {str(a.attrs.get("geometry", "cylinder")) for a in analyses}
+    if len(geometries) > 1:
+        raise ValueError(f"the runs hold more than one geometry ({', '.join(sorted(geometries))}); "
+                         "a summary holds one")
+    geometry = geometries.pop()
+    if geometry not in GEOMETRY_ATTRIBUTES:
+        raise ValueError(f"geometry {geometry[:60]!r} is not one of {', '.join(GEOMETRY_ATTRIBUTES)}")
+    first = analyses[0].attrs
+    attrs = {name: float(first[name]) for name in GEOMETRY_ATTRIBUTES[geometry]}
+    return attrs | ({"geometry": geometry} if geometry == "channel" else {})
 
 
 def solver_backends(analyses) -> dict:

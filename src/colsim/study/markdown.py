@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .collect import FLAGS, MAIN_MASS_SHARE, counted, rest_energy_of, run_status
-from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
+from .experimental_laws import REFERENCE, geometry_of, laws_for
 
 
 def _sd(values) -> float:
@@ -43,11 +43,11 @@ def runout_measures_markdown(summary) -> str:
             part = summary.sel(mu_r=m, aspect_ratio=a)
             if not _has_runs(part):
                 continue
-            law = lube_runout(a)
+            law = float(_reference(summary, "runout_over_r0")(a))
             values = list(np.nanmean(part.runout_over_r0_by_tolerance.values, axis=0)) + list(
                 np.nanmean(part.mass_front_over_r0.values, axis=0))
             cells = [f"{v:.2f} ({_error(v, law)})" for v in values]
-            lines.append(f"| {float(m):g} | {a:g} | {law:.2f} | " + " | ".join(cells) + " |")
+            lines.append(f"| {float(m):g} | {a:g} | {_law_cell(law, 2)} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -61,11 +61,26 @@ def _flag_cell(flags, seeds) -> str:
     return "; ".join(cells)
 
 
+def _reference(summary, variable: str):
+    """The law of :data:`REFERENCE` for the summary's geometry that predicts `variable`."""
+    return laws_for(geometry_of(summary))[variable][REFERENCE[geometry_of(summary)]]
+
+
+def _other(summary, variable: str):
+    """The second law of the summary's geometry for `variable` (Lajeunesse et al.'s)."""
+    return [law for name, law in laws_for(geometry_of(summary))[variable].items()
+            if name != REFERENCE[geometry_of(summary)]][0]
+
+
 def lube_markdown(summary) -> str:
     """Markdown table: mean over seeds of h_inf/r0 and the run-out against Lube et al., per mu_r and
     a, with the error against Lajeunesse et al. beside (its height law as the paper prints it), and a
-    flags column naming the seeds whose runs :func:`run_status` flags (explained under the tables)."""
+    flags column naming the seeds whose runs :func:`run_status` flags (explained under the tables).
+    The laws are the geometry's (:func:`colsim.study.experimental_laws.laws_for`): 2004's for a
+    cylinder, 2005's for a channel, where r0 stands for the box length L0."""
     lines = []
+    height, runout = _reference(summary, "h_inf_over_r0"), _reference(summary, "runout_over_r0")
+    other_height, other_runout = _other(summary, "h_inf_over_r0"), _other(summary, "runout_over_r0")
     flags = run_status(summary)
     seed_values = summary.seed.values if "seed" in summary.coords else [0]
     for m in summary.mu_r.values:
@@ -84,11 +99,11 @@ def lube_markdown(summary) -> str:
             r = part.runout_over_r0.sel(aspect_ratio=a).values
             h_mean, r_mean = np.nanmean(h), np.nanmean(r)
             cells = [f"{a:g}"]
-            for mean, values, law in ((h_mean, h, lube_height(a)), (r_mean, r, lube_runout(a))):
-                cells += [f"{mean:.3f}", f"{np.nanmax(values) - np.nanmin(values):.3f}", f"{law:.3f}",
+            for mean, values, law in ((h_mean, h, height(a)), (r_mean, r, runout(a))):
+                cells += [f"{mean:.3f}", f"{np.nanmax(values) - np.nanmin(values):.3f}", _law_cell(law),
                           _error(mean, law)]
-            for mean, law in ((h_mean, lajeunesse_height(a)), (r_mean, lajeunesse_runout(a))):
-                cells += [f"{law:.3f}", _error(mean, law)]
+            for mean, law in ((h_mean, other_height(a)), (r_mean, other_runout(a))):
+                cells += [_law_cell(law), _error(mean, law)]
             cells.append(_flag_cell({name: flag.sel(mu_r=m, aspect_ratio=a).values for name, flag in flags.items()},
                                     seed_values))
             lines.append("| " + " | ".join(cells) + " |")
@@ -106,6 +121,10 @@ def lube_markdown(summary) -> str:
                   runout_measures_markdown(summary)]
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
+    if geometry_of(summary) == "channel":
+        from .channel import exponents_markdown
+
+        lines += ["### Exponents against the channel laws (fitted over every seed)", "", exponents_markdown(summary)]
     return "\n".join(lines)
 
 
@@ -148,17 +167,18 @@ def lube_rst(summary, mu_r: float) -> str:
     flags = run_status(summary)
     seed_values = summary.seed.values if "seed" in summary.coords else [0]
     rows = [["a", "h_inf/r0", "Lube", "error", "(r_inf - r0)/r0", "Lube", "error", "flags"]]
+    height, runout = _reference(summary, "h_inf_over_r0"), _reference(summary, "runout_over_r0")
     for a in part.aspect_ratio.values:
         if not _has_runs(part.sel(aspect_ratio=a)):
             continue
         h = float(np.nanmean(part.h_inf_over_r0.sel(aspect_ratio=a).values))
         r = float(np.nanmean(part.runout_over_r0.sel(aspect_ratio=a).values))
         flag = _flag_cell({name: f.sel(mu_r=m, aspect_ratio=a).values for name, f in flags.items()}, seed_values)
-        rows.append([f"{a:g}", f"{h:.3f}", f"{lube_height(a):.3f}", _error(h, lube_height(a)),
-                     f"{r:.3f}", f"{lube_runout(a):.3f}", _error(r, lube_runout(a)), flag or "-"])
+        rows.append([f"{a:g}", f"{h:.3f}", _law_cell(height(a)), _error(h, height(a)),
+                     f"{r:.3f}", _law_cell(runout(a)), _error(r, runout(a)), flag or "-"])
     caveat = size_caveat(float(summary.attrs["r0"])) if "r0" in summary.attrs else ""
     lines = ([caveat, ""] if caveat else []) + [
-        f".. list-table:: mu_r = {float(m):g}, mean over seeds, against Lube et al. (2004)",
+        f".. list-table:: mu_r = {float(m):g}, mean over seeds, against {REFERENCE[geometry_of(summary)]}",
         "   :header-rows: 1", ""]
     for row in rows:
         lines += [f"   * - {row[0]}"] + [f"     - {cell}" for cell in row[1:]]
@@ -173,8 +193,16 @@ def _has_runs(part) -> bool:
     return bool(np.isfinite(part.h_inf_over_r0.values).any())
 
 
+def _law_cell(law: float, digits: int = 3) -> str:
+    """A law's value for a table, "-" where the law gives none."""
+    return f"{law:.{digits}f}" if np.isfinite(law) else "-"
+
+
 def _error(value: float, law: float) -> str:
-    """The relative error of value against law, in percent, signed."""
+    """The relative error of value against law, in percent, signed; "-" where the law gives no value
+    (outside its range of a, or between the regimes of Lube et al. 2005)."""
+    if not np.isfinite(law):
+        return "-"
     return f"{100 * (value - law) / law:+.0f} %"
 
 
@@ -194,7 +222,8 @@ def friction_law_markdown(comparison) -> str:
                 seeds = int(np.isfinite(h).sum())
                 if seeds == 0:
                     continue
-                h_law, r_law = lube_height(a), lube_runout(a)
+                h_law = float(_reference(comparison, "h_inf_over_r0")(a))
+                r_law = float(_reference(comparison, "runout_over_r0")(a))
                 share = np.nanmean(part.n_main_mass.values / part.n_particles.values)
                 programs = (np.nanmean(part.cone_programs_per_step.values)
                             if "cone_programs_per_step" in part else np.nan)

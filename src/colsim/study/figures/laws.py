@@ -10,21 +10,15 @@ from pathlib import Path
 import numpy as np
 
 from ..collect import FLAGS
-from ..experimental_laws import LAJEUNESSE_BREAK, LAWS, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK, lube_height, lube_runout
+from ..experimental_laws import BREAKPOINTS, REFERENCE, geometry_of, laws_for
 from .style import (MARKERS, QUANTITY_LABELS, _bar_kind, _bar_note, _bars, _colours, _draw_flags, _flag_handles,
                     _flags_of, _label, _pyplot, _save)
-
-
-BREAKPOINTS = (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BREAK)
 
 
 LAW_STYLES = ("-", "--", ":", "-.")
 
 
-LUBE = "Lube et al. (2004)"
-
-
-LUBE_LAWS = {"h_inf_over_r0": lube_height, "runout_over_r0": lube_runout}
+ASPECT_RATIO_LABELS = {"cylinder": "aspect ratio a = h0/r0", "channel": "aspect ratio a = H0/L0"}
 
 
 SQUEEZE = 2.0
@@ -33,16 +27,17 @@ it leaves the frame (Lajeunesse's height law as printed, 0.74 a, reaches 4.1 at 
 heights are about 1)."""
 
 
-def _law_abscissa(end: float):
-    """Values of a from 0 to `end`, with NaN at the laws' breakpoints so the jumps are not drawn as lines."""
-    edges = sorted({0.0, end, *(b for b in BREAKPOINTS if b < end)})
+def _law_abscissa(end: float, geometry: str = "cylinder"):
+    """Values of a from 0 to `end`, with NaN at the `geometry`'s laws' breakpoints so the jumps are
+    not drawn as lines."""
+    edges = sorted({0.0, end, *(b for b in BREAKPOINTS[geometry] if b < end)})
     pieces = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         pieces += [np.linspace(lo, hi - 1e-9 * (hi < end), 100), [np.nan]]
     return np.concatenate(pieces[:-1])
 
 
-def _against_aspect_ratio(ax, ratios, span, series, outside: bool = False) -> float:
+def _against_aspect_ratio(ax, ratios, span, series, outside: bool = False, geometry: str = "cylinder") -> float:
     """Draw `series`, [(label, values (aspect_ratio, seed), flags {flag: bool (aspect_ratio,)})],
     against a on `ax`: the mean over seeds with error bars (the standard error or the range, as
     :func:`_bar_kind` chooses for all of them; the legend's title says which), side by side so the
@@ -60,7 +55,7 @@ def _against_aspect_ratio(ax, ratios, span, series, outside: bool = False) -> fl
         if np.isfinite(mean).any():
             top = np.fmax(top, np.nanmax(mean + high))
             bottom = min(bottom, float(np.nanmin(mean - low)))
-    ax.set_xlabel("aspect ratio a = h0/r0")
+    ax.set_xlabel(ASPECT_RATIO_LABELS[geometry])
     ax.set_xlim(0, span[-1])
     ax.set_ylim(bottom=0.0 if bottom >= 0 else 1.1 * bottom)   # a run-out below 0: a main mass inside r0
     ax.grid(alpha=0.3)
@@ -72,11 +67,11 @@ def _against_aspect_ratio(ax, ratios, span, series, outside: bool = False) -> fl
     return float(top)
 
 
-def _fit_laws(ax, span, laws: dict, top: float, variable: str) -> None:
-    """Set the top of `ax` to hold the data (up to `top`) and Lube's law; a law rising above SQUEEZE
-    times that is left outside the frame, with a note under the axes saying from where."""
+def _fit_laws(ax, span, laws: dict, top: float, variable: str, reference: str = REFERENCE["cylinder"]) -> None:
+    """Set the top of `ax` to hold the data (up to `top`) and the `reference` law; a law rising
+    above SQUEEZE times that is left outside the frame, with a note under the axes saying from where."""
     values = {name: np.asarray(law(span), dtype=float) for name, law in laws.items()}
-    base = np.nanmax([top, *(np.nanmax(v, initial=0.0) for n, v in values.items() if n == LUBE)])
+    base = np.nanmax([top, *(np.nanmax(v, initial=0.0) for n, v in values.items() if n == reference)])
     if not np.isfinite(base) or base <= 0:
         return
     frame = base
@@ -96,24 +91,37 @@ def _fit_laws(ax, span, laws: dict, top: float, variable: str) -> None:
 
 
 def law_figure(summary, variable: str, path: Path) -> Path:
-    """`variable` (h_inf_over_r0 or runout_over_r0) against a: markers per mu_r, laws as curves."""
+    """`variable` (h_inf_over_r0 or runout_over_r0) against a: markers per mu_r, the laws of the
+    summary's geometry as curves (a channel's: Lube et al. 2005 and Lajeunesse et al. 2005, r0
+    standing for L0)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    geometry = geometry_of(summary)
+    laws = laws_for(geometry)[variable]
     ratios = summary["aspect_ratio"].values
-    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0))
-    for (name, law), style in zip(LAWS[variable].items(), LAW_STYLES):
+    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0), geometry)
+    for (name, law), style in zip(laws.items(), LAW_STYLES):
         ax.plot(span, law(span), style, color="0.35", lw=1.2, label=name)
     data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
     flags = {name: flag.transpose("aspect_ratio", "mu_r").values for name, flag in _flags_of(summary).items()}
     top = _against_aspect_ratio(ax, ratios, span,
                                 [(f"colsim, $\\mu_r$ = {mu_r:g}", data.isel(mu_r=k).values,
                                   {name: flag[:, k] for name, flag in flags.items()})
-                                 for k, mu_r in enumerate(summary["mu_r"].values)], outside=True)
-    _fit_laws(ax, span, LAWS[variable], top, variable)
+                                 for k, mu_r in enumerate(summary["mu_r"].values)], outside=True,
+                                geometry=geometry)
+    _fit_laws(ax, span, laws, top, variable, REFERENCE[geometry])
     ax.set_ylabel(_label(summary[variable], variable))
-    ax.set_title(f"r0 = {summary.attrs.get('r0', float('nan')):g}, mu = {summary.attrs.get('mu', float('nan')):g}, "
+    ax.set_title(f"{_size(summary)}, mu = {summary.attrs.get('mu', float('nan')):g}, "
                  f"{summary.sizes['seed']} seed(s)", fontsize=9)
     return _save(fig, path)
+
+
+def _size(summary) -> str:
+    """The column's size for a title: "r0 = 3", or a channel's "L0 = 6, W = 2"."""
+    if geometry_of(summary) == "channel":
+        return (f"L0 = {summary.attrs.get('channel_length', float('nan')):g}, "
+                f"W = {summary.attrs.get('channel_width', float('nan')):g}")
+    return f"r0 = {summary.attrs.get('r0', float('nan')):g}"
 
 
 def friction_law_figure(comparison, path: Path) -> Path:
@@ -121,20 +129,22 @@ def friction_law_figure(comparison, path: Path) -> Path:
     :func:`_against_aspect_ratio`), at the comparison's first mu_r, with Lube's laws drawn."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
+    geometry = geometry_of(comparison)
+    reference = REFERENCE[geometry]
     ratios = comparison["aspect_ratio"].values
-    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0))
+    span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0), geometry)
     mu_r = float(comparison["mu_r"].values[0])
     flags = {name: flag.sel(mu_r=mu_r).transpose("friction_law", "aspect_ratio")
              for name, flag in _flags_of(comparison).items()}
     for ax, variable in zip(axes, ("h_inf_over_r0", "runout_over_r0")):
-        ax.plot(span, LAWS[variable][LUBE](span), "-", color="0.35", lw=1.2, label=LUBE)
+        ax.plot(span, laws_for(geometry)[variable][reference](span), "-", color="0.35", lw=1.2, label=reference)
         data = comparison[variable].sel(mu_r=mu_r).transpose("friction_law", "aspect_ratio", "seed")
         _against_aspect_ratio(ax, ratios, span,
                               [(f"colsim, {name}", data.sel(friction_law=name).values,
                                 {flag: value.sel(friction_law=name).values for flag, value in flags.items()})
-                               for name in comparison["friction_law"].values])
+                               for name in comparison["friction_law"].values], geometry=geometry)
         ax.set_ylabel(_label(comparison[variable], variable))
-    fig.suptitle(f"friction laws, r0 = {comparison.attrs.get('r0', float('nan')):g}, mu_r = {mu_r:g}", fontsize=10)
+    fig.suptitle(f"friction laws, {_size(comparison)}, mu_r = {mu_r:g}", fontsize=10)
     return _save(fig, path)
 
 
@@ -146,6 +156,8 @@ def mu_r_figure(summary, path: Path) -> Path:
 
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    geometry = geometry_of(summary)
+    reference = REFERENCE[geometry]
     mu_r = summary["mu_r"].values
     ratios = summary["aspect_ratio"].values
     colours = _colours(len(ratios))
@@ -155,9 +167,9 @@ def mu_r_figure(summary, path: Path) -> Path:
     for ax, variable in zip(axes, variables):
         data = summary[variable].transpose("aspect_ratio", "mu_r", "seed")
         for k, a in enumerate(ratios):
-            law = float(LUBE_LAWS[variable](a))
+            law = float(laws_for(geometry)[variable][reference](a))
             if np.isfinite(law):
-                ax.axhline(law, color=colours[k], ls="--", lw=1.0, label=f"{LUBE}, a = {a:g}")
+                ax.axhline(law, color=colours[k], ls="--", lw=1.0, label=f"{reference}, a = {a:g}")
             mean, low, high = _bars(data.isel(aspect_ratio=k).values, kind)
             ax.errorbar(mu_r, mean, yerr=[low, high], fmt="o-", color=colours[k], ms=5, capsize=3, label=f"a = {a:g}")
             _draw_flags(ax, mu_r, mean, {name: flag[k] for name, flag in flags.items()}, colours[k], "o", ms=5)
@@ -167,7 +179,7 @@ def mu_r_figure(summary, path: Path) -> Path:
         ax.grid(alpha=0.3)
     handles = [Line2D([], [], color=colours[k], marker="o", ms=5, label=f"a = {a:g}") for k, a in enumerate(ratios)]
     handles += [Line2D([], [], color="0.3", marker="o", ms=5, label="colsim"),
-                Line2D([], [], color="0.3", ls="--", label=f"{LUBE}\n(independent of $\\mu_r$)")]
+                Line2D([], [], color="0.3", ls="--", label=f"{reference}\n(independent of $\\mu_r$)")]
     handles += _flag_handles(flags)
     fig.legend(handles=handles, loc="outside right upper", fontsize=8, title=_bar_note(kind, fewest, most),
                title_fontsize=8)

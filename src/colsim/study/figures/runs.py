@@ -11,9 +11,15 @@ from pathlib import Path
 import numpy as np
 
 from ...io.netcdf import AT_REST_FLAGS
-from ...stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE
+from ...stages.analyse import FRONT_MASS_SHARE, FRONT_MASS_VARIABLE, column_length, geometry_of
 from ..collect import FLAGS, one_run, run_status
 from .style import _by_key, _colours, _empty, _grid, _pyplot, _save
+
+
+def _axis_names(run) -> tuple[str, str]:
+    """(the run's length scale, its distance along the spread): ("r0", "r") for a cylinder, ("L0",
+    "x") for a channel, whose distances run from the back wall."""
+    return ("L0", "x") if geometry_of(run.attrs) == "channel" else ("r0", "r")
 
 
 def _bin_edges(centres) -> np.ndarray:
@@ -25,9 +31,10 @@ def _bin_edges(centres) -> np.ndarray:
 
 
 def deposit_profile_figure(analyses, path: Path) -> Path:
-    """Deposit height / r0 against r / r0: one panel per a, one line per mu_r, the lowest seed; each
-    bin drawn over its whole width, from the first (at the axis) to the last; a run that
-    :func:`colsim.study.collect.run_status` flags is dashed and its legend entry says why."""
+    """Deposit height / r0 against r / r0 (a channel's: / L0 against x / L0 from the back wall): one
+    panel per a, one line per mu_r, the lowest seed; each bin drawn over its whole width, from the
+    first (at the axis) to the last; a run that :func:`colsim.study.collect.run_status` flags is
+    dashed and its legend entry says why."""
     plt = _pyplot()
     runs = _by_key(analyses)
     ratios = sorted({a for a, _, _ in runs}) or [np.nan]
@@ -39,7 +46,7 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
             _empty(ax, "no analyses")
             continue
         for m, run in chosen.items():
-            r0 = float(run.attrs["r0"])
+            r0 = column_length(run.attrs)
             edges = _bin_edges(run["radial_bin"].values)
             height = run["deposit_height"].values
             flagged = [FLAGS[name] for name, flag in run_status(one_run(run)).items() if flag]
@@ -48,8 +55,9 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
         ax.axhline(a, color="0.6", lw=0.8, ls=":")
         ax.axvline(1.0, color="0.6", lw=0.8, ls=":")
         ax.set_title(f"a = {a:g}", fontsize=9)
-        ax.set_xlabel("r / r0")
-        ax.set_ylabel("deposit height / r0")
+        scale, along = _axis_names(next(iter(chosen.values())))
+        ax.set_xlabel(f"{along} / {scale}")
+        ax.set_ylabel(f"deposit height / {scale}")
         ax.set_xlim(left=0)
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
@@ -58,8 +66,9 @@ def deposit_profile_figure(analyses, path: Path) -> Path:
 
 
 def _slab(run, frame):
-    """(x/r0, z/r0, R/r0, initial height/h0) of the particles with |y| < d_max in one frame."""
-    r0, h0 = float(run.attrs["r0"]), float(run.attrs["h0"])
+    """(x/r0, z/r0, R/r0, initial height/h0) of the particles with |y| < d_max in one frame (r0: a
+    channel's L0)."""
+    r0, h0 = column_length(run.attrs), float(run.attrs["h0"])
     radius = run["radius"].values
     position = run["position"].isel(time=frame).values
     inside = np.abs(position[:, 1]) < 2.0 * float(radius.max())
@@ -105,15 +114,15 @@ def side_view_figure(trajectories, path: Path) -> Path:
             collection.set_array(colour)
             collection.set_clim(0, 1)
             ax.add_collection(collection)
-            ax.set_xlim(-limit, limit)
+            ax.set_xlim(0 if geometry_of(run.attrs) == "channel" else -limit, limit)
             ax.set_ylim(0, top)
             ax.set_aspect("equal")
             time = float(run["scaled_time"].values[frame])
             ax.set_title(f"a = {a:g}, $\\mu_r$ = {m:g}, seed {seed}: {when}, t/$\\sqrt{{h_0/g}}$ = {time:.2f}",
                          fontsize=8)
-            ax.set_ylabel("z / r0")
+            ax.set_ylabel(f"z / {_axis_names(run)[0]}")
     for ax in axes[-1]:
-        ax.set_xlabel("x / r0")
+        ax.set_xlabel(f"x / {_axis_names(runs[-1][1])[0]}")
     fig.colorbar(collection, ax=axes, shrink=0.8, label="initial height / h0")
     return _save(fig, path)
 

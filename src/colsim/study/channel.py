@@ -1,0 +1,108 @@
+"""What a channel study adds to a cylinder's tables: the exponents of its run-outs and heights
+against a, beside those of the channel laws (Balmforth & Kerswell's, which give exponents only,
+and the 2/3 of Lube et al. and Lajeunesse et al. 2005), and the convergence of the run-outs in the
+box length L0 (the relative spread between the two largest L0).
+
+Both take summaries as :func:`colsim.study.collect.collect_analyses` makes them, one per box length,
+with r0 standing for L0 in the variables' names (colsim.stages.analyse)."""
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+from .experimental_laws import (BALMFORTH_KERSWELL, LUBE_2005_HEIGHT_BREAK, LUBE_2005_POWER_ABOVE,
+                                power_law_exponent)
+
+#: the aspect ratios an exponent is fitted over, from Lube et al.'s (2005) power-law regimes: the
+#: run-out's from a = 2.8, the height's from a = 1.15 (below them both grow as a)
+FIT_FROM = {"runout_over_r0": LUBE_2005_POWER_ABOVE, "h_inf_over_r0": LUBE_2005_HEIGHT_BREAK}
+#: the exponent of Lube et al.'s and Lajeunesse et al.'s (2005) run-out in its power-law regime
+TWO_THIRDS = 2.0 / 3.0
+#: the goal for the run-outs' spread between the two largest box lengths
+CONVERGED_SPREAD = 0.02
+
+
+def fitted_exponent(summary, variable: str, mu_r: float, a_min: float | None = None) -> tuple[float, int]:
+    """(b, number of aspect ratios) of `variable` ~ c a^b fitted over every run (each seed a point)
+    at `mu_r` with a >= a_min (default FIT_FROM[variable]); NaN where fewer than two a have runs."""
+    a_min = FIT_FROM[variable] if a_min is None else a_min
+    part = summary[variable].sel(mu_r=mu_r).transpose("aspect_ratio", "seed")
+    ratios = part.aspect_ratio.values
+    keep = ratios >= a_min
+    values = part.values[keep]
+    a = np.broadcast_to(ratios[keep][:, None], values.shape)
+    used = int(np.isfinite(values).any(axis=-1).sum()) if values.size else 0
+    return power_law_exponent(a, values), used
+
+
+def exponents_markdown(summary) -> str:
+    """Markdown table per mu_r: the fitted exponents of the run-out and of the height (over
+    FIT_FROM's aspect ratios) beside Balmforth & Kerswell's for narrow slots and wide channels and,
+    for the run-out, Lube's and Lajeunesse's 2/3."""
+    narrow, wide = BALMFORTH_KERSWELL["narrow"], BALMFORTH_KERSWELL["wide"]
+    lines = ["| mu_r | run-out exponent (a >= {r:g}; a values) | B&K narrow | B&K wide | Lube, Lajeunesse 2005 "
+             "| height exponent (a >= {h:g}; a values) | B&K narrow | B&K wide |".format(
+                 r=FIT_FROM["runout_over_r0"], h=FIT_FROM["h_inf_over_r0"]),
+             "|---|---|---|---|---|---|---|---|"]
+    for m in summary.mu_r.values:
+        runout, n_runout = fitted_exponent(summary, "runout_over_r0", float(m))
+        height, n_height = fitted_exponent(summary, "h_inf_over_r0", float(m))
+        lines.append(f"| {float(m):g} | {_exponent(runout, n_runout)} | {_law(narrow['runout_over_r0'])} | "
+                     f"{_law(wide['runout_over_r0'])} | {TWO_THIRDS:.2f} | {_exponent(height, n_height)} | "
+                     f"{_law(narrow['h_inf_over_r0'])} | {_law(wide['h_inf_over_r0'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def _exponent(value: float, count: int) -> str:
+    return f"{value:.2f} ({count})" if np.isfinite(value) else f"- ({count})"
+
+
+def _law(exponent: tuple) -> str:
+    value, error = exponent
+    return f"{value:g}" if error is None else f"{value:g} +- {error:g}"
+
+
+def length_convergence(summaries: dict) -> xr.Dataset:
+    """The run-outs' convergence in the box length: {L0: summary} -> a Dataset over (aspect_ratio,
+    mu_r) of the mean run-out over seeds at each L0 (`runout_by_length`, over `channel_length`) and
+    `relative_spread`, |R(L_max) - R(L_next)| / |R(L_max)| between the two largest L0 (NaN where
+    either has no run). ValueError with fewer than two lengths or aspect ratios and mu_r that differ."""
+    if len(summaries) < 2:
+        raise ValueError(f"the convergence in L0 needs two box lengths or more, got {len(summaries)}")
+    summaries = {float(length): summary for length, summary in summaries.items()}
+    lengths = sorted(summaries)
+    first = summaries[lengths[0]]
+    means = []
+    for length in lengths:
+        summary = summaries[length]
+        for dim in ("aspect_ratio", "mu_r"):
+            if not np.array_equal(summary[dim].values, first[dim].values):
+                raise ValueError(f"the summary at L0 = {length:g} has other {dim} values than at L0 = {lengths[0]:g}")
+        means.append(summary.runout_over_r0.mean("seed", skipna=True))
+    stacked = xr.concat(means, dim=xr.DataArray(lengths, dims="channel_length", name="channel_length",
+                                                attrs={"units": "length", "long_name": "box length L0"}))
+    largest, next_largest = stacked.isel(channel_length=-1), stacked.isel(channel_length=-2)
+    spread = abs(largest - next_largest) / abs(largest)
+    return xr.Dataset({
+        "runout_by_length": stacked.assign_attrs(units="1", long_name="run-out (L_inf - L0)/L0, mean over seeds"),
+        "relative_spread": spread.assign_attrs(
+            units="1", long_name=f"|run-out at L0 = {lengths[-1]:g} - at {lengths[-2]:g}| over the first"),
+    })
+
+
+def length_convergence_markdown(convergence: xr.Dataset) -> str:
+    """Markdown table per mu_r and a: the mean run-out at each box length and the relative spread
+    between the two largest, marked "converged" within CONVERGED_SPREAD."""
+    lengths = convergence.channel_length.values
+    header = ["mu_r", "a"] + [f"L0 = {length:g}" for length in lengths] + ["spread, two largest", ""]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for m in convergence.mu_r.values:
+        for a in convergence.aspect_ratio.values:
+            values = convergence.runout_by_length.sel(mu_r=m, aspect_ratio=a).values
+            spread = float(convergence.relative_spread.sel(mu_r=m, aspect_ratio=a))
+            cells = [f"{v:.3f}" if np.isfinite(v) else "-" for v in values]
+            verdict = "-" if not np.isfinite(spread) else (
+                "converged" if spread <= CONVERGED_SPREAD else f"above {100 * CONVERGED_SPREAD:g} %")
+            spread_cell = f"{100 * spread:.1f} %" if np.isfinite(spread) else "-"
+            lines.append(f"| {float(m):g} | {a:g} | " + " | ".join(cells) + f" | {spread_cell} | {verdict} |")
+    return "\n".join(lines) + "\n"
