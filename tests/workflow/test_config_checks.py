@@ -171,6 +171,16 @@ JOB_TIME_REFUSALS = {
     "a calibration needs at least two": ("config", {"calibration": {"r0": [2.0, 3.0]}, "mu_r": [0.12]}),
     "every (mu_r, a) needs runs at tw": ("schema", {"calibration": {"r0": [2.0]}}),
     "unknown convergence sub-studies ": ("reason", "the convergence rule names the sub-studies itself"),
+    "channel runs: the calibration fi": ("reason", "a channel study's box lengths go to the length_convergence rule"
+                                                   " (plan.calibration_outputs), never to the calibration"),
+    "{path}: not a channel run (geome": ("reason", "the length_convergence rule runs only for geometry: channel,"
+                                                   " whose runs are all the channel's"),
+    "geometry {geometry[:60]!r} is no": ("reason", "the analyses read files colsim wrote, whose geometry the"
+                                                   " schema's enum allowed"),
+    "a {geometry_of(attrs)} file need": ("reason", "the pour writes r0 or channel_length into every file"),
+    "a channel file needs attribute {": ("reason", "the collapse writes a channel's width and wall friction"
+                                                   " into its file"),
+    "attribute {name} is {value:g}, n": ("schema", {"channel_length": 0}),
     "no analyses to tabulate": ("reason", "the convergence rule runs only for a convergence section, whose"
                                           " sub-studies the schema requires to name runs"),
 }

@@ -686,3 +686,24 @@ def test_nolock_is_refused_with_its_reason_before_any_job(tmp_path):
     assert result.returncode != 0 and "--nolock: studies here share their runs" in result.stdout + result.stderr
     assert not (directory / "results").exists()
     assert snakemake(directory, "-n", "--nolock", "all", "--configfile", "config/tiny.yaml", timeout=300).returncode == 0
+
+
+@pytest.mark.slow
+def test_the_tiny_channel_study_runs_end_to_end(tmp_path):
+    """config/tiny-channel.yaml from a copy of the workflow: a channel's pours, trims, collapses and
+    analyses at two box lengths, its summary against the channel laws of 2005, the run-outs by box
+    length, and a report page that names the channel; every file says it holds a channel."""
+    directory = copy_workflow(tmp_path)
+    result = snakemake(directory, "-j2", "all", "calibration_runs", "--configfile", "config/tiny-channel.yaml")
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
+    study = directory / "results" / "tiny-channel"
+    summary = xr.load_dataset(study / "summary.nc")
+    assert summary.attrs["geometry"] == "channel" and summary.attrs["channel_length"] == 1.0
+    assert np.isfinite(summary.runout_over_r0.values).all() and np.isfinite(summary.h_inf_over_r0.values).all()
+    convergence = xr.load_dataset(study / "length_convergence.nc")
+    assert list(convergence.channel_length.values) == [1.0, 1.5]
+    assert np.isfinite(convergence.relative_spread.values).all()
+    assert "L0 = 1.5" in (study / "length_convergence.md").read_text()
+    assert "channel laws" in (study / "report_description.rst").read_text()
+    for path in (directory / "results").glob("r0_*/seed_1/pack_*/a_1/mu_r_0.12/run_*/collapse.nc"):
+        assert xr.open_dataset(path).attrs["geometry"] == "channel"

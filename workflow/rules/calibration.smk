@@ -34,3 +34,24 @@ rule calibration:
     shell:
         "colsim calibrate {input:q} --output {output.nc:q} --markdown {output.markdown:q}"
         " --figure {output.figure:q} > {log:q} 2>&1"
+
+
+# a channel study (geometry: channel): the same runs at each box length L0 (calibration's r0), and
+# the run-outs' spread between the two largest (colsim length-convergence)
+rule length_convergence:
+    input:
+        PLAN.calibration_runs("analysis.nc"),
+    output:
+        nc=f"{STUDY_DIR}/length_convergence.nc",
+        markdown=report(
+            f"{STUDY_DIR}/length_convergence.md",
+            caption="../report/length_convergence.rst",
+            category="Convergence in L0",
+            labels={"table": "run-outs by box length"},
+        ),
+    log:
+        f"{STUDY_DIR}/logs/length_convergence.log",
+    benchmark:
+        f"{STUDY_DIR}/benchmarks/length_convergence.tsv"
+    shell:
+        "colsim length-convergence {input:q} --output {output.nc:q} --markdown {output.markdown:q} > {log:q} 2>&1"

@@ -374,12 +374,37 @@ def convergence(args):
 def calibrate(args):
     from ..study.calibration import calibrate as run_calibration, calibration_markdown, runs_from_analyses
 
-    runs = runs_from_analyses([io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs])
+    analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs]
+    if any(run.attrs.get("geometry") == "channel" for run in analyses):
+        raise io.InputError("channel runs: the calibration fits the cylinder's laws (Lube et al. 2004); a channel "
+                            "study's box lengths go to colsim length-convergence")
+    runs = runs_from_analyses(analyses)
     result = run_calibration(runs, replicates=args.replicates, tolerance=args.fit_tolerance)
     result.attrs.update(io.global_attributes("mu-r-calibration", "colsim mu_r calibration", _settings(args)))
     from ..study.figures import calibration_figure
 
     _write_table_and_figure(args, "calibration", result, calibration_markdown(result), calibration_figure)
+
+
+def length_convergence(args):
+    from ..study.channel import length_convergence as converge, length_convergence_markdown
+    from ..study.collect import collect_analyses
+
+    analyses = [io.open_dataset(p, io.ANALYSIS_KIND) for p in args.inputs]
+    by_length = {}
+    for path, run in zip(args.inputs, analyses):
+        if run.attrs.get("geometry") != "channel":
+            raise io.InputError(f"{path}: not a channel run (geometry {run.attrs.get('geometry', 'cylinder')})")
+        by_length.setdefault(float(run.attrs["channel_length"]), []).append(run)
+    convergence = converge({length: collect_analyses(runs) for length, runs in by_length.items()})
+    convergence.attrs.update(io.global_attributes("channel-length-convergence",
+                                                  "colsim channel run-outs by box length", _settings(args)))
+    text = length_convergence_markdown(convergence)
+    log.info("run-outs by box length:\n%s", text)
+    writers = {args.output: lambda tmp: io.write_netcdf(convergence, tmp)}
+    if args.markdown:
+        writers[args.markdown] = _text_writer(text)
+    io.write_all(writers)
 
 
 def compare_laws(args):

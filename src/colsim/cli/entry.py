@@ -9,6 +9,7 @@
     colsim convergence  time step, end time, column size and seed studies in one table and figure
     colsim compare-laws the same runs under both friction laws, against Lube's laws
     colsim calibrate  which mu_r gives Lube's (and Lajeunesse's) laws in the large-column limit
+    colsim length-convergence  a channel study's run-outs at several box lengths L0: converged in L0?
     colsim export-vtk a ParaView time series of a collapse
     colsim status     the runs under a results folder: done, and in progress from their checkpoints
     colsim mu-r       rolling coefficient of a regular polygon (the paper's Eqs. 7-10)
@@ -154,6 +155,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--replicates", type=positive_int, default=1000, help="bootstrap replicates (default: %(default)s)")
     p.add_argument("--fit-tolerance", type=positive, default=0.1,
                    help="a limit fits a law within this relative error (default: %(default)s)")
+
+    p = sub.add_parser("length-convergence", help="a channel study's run-outs at each box length L0 and their "
+                                                  "spread between the two largest")
+    p.add_argument("inputs", nargs="+", help="analysis files of channel runs at two box lengths or more")
+    p.add_argument("--output", required=True, help="the run-outs by box length to write (netCDF)")
+    p.add_argument("--markdown", default=None, help="also write the table as Markdown here")
 
     p = sub.add_parser("plot", help="the study's figures")
     p.add_argument("--summary", required=True, help="summary file from `colsim collect`")

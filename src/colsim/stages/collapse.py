@@ -91,8 +91,9 @@ class DepositHistory:
     the contact graph's main mass, whose cost grows with the spheres: over every frame of a large
     collapse it would add up)."""
 
-    def __init__(self):
+    def __init__(self, geometry: str = "cylinder"):
         self._measured: dict[int, tuple[float, float]] = {}
+        self._geometry = geometry   # r_inf from the axis (cylinder) or the back wall (channel)
 
     def at_rest(self, frames, time_scale: float, window: float, tolerance: float) -> bool:
         """:func:`deposit_at_rest` of `frames` ([(step, state)]; times over `time_scale`)."""
@@ -106,7 +107,7 @@ class DepositHistory:
 
     def _deposit(self, step: int, state: ParticleState) -> tuple[float, float]:
         if step not in self._measured:
-            deposit = measure_deposit(state)
+            deposit = measure_deposit(state, geometry=self._geometry)
             self._measured[step] = deposit.h_inf, deposit.r_inf
         return self._measured[step]
 
@@ -155,7 +156,7 @@ def collapse(column: ParticleState, h0: float, settings: CollapseSettings, solve
     resumed_from = len(diagnostics)
     rest_check = settings.max_duration is not None
     time_scale = np.sqrt(h0 / settings.gravity)
-    history = DepositHistory()
+    history = DepositHistory("cylinder" if channel is None else "channel")
     at_rest = None
     last = settings.max_steps
     for result in run(state, step_settings, last - resumed_from, solver, resumed_from, carry, backend):

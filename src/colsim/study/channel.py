@@ -78,7 +78,7 @@ def length_convergence(summaries: dict) -> xr.Dataset:
         for dim in ("aspect_ratio", "mu_r"):
             if not np.array_equal(summary[dim].values, first[dim].values):
                 raise ValueError(f"the summary at L0 = {length:g} has other {dim} values than at L0 = {lengths[0]:g}")
-        means.append(summary.runout_over_r0.mean("seed", skipna=True))
+        means.append(summary.runout_over_r0.mean("seed", skipna=True).reset_coords(drop=True))   # r0 differs
     stacked = xr.concat(means, dim=xr.DataArray(lengths, dims="channel_length", name="channel_length",
                                                 attrs={"units": "length", "long_name": "box length L0"}))
     largest, next_largest = stacked.isel(channel_length=-1), stacked.isel(channel_length=-2)

@@ -126,7 +126,8 @@ def cross_field_problem(config):
     problem = time_problem(config) or solver_problem(config)
     if problem:
         return problem
-    if config.get("calibration") and len(set(config["mu_r"])) < 2:
+    calibrated = config.get("calibration") and config.get("geometry", "cylinder") == "cylinder"   # a channel's: its L0
+    if calibrated and len(set(config["mu_r"])) < 2:
         return (f"config: the calibration finds the best mu_r between the swept ones and needs two or more;"
                 f" mu_r holds {len(set(config['mu_r']))}")
     if config["friction_law"] != "associated" and config["friction_law_comparison"]:

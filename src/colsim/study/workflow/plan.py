@@ -313,10 +313,13 @@ class StudyPlan:
                 f"{where}/column_size_limits.nc", f"{where}/figures/column_size_limits.png"]
 
     def calibration_outputs(self) -> list[str]:
-        """The mu_r calibration's products (config key calibration), or none."""
+        """The mu_r calibration's products (config key calibration), or none; a channel study's, its
+        run-outs' convergence in the box length."""
         if not self.config.get("calibration"):
             return []
         where = self.study_dir
+        if self.config.get("geometry") == "channel":   # the run-outs' convergence in the box length
+            return [f"{where}/length_convergence.nc", f"{where}/length_convergence.md"]
         return [f"{where}/calibration.nc", f"{where}/calibration.md", f"{where}/figures/calibration.png"]
 
     def friction_law_outputs(self) -> list[str]:
