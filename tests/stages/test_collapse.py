@@ -130,7 +130,7 @@ def test_the_rest_test_measures_only_the_frames_it_reads(packing, monkeypatch):
                                 rest_window=1.0, rest_tolerance=0.1)
     measured = []
     measure = stage.measure_deposit
-    monkeypatch.setattr(stage, "measure_deposit", lambda state: measured.append(state.time) or measure(state))
+    monkeypatch.setattr(stage, "measure_deposit", lambda state, **how: measured.append(state.time) or measure(state, **how))
     run = collapse(column, h0, settings, CLARABEL)
     assert run.at_rest and len(measured) == len(set(measured)) < len(run.frames)
     time_scale = np.sqrt(h0 / settings.gravity)

@@ -694,7 +694,7 @@ def test_the_tiny_channel_study_runs_end_to_end(tmp_path):
     analyses at two box lengths, its summary against the channel laws of 2005, the run-outs by box
     length, and a report page that names the channel; every file says it holds a channel."""
     directory = copy_workflow(tmp_path)
-    result = snakemake(directory, "-j2", "all", "calibration_runs", "--configfile", "config/tiny-channel.yaml")
+    result = snakemake(directory, "-j2", "all", "--configfile", "config/tiny-channel.yaml")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-5000:]
     study = directory / "results" / "tiny-channel"
     summary = xr.load_dataset(study / "summary.nc")
