@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .calibration import Runs, calibrate, misfits, relative_errors
+from .convergence import SIZE_EXPONENTS
 from .experimental_laws import lube_height, lube_runout
 from .size_limit import size_limit
 
@@ -165,13 +166,34 @@ def size_coverage(case: Case, studies: int = 200, replicates: int = 400, seed: i
     held = []
     for k in range(studies):
         for (q, a), runs in size_study(case, rng).items():
-            limit = size_limit(runs, DIAMETER, replicates=replicates, seed=k, **method)
+            limit = size_limit(runs, DIAMETER, replicates=replicates, seed=k, fit_exponent=False, **method)
             truth = float((lube_height, lube_runout)[q](a))
             held.append(limit.low <= truth <= limit.high)
     return float(np.mean(held))
 
 
-if __name__ == "__main__":    # python -m colsim.study.coverage [studies]: the table of docs/validation/calibration.md
+#: the methods the column-size coverage table compares: size_limit's interval options
+SIZE_METHODS = {"percentile, p = 1": {"exponents": None, "student": False},
+                "p from 0.5-1.5, Student's t (the calibration's)": {},
+                "p from 0.3-1.6, Student's t (the column-size study's)": {"exponents": SIZE_EXPONENTS}}
+
+
+def size_coverage_table(studies: int = 200, replicates: int = 400) -> str:
+    """The coverage of the column-size limits for every case of SIZE_CASES and method (SIZE_METHODS)
+    as a Markdown table."""
+    lines = ["| case | method | nominal | limits held |", "|---|---|---|---|"]
+    for case in SIZE_CASES:
+        for name, method in SIZE_METHODS.items():
+            lines.append(f"| {case.name} | {name} | 95 % | {100 * size_coverage(case, studies, replicates, **method):.1f} % |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    # python -m colsim.study.coverage [studies]: the table of docs/validation/calibration.md;
+    # python -m colsim.study.coverage sizes [studies]: the table of docs/validation/column-size.md
     import sys
 
-    print(coverage_table(int(sys.argv[1]) if len(sys.argv) > 1 else 200), flush=True)
+    arguments = sys.argv[1:]
+    table = size_coverage_table if arguments[:1] == ["sizes"] else coverage_table
+    arguments = arguments[1:] if table is size_coverage_table else arguments
+    print(table(int(arguments[0]) if arguments else 200), flush=True)
