@@ -358,7 +358,8 @@ def column_size_limit_markdown(limits) -> str:
              f"X_inf's {level:.0%} interval: bootstrap over the seeds and the size law's exponent, p = "
              f"{limits.attrs['size_law_exponents']}; such intervals held the true limit in {100 * low:.0f}-"
              f"{100 * high:.0f} % of synthetic studies of this design (docs/validation/column-size.md). The fitted p "
-             "(4 sizes or more) is a check of p = 1, not used in the limit.", "",
+             "(4 sizes or more) is a check of p = 1, not used in the limit; its percentile interval's coverage was "
+             "not measured.", "",
              f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | fitted p [{level:.0%}] | "
              "Lube | X_inf vs Lube | Lajeunesse | X_inf vs Lajeunesse | largest r0 vs X_inf | r0 for 5 % | r0 for 2 % |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

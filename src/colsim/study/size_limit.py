@@ -22,7 +22,8 @@ Its coverage was measured on synthetic studies of each design (colsim.study.cove
 calibration's in docs/validation/calibration.md, the column-size study's in
 docs/validation/column-size.md. Where 4 sizes or more were measured, :func:`size_limit` also fits p
 itself (a bounded search on P_BOUNDS, the residual sum of squares being smooth in p) with a
-percentile interval over the same resampled seeds: a check of the size law, not used in the limit.
+percentile interval over the same resampled seeds: a check of the size law, not used in the limit
+(its coverage not measured).
 """
 from __future__ import annotations
 
