@@ -55,7 +55,7 @@ def test_the_calibration_and_the_column_size_study_compute_one_interval():
 def test_the_interval_holds_the_true_limit_at_its_rate():
     """Over 40 synthetic studies of five sizes (p = 1, 3 seeds, noise 0.03 on values near 1.5) the
     95 % interval holds the true limit in 36 or more (measured 99.5 % on the column-size design;
-    binomial: P(fewer than 36 of 40 | 0.95) = 4.8 %, | 0.99: 0.01 %); ten times less noise narrows it
+    binomial: P(fewer than 36 of 40 | 0.95) = 4.8 %, | 0.99: 0.005 %); ten times less noise narrows it
     (not tenfold: the exponent's share of the interval does not shrink with the noise)."""
     hits, widths = 0, []
     for seed in range(40):
