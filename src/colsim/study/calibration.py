@@ -37,10 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 from scipy.interpolate import PchipInterpolator
-from scipy.stats import norm
-from scipy.stats import t as student_t
 
 from .experimental_laws import lajeunesse_height, lajeunesse_runout, lube_height, lube_runout
+from .size_limit import EXPONENT_RANGE, RunTable, bootstrap_draws, inflated, interval_widening, table_limits, widened
 
 #: the laws a calibration is measured against: name -> (height law, run-out law), both of a
 LAWS = {"lube": (lube_height, lube_runout), "lajeunesse": (lajeunesse_height, lajeunesse_runout)}
@@ -48,9 +47,6 @@ LAWS = {"lube": (lube_height, lube_runout), "lajeunesse": (lajeunesse_height, la
 MEASURES = ("height", "runout", "both")
 GRID_POINTS = 401      #: points of the fine mu_r grid between the smallest and largest swept value
 FIT_TOLERANCE = 0.10   #: a limit "fits" a law within this relative error
-#: the size law's exponents p a bootstrap replicate draws from (uniformly): X = X_inf + k (d/r0)^p holds
-#: with p = 1 over r0 <= 6 to about 5 % (docs/validation/column-size.md), which three sizes cannot test
-EXPONENT_RANGE = (0.5, 1.5)
 #: the lowest and highest share of synthetic studies in which the 95 % intervals held the truth, over
 #: the cases of colsim.study.coverage (200 studies each; `python -m colsim.study.coverage`, the table
 #: in docs/validation/calibration.md): no one method holds 90-99 % in every case (three sizes cannot
@@ -89,20 +85,6 @@ def runs_from_analyses(analyses) -> Runs:
     return Runs(*(np.array(column) for column in zip(*rows)))
 
 
-@dataclass(frozen=True)
-class RunTable:
-    """The runs as arrays over (mu_r, a, r0, seed slot): values (2, n_mu, n_a, n_r, n_s) the height
-    and run-out, d_over_r0 (n_mu, n_a, n_r, n_s), NaN where a run is missing; seeds[r] the seed labels
-    of radius r's slots (radii may have different seeds)."""
-    values: np.ndarray
-    d_over_r0: np.ndarray
-    seeds: tuple
-
-    @property
-    def present(self) -> np.ndarray:
-        return np.isfinite(self.d_over_r0)
-
-
 def run_table(runs: Runs) -> RunTable:
     """The runs of `runs` on the grid of their swept values (each r0's seeds in slots)."""
     mu_rs, ratios, radii = runs.axes()
@@ -115,39 +97,6 @@ def run_table(runs: Runs) -> RunTable:
     k = np.array([seeds[rr].index(int(s)) for rr, s in zip(r, runs.seed)])
     values[0, i, j, r, k], values[1, i, j, r, k], x[i, j, r, k] = runs.height, runs.runout, runs.d_over_r0
     return RunTable(values, x, seeds)
-
-
-def table_limits(table: RunTable, counts=None, p=1.0) -> np.ndarray:
-    """(..., 2, n_mu, n_a) limits of the height and run-out, X = X_inf + k (d/r0)^p fitted by least
-    squares over every run; counts (..., n_r, n_s) how often each seed slot enters (a bootstrap's
-    resample; default: each run once), p a number or one per leading index of counts. Where none of
-    the counted seeds of a size ran in a cell (a study part way, a seed missing), that size enters
-    with the cell's own runs, once each; a cell with runs at fewer than two sizes is NaN."""
-    counts = np.ones(table.d_over_r0.shape[-2:]) if counts is None else np.asarray(counts, dtype=float)
-    lead = counts.shape[:-2]
-    p = np.broadcast_to(np.asarray(p, dtype=float), lead)
-    present = table.present
-    weight = counts[..., None, None, :, :] * present                        # (..., n_mu, n_a, n_r, n_s)
-    weight = np.where(weight.sum(-1, keepdims=True) > 0, weight, present)  # no picked seed ran: its own runs
-    u = np.where(present, np.nan_to_num(table.d_over_r0, nan=1.0), 1.0) ** p[(...,) + (None,) * 4]
-    y = np.nan_to_num(table.values)
-    n, su, suu = weight.sum((-2, -1)), (weight * u).sum((-2, -1)), (weight * u * u).sum((-2, -1))
-    wy = weight[..., None, :, :, :, :]
-    sy, suy = (wy * y).sum((-2, -1)), (wy * u[..., None, :, :, :, :] * y).sum((-2, -1))
-    sizes = (weight.sum(-1) > 0).sum(-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        k = (n[..., None, :, :] * suy - su[..., None, :, :] * sy) / (n * suu - su**2)[..., None, :, :]
-        limits = (sy - k * su[..., None, :, :]) / n[..., None, :, :]
-    return np.where((sizes >= 2)[..., None, :, :], limits, np.nan)
-
-
-def bootstrap_counts(table: RunTable, replicates: int, rng: np.random.Generator) -> np.ndarray:
-    """(replicates, n_r, n_s) how often each seed enters a replicate: each r0's seeds resampled with
-    replacement, the same pick for every mu_r and a (they share the packings)."""
-    counts = np.zeros((replicates,) + table.d_over_r0.shape[-2:])
-    for r, seeds in enumerate(table.seeds):
-        counts[:, r, :len(seeds)] = rng.multinomial(len(seeds), np.full(len(seeds), 1 / len(seeds)), replicates)
-    return counts
 
 
 def relative_errors(limits: np.ndarray, ratios: np.ndarray, law: str) -> np.ndarray:
@@ -194,34 +143,6 @@ def fitting_range(limits, mu_rs, ratios, law, grid, tolerance=FIT_TOLERANCE) -> 
     return float(grid[good].min()), float(grid[good].max())
 
 
-def inflated(table: RunTable) -> RunTable:
-    """The table with every (mu_r, a, r0)'s runs moved away from their mean by sqrt(n/(n - 1)), n its
-    runs: a bootstrap resample of n values has (n - 1)/n of their variance, and so the resampled
-    table's has theirs, whatever the seeds a size."""
-    present = table.present
-    n = present.sum(-1, keepdims=True)
-    mean = np.where(present, table.values, 0.0).sum(-1, keepdims=True) / np.maximum(n, 1)
-    factor = np.sqrt(n / np.maximum(n - 1, 1))
-    return RunTable(mean + factor * (table.values - mean), table.d_over_r0, table.seeds)
-
-
-def interval_widening(table: RunTable, level: float) -> float:
-    """The factor by which the bootstrap's percentile interval is widened about the estimate:
-    Student's quantile with n_runs - n_sizes degrees of freedom over the normal one, since the seeds'
-    spread is estimated from them, not known (the median (mu_r, a)'s, at least 1: a study part way
-    has cells of one run a size)."""
-    freedom = np.median(table.present.sum((-2, -1)) - table.present.any(-1).sum(-1))
-    tail = (1 + level) / 2
-    return float(student_t.ppf(tail, max(freedom, 1)) / norm.ppf(tail))
-
-
-def widened(estimate, replicates, level: float, widen: float, axis=0):
-    """The percentile interval of the replicates (along `axis`) widened about the estimate by `widen`."""
-    tail = 100 * (1 - level) / 2
-    low, high = np.nanpercentile(replicates, [tail, 100 - tail], axis=axis)
-    return estimate - widen * (estimate - low), estimate + widen * (high - estimate)
-
-
 def calibrate(runs: Runs, replicates: int = 1000, level: float = 0.95, seed: int = 0,
               tolerance: float = FIT_TOLERANCE, exponents=EXPONENT_RANGE, student: bool = True) -> xr.Dataset:
     """The calibration of the module docstring as one dataset over (mu_r, aspect_ratio, law,
@@ -238,8 +159,7 @@ def calibrate(runs: Runs, replicates: int = 1000, level: float = 0.95, seed: int
     if np.isnan(limits).any():
         raise ValueError("every (mu_r, a) needs runs at two r0 or more for its limit")
     rng = np.random.default_rng(seed)
-    counts = bootstrap_counts(table, replicates, rng)
-    exponent = rng.uniform(*exponents, replicates) if exponents else 1.0
+    counts, exponent = bootstrap_draws(table, replicates, rng, exponents)
     boot = table_limits(inflated(table), counts, exponent)                  # (B, 2, n_mu, n_a)
     widen = interval_widening(table, level) if student else 1.0
 

@@ -248,15 +248,26 @@ LIMIT_MEASURES = ("h_inf_over_r0", "runout_over_r0")
 LIMIT_ACCURACIES = (0.05, 0.02)
 #: Points of d/r0 at which the fit's bootstrap band is stored.
 BAND_POINTS = 41
+#: the lowest and highest share of synthetic column-size studies in which the 95 % intervals of the
+#: limits held the truth, over the cases of colsim.study.coverage.SIZE_CASES (200 studies each;
+#: `python -m colsim.study.coverage sizes`, the table in docs/validation/column-size.md): 94 % where
+#: the size law has p = 0.5, 99.9 % where it has p = 1 (too wide there: the range that holds p = 0.5)
+MEASURED_SIZE_COVERAGE = (0.94, 0.999)
+#: the size law's exponents a replicate of the column-size limits draws from: wider than the
+#: calibration's 0.5-1.5 since four or five sizes shrink the seeds' share of the interval, and an
+#: exponent at the range's edge is then missed: drawn from 0.5-1.5, the intervals held a true p = 0.5
+#: in 83 % of synthetic studies of this design (docs/validation/column-size.md)
+SIZE_EXPONENTS = (0.3, 1.6)
 
 
 def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed: int = 0):
     """The column-size limit X_inf of h_inf/r0 and the run-out at each aspect ratio of the
     column_size sub-study with at least 2 sizes (:func:`colsim.study.size_limit.size_limit`: X(r0) =
-    X_inf + k (d/r0)^p, its interval by bootstrap over seeds and sizes), beside Lube's and
-    Lajeunesse's laws, how far the largest r0's mean is from X_inf, and the r0 (length) at which the
-    fit is within 5 % and 2 % of X_inf; the interval with p kept at 1, the share of replicates that
-    fitted p, and the fit's pointwise band over d/r0 (BAND_POINTS from 0 to 1.05 times the largest).
+    X_inf + k d/r0, its interval by bootstrap over the seeds and the size law's exponent p drawn from
+    SIZE_EXPONENTS, the calibration's method), beside Lube's and Lajeunesse's laws, how far the largest r0's mean is from
+    X_inf, and the r0 (length) at which the fit is within 5 % and 2 % of X_inf; with 4 sizes or more
+    the exponent p fitted with its interval; and the fit's pointwise band over d/r0 (BAND_POINTS from
+    0 to 1.05 times the largest).
 
     Returns a Dataset over (aspect_ratio, measure) (the band also over d_over_r0); None when no
     aspect ratio has 2 sizes."""
@@ -279,28 +290,28 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
         for measure in LIMIT_MEASURES:
             values = part[measure].values
             runs = {float(r): values[r0 == r] for r in np.unique(r0)}
-            limit = size_limit(runs, diameter, replicates, level, seed)
+            limit = size_limit(runs, diameter, replicates, level, seed, exponents=SIZE_EXPONENTS)
             fit = limit.fit
             laws = {name.split()[0]: value for name, value in final_values(measure, a).items()}
             needed = [diameter * (abs(fit.k) / (accuracy * abs(fit.x_inf))) ** (1.0 / fit.p)
                       if fit.x_inf else np.nan for accuracy in LIMIT_ACCURACIES]
             largest = float(np.mean(runs[max(runs)]))
-            rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, float(fit.p_fitted),
-                                         laws["Lube"], laws["Lajeunesse"], len(runs), float(max(runs)),
+            free_p = limit.free.p if limit.free else np.nan
+            rows[(float(a), measure)] = [fit.x_inf, limit.low, limit.high, fit.k, fit.p, laws["Lube"],
+                                         laws["Lajeunesse"], len(runs), float(max(runs)),
                                          largest / fit.x_inf - 1.0 if fit.x_inf else np.nan, diameter, *needed,
-                                         limit.linear_low, limit.linear_high, limit.free_share]
+                                         free_p, limit.p_low, limit.p_high]
             bands[(float(a), measure)] = limit.band(d_over_r0)
     if not rows:
         return None
-    names = ["limit", "limit_low", "limit_high", "slope", "exponent", "exponent_fitted", "lube", "lajeunesse",
-             "n_sizes", "largest_r0", "largest_r0_off", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent",
-             "limit_low_p1", "limit_high_p1", "exponent_fitted_share"]
+    names = ["limit", "limit_low", "limit_high", "slope", "exponent", "lube", "lajeunesse", "n_sizes",
+             "largest_r0", "largest_r0_off", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent",
+             "fitted_exponent", "fitted_exponent_low", "fitted_exponent_high"]
     long_names = {
         "limit": "column-size limit X_inf of the fit X = X_inf + k (d/r0)^p",
-        "limit_low": f"lower end of the {level:.0%} bootstrap interval of X_inf",
-        "limit_high": f"upper end of the {level:.0%} bootstrap interval of X_inf",
-        "slope": "k of the fit", "exponent": "p of the fit (1 unless fitted)",
-        "exponent_fitted": "whether p was fitted (1) or fixed at 1 (0)",
+        "limit_low": f"lower end of the {level:.0%} interval of X_inf (bootstrap over the seeds and p in 0.5-1.5)",
+        "limit_high": f"upper end of the {level:.0%} interval of X_inf (bootstrap over the seeds and p in 0.5-1.5)",
+        "slope": "k of the fit", "exponent": "p of the fit (1)",
         "lube": "Lube et al. (2004) at this a",
         "lajeunesse": "Lajeunesse et al. (2004) at this a (no height above a = 0.74: its printed law is none)",
         "n_sizes": "column sizes fitted", "largest_r0": "largest r0 measured",
@@ -308,9 +319,9 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
         "mean_diameter": "mean particle diameter d",
         "r0_for_5_percent": "r0 at which the fit is within 5 % of X_inf",
         "r0_for_2_percent": "r0 at which the fit is within 2 % of X_inf",
-        "limit_low_p1": f"lower end of the {level:.0%} bootstrap interval of X_inf with p kept at 1",
-        "limit_high_p1": f"upper end of the {level:.0%} bootstrap interval of X_inf with p kept at 1",
-        "exponent_fitted_share": "share of the bootstrap replicates whose criterion chose the fitted p"}
+        "fitted_exponent": "p fitted with X_inf and k (4 sizes or more; not used in the limit)",
+        "fitted_exponent_low": f"lower end of the {level:.0%} percentile bootstrap interval of the fitted p",
+        "fitted_exponent_high": f"upper end of the {level:.0%} percentile bootstrap interval of the fitted p"}
     lengths = {"largest_r0", "mean_diameter", "r0_for_5_percent", "r0_for_2_percent"}
     aspect = sorted({a for a, _ in rows})
     data = {}
@@ -325,36 +336,44 @@ def column_size_limits(table, replicates: int = 2000, level: float = 0.95, seed:
         for (a, measure), values in bands.items():
             band[aspect.index(a), LIMIT_MEASURES.index(measure)] = values[end]
         data[name] = (("aspect_ratio", "measure", "d_over_r0"), band,
-                      {"long_name": f"{('lower', 'upper')[end]} end of the fit's pointwise {level:.0%} bootstrap band",
+                      {"long_name": f"{('lower', 'upper')[end]} end of the fit's pointwise {level:.0%} band",
                        "units": "1"})
     limits = xr.Dataset(data, coords={
         "aspect_ratio": ("aspect_ratio", aspect, {"long_name": "aspect ratio h0/r0", "units": "1"}),
         "measure": ("measure", list(LIMIT_MEASURES), {"long_name": "deposit measure X"}),
         "d_over_r0": ("d_over_r0", d_over_r0, {"long_name": "mean particle diameter over r0", "units": "1"})})
-    limits.attrs.update(replicates=replicates, level=level, bootstrap_seed=seed)
+    limits.attrs.update(replicates=replicates, level=level, bootstrap_seed=seed,
+                        size_law_exponents=f"{SIZE_EXPONENTS[0]:g} to {SIZE_EXPONENTS[1]:g}")
     return limits
 
 
 def column_size_limit_markdown(limits) -> str:
-    """The limits of :func:`column_size_limits` as a Markdown table."""
+    """The limits of :func:`column_size_limits` as a Markdown table, the measured coverage of such
+    intervals (MEASURED_SIZE_COVERAGE) beside them."""
     if limits is None:
         return "### Column-size limits\n\nFewer than two column sizes at every aspect ratio: no limit fitted.\n"
     level = float(limits.attrs["level"])
-    lines = ["### Column-size limits (X = X_inf + k (d/r0)^p over every seed)", "",
-             f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | p | replicates fitting p | interval at p = 1 | "
+    low, high = MEASURED_SIZE_COVERAGE
+    lines = ["### Column-size limits (X = X_inf + k d/r0 over every seed)", "",
+             f"X_inf's {level:.0%} interval: bootstrap over the seeds and the size law's exponent, p = "
+             f"{limits.attrs['size_law_exponents']}; such intervals held the true limit in {100 * low:.0f}-"
+             f"{100 * high:.0f} % of synthetic studies of this design (docs/validation/column-size.md). The fitted p "
+             "(4 sizes or more) is a check of p = 1, not used in the limit; its percentile interval's coverage was "
+             "not measured.", "",
+             f"| a | X | sizes | largest r0 | X_inf [{level:.0%} interval] | fitted p [{level:.0%}] | "
              "Lube | X_inf vs Lube | Lajeunesse | X_inf vs Lajeunesse | largest r0 vs X_inf | r0 for 5 % | r0 for 2 % |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for a in limits.aspect_ratio.values:
         for measure in limits.measure.values:
             row = limits.sel(aspect_ratio=a, measure=measure)
             if np.isnan(float(row.limit)):
                 continue
             x, lube, laj = float(row.limit), float(row.lube), float(row.lajeunesse)
-            p = f"{float(row.exponent):.2f}" + (" (fitted)" if float(row.exponent_fitted) else "")
+            p = ("-" if np.isnan(float(row.fitted_exponent)) else
+                 f"{float(row.fitted_exponent):.2f} [{float(row.fitted_exponent_low):.2f}, "
+                 f"{float(row.fitted_exponent_high):.2f}]")
             lines.append(f"| {a:g} | {measure} | {int(row.n_sizes)} | {float(row.largest_r0):g} | {x:.3f} "
-                         f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | "
-                         f"{100 * float(row.exponent_fitted_share):.0f} % | "
-                         f"[{float(row.limit_low_p1):.3f}, {float(row.limit_high_p1):.3f}] | {lube:.3f} | "
+                         f"[{float(row.limit_low):.3f}, {float(row.limit_high):.3f}] | {p} | {lube:.3f} | "
                          f"{100 * (x / lube - 1):+.0f} % | {_or_dash(laj, '.3f')} | {_or_dash(100 * (x / laj - 1), '+.0f', ' %')} | "
                          f"{_or_dash(100 * float(row.largest_r0_off), '+.1f', ' %')} | "
                          f"{float(row.r0_for_5_percent):.2g} | {float(row.r0_for_2_percent):.2g} |")

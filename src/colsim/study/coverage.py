@@ -17,6 +17,12 @@ shared by every run of a packing (every a and mu_r poured from it), and more noi
 coverage() runs `calibrate` on many such studies and counts how often each interval holds the true
 value: of every limit, of the best mu_r (Lube, both measures) and of the minimax mu_r (Lube), the
 true ones found on the true limits' own curves (no interpolation).
+
+The column-size study's limits (colsim.study.size_limit) are measured the same way on studies of
+that study's design (SIZE_DESIGN, config/column-size.yaml: r0 = 2-4 with three seeds and r0 = 5-6
+with two, at a = 0.5-5, mu_r = 0.12; a = 3 and 4 up to r0 = 5 only): the true limits are Lube's laws
+at each a, reached as above, and size_coverage() counts how often each limit's interval holds its
+true value (SIZE_CASES: the exponent p and the noise).
 """
 from __future__ import annotations
 
@@ -25,7 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .calibration import Runs, calibrate, misfits, relative_errors
+from .convergence import SIZE_EXPONENTS
 from .experimental_laws import lube_height, lube_runout
+from .size_limit import size_limit
 
 MU_R = np.array([0.06, 0.12, 0.2, 0.3])
 RATIOS = np.array([0.5, 1, 2, 3, 4, 5])
@@ -131,7 +139,61 @@ def coverage_table(studies: int = 200, replicates: int = 400) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":    # python -m colsim.study.coverage [studies]: the table of docs/validation/calibration.md
+#: the column-size study's design (config/column-size.yaml): a -> {r0: seeds}
+SIZE_DESIGN = {a: {2.0: 3, 3.0: 3, 4.0: 3, 5.0: 2, **({} if a in (3, 4) else {6.0: 2})} for a in RATIOS}
+SIZE_CASES = (Case("exponent p = 1"), Case("exponent p = 0.5", exponent=0.5), Case("exponent p = 1.5", exponent=1.5),
+              Case("noise 2x", noise=2.0))
+
+
+def size_study(case: Case, rng: np.random.Generator) -> dict:
+    """{(measure index, a): {r0: the runs' values}} of one synthetic column-size study under `case`
+    (module docstring; measure 0 the height, 1 the run-out)."""
+    p, study = case.exponent, {}
+    for q, law in enumerate((lube_height, lube_runout)):
+        sigma = case.noise * MEASURED_NOISE[q]
+        for a, sizes in SIZE_DESIGN.items():
+            shortfall = {r0: 0.8 * (DIAMETER / 3.0) ** (1 - p) * (DIAMETER / r0) ** p for r0 in sizes}
+            study[(q, a)] = {r0: float(law(a)) * (1 - shortfall[r0]) * (1 + sigma * rng.standard_normal(seeds))
+                             for r0, seeds in sizes.items()}
+    return study
+
+
+def size_coverage(case: Case, studies: int = 200, replicates: int = 400, seed: int = 2026, **method) -> float:
+    """The share of the limits of `studies` synthetic column-size studies (every a, height and
+    run-out, pooled) whose 95 % interval held the true limit; `method`: size_limit's interval options.
+    Reproducible from `seed`."""
+    rng = np.random.default_rng(seed)
+    held = []
+    for k in range(studies):
+        for (q, a), runs in size_study(case, rng).items():
+            limit = size_limit(runs, DIAMETER, replicates=replicates, seed=k, fit_exponent=False, **method)
+            truth = float((lube_height, lube_runout)[q](a))
+            held.append(limit.low <= truth <= limit.high)
+    return float(np.mean(held))
+
+
+#: the methods the column-size coverage table compares: size_limit's interval options
+SIZE_METHODS = {"percentile, p = 1": {"exponents": None, "student": False},
+                "p from 0.5-1.5, Student's t (the calibration's)": {},
+                "p from 0.3-1.6, Student's t (the column-size study's)": {"exponents": SIZE_EXPONENTS}}
+
+
+def size_coverage_table(studies: int = 200, replicates: int = 400) -> str:
+    """The coverage of the column-size limits for every case of SIZE_CASES and method (SIZE_METHODS)
+    as a Markdown table."""
+    lines = ["| case | method | nominal | limits held |", "|---|---|---|---|"]
+    for case in SIZE_CASES:
+        for name, method in SIZE_METHODS.items():
+            lines.append(f"| {case.name} | {name} | 95 % | {100 * size_coverage(case, studies, replicates, **method):.1f} % |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    # python -m colsim.study.coverage [studies]: the table of docs/validation/calibration.md;
+    # python -m colsim.study.coverage sizes [studies]: the table of docs/validation/column-size.md
     import sys
 
-    print(coverage_table(int(sys.argv[1]) if len(sys.argv) > 1 else 200), flush=True)
+    arguments = sys.argv[1:]
+    table = size_coverage_table if arguments[:1] == ["sizes"] else coverage_table
+    arguments = arguments[1:] if table is size_coverage_table else arguments
+    print(table(int(arguments[0]) if arguments else 200), flush=True)

@@ -1,22 +1,29 @@
-"""The column-size limit of a result: X(r0) = X_inf + k (d/r0)^p fitted over the column sizes.
+"""The large-column limit of a deposit measure and its interval, one method for the mu_r calibration
+(colsim.study.calibration: every mu_r and a at once) and the column-size study (:func:`size_limit`:
+one measure at one a).
 
 X is a deposit measure (h_inf/r0, the run-out over r0) measured at several cylinder radii r0 with
 one or more packing seeds each; d is the mean particle diameter, so d/r0 -> 0 is the infinitely
-large column. Two models are fitted by least squares over every run (each seed one point):
+large column. The limit X_inf is the least-squares fit of X(r0) = X_inf + k (d/r0)^p over every run
+(each seed one point) with p = 1, the leading finite-size correction of a smooth boundary effect
+(:func:`table_limits`, linear in X_inf and k).
 
-- p fixed at 1 (the leading finite-size correction of a smooth boundary effect): linear in
-  (X_inf, k);
-- p fitted (at least 4 sizes): for each p, linear in (X_inf, k); p by a bounded scalar search on
-  [P_BOUNDS], the residual sum of squares being smooth in p.
+Its interval is a bootstrap (:func:`bootstrap_draws`, :func:`inflated`, :func:`widened`):
 
-The better model is chosen by the small-sample Akaike criterion AICc = n ln(SSE/n) + 2 q +
-2 q (q + 1)/(n - q - 1) (q parameters, n runs): the free p only when its AICc is lower by more than
-2 (a free exponent must earn its parameter). The uncertainty of X_inf is a percentile bootstrap:
-each replicate resamples the seeds within every size (with replacement) and, when more than 3 sizes
-were measured, leaves one size out at random, then chooses and fits the model again. Beside that
-interval, the same replicates give the interval with p kept at 1 in every one (the seeds' and sizes'
-share of the uncertainty, without the model's choice), the share of replicates that chose the free p,
-and a pointwise band of the fitted curve.
+- each replicate resamples the seeds within every size (with replacement) and draws the exponent p
+  uniformly from EXPONENT_RANGE: sizes up to r0 = 6 cannot tell p = 1 from 0.5 or 1.5, and the
+  limit moves with it;
+- each size's runs are first moved from their mean by sqrt(n/(n - 1)) for n runs (a resample of n
+  values has (n - 1)/n of their variance);
+- the percentile interval is widened about the estimate by Student's t over the normal quantile
+  (n_runs - n_sizes degrees of freedom: the spread is estimated from two or three seeds, not known).
+
+Its coverage was measured on synthetic studies of each design (colsim.study.coverage): the
+calibration's in docs/validation/calibration.md, the column-size study's in
+docs/validation/column-size.md. Where 4 sizes or more were measured, :func:`size_limit` also fits p
+itself (a bounded search on P_BOUNDS, the residual sum of squares being smooth in p) with a
+percentile interval over the same resampled seeds: a check of the size law, not used in the limit
+(its coverage not measured).
 """
 from __future__ import annotations
 
@@ -24,32 +31,112 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+from scipy.stats import norm
+from scipy.stats import t as student_t
 
+#: the size law's exponents p a bootstrap replicate draws from (uniformly): X = X_inf + k (d/r0)^p holds
+#: with p = 1 over r0 <= 6 to about 5 % (docs/validation/column-size.md), which the sizes cannot test
+EXPONENT_RANGE = (0.5, 1.5)
 P_BOUNDS = (0.25, 4.0)   #: the exponents a fitted p may take
-AICC_MARGIN = 2.0        #: how much lower the free p's AICc must be to be chosen
+
+
+@dataclass(frozen=True)
+class RunTable:
+    """The runs as arrays over (mu_r, a, r0, seed slot): values (n_q, n_mu, n_a, n_r, n_s) the
+    measures (the calibration's: height and run-out), d_over_r0 (n_mu, n_a, n_r, n_s), NaN where a
+    run is missing; seeds[r] the seed labels of radius r's slots (radii may have different seeds)."""
+    values: np.ndarray
+    d_over_r0: np.ndarray
+    seeds: tuple
+
+    @property
+    def present(self) -> np.ndarray:
+        return np.isfinite(self.d_over_r0)
+
+
+def table_fits(table: RunTable, counts=None, p=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """((..., n_q, n_mu, n_a) limits X_inf, the same shape slopes k) of X = X_inf + k (d/r0)^p fitted
+    by least squares over every run; counts (..., n_r, n_s) how often each seed slot enters (a
+    bootstrap's resample; default: each run once), p a number or one per leading index of counts.
+    Where none of the counted seeds of a size ran in a cell (a study part way, a seed missing), that
+    size enters with the cell's own runs, once each; a cell with runs at fewer than two sizes is NaN."""
+    counts = np.ones(table.d_over_r0.shape[-2:]) if counts is None else np.asarray(counts, dtype=float)
+    lead = counts.shape[:-2]
+    p = np.broadcast_to(np.asarray(p, dtype=float), lead)
+    present = table.present
+    weight = counts[..., None, None, :, :] * present                        # (..., n_mu, n_a, n_r, n_s)
+    weight = np.where(weight.sum(-1, keepdims=True) > 0, weight, present)  # no picked seed ran: its own runs
+    u = np.where(present, np.nan_to_num(table.d_over_r0, nan=1.0), 1.0) ** p[(...,) + (None,) * 4]
+    y = np.nan_to_num(table.values)
+    n, su, suu = weight.sum((-2, -1)), (weight * u).sum((-2, -1)), (weight * u * u).sum((-2, -1))
+    wy = weight[..., None, :, :, :, :]
+    sy, suy = (wy * y).sum((-2, -1)), (wy * u[..., None, :, :, :, :] * y).sum((-2, -1))
+    sizes = (weight.sum(-1) > 0).sum(-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = (n[..., None, :, :] * suy - su[..., None, :, :] * sy) / (n * suu - su**2)[..., None, :, :]
+        limits = (sy - k * su[..., None, :, :]) / n[..., None, :, :]
+    enough = (sizes >= 2)[..., None, :, :]
+    return np.where(enough, limits, np.nan), np.where(enough, k, np.nan)
+
+
+def table_limits(table: RunTable, counts=None, p=1.0) -> np.ndarray:
+    """(..., n_q, n_mu, n_a) the limits X_inf of :func:`table_fits`."""
+    return table_fits(table, counts, p)[0]
+
+
+def bootstrap_counts(table: RunTable, replicates: int, rng: np.random.Generator) -> np.ndarray:
+    """(replicates, n_r, n_s) how often each seed enters a replicate: each r0's seeds resampled with
+    replacement, the same pick for every mu_r and a (they share the packings)."""
+    counts = np.zeros((replicates,) + table.d_over_r0.shape[-2:])
+    for r, seeds in enumerate(table.seeds):
+        counts[:, r, :len(seeds)] = rng.multinomial(len(seeds), np.full(len(seeds), 1 / len(seeds)), replicates)
+    return counts
+
+
+def bootstrap_draws(table: RunTable, replicates: int, rng: np.random.Generator, exponents=EXPONENT_RANGE):
+    """(counts (replicates, n_r, n_s) of :func:`bootstrap_counts`, the exponent p of each replicate
+    drawn uniformly from `exponents`, or 1.0 when exponents is None)."""
+    counts = bootstrap_counts(table, replicates, rng)
+    return counts, rng.uniform(*exponents, replicates) if exponents else 1.0
+
+
+def inflated(table: RunTable) -> RunTable:
+    """The table with every (mu_r, a, r0)'s runs moved away from their mean by sqrt(n/(n - 1)), n its
+    runs: a bootstrap resample of n values has (n - 1)/n of their variance, and so the resampled
+    table's has theirs, whatever the seeds a size."""
+    present = table.present
+    n = present.sum(-1, keepdims=True)
+    mean = np.where(present, table.values, 0.0).sum(-1, keepdims=True) / np.maximum(n, 1)
+    factor = np.sqrt(n / np.maximum(n - 1, 1))
+    return RunTable(mean + factor * (table.values - mean), table.d_over_r0, table.seeds)
+
+
+def interval_widening(table: RunTable, level: float) -> float:
+    """The factor by which the bootstrap's percentile interval is widened about the estimate:
+    Student's quantile with n_runs - n_sizes degrees of freedom over the normal one, since the seeds'
+    spread is estimated from them, not known (the median (mu_r, a)'s, at least 1: a study part way
+    has cells of one run a size)."""
+    freedom = np.median(table.present.sum((-2, -1)) - table.present.any(-1).sum(-1))
+    tail = (1 + level) / 2
+    return float(student_t.ppf(tail, max(freedom, 1)) / norm.ppf(tail))
+
+
+def widened(estimate, replicates, level: float, widen: float, axis=0):
+    """The percentile interval of the replicates (along `axis`) widened about the estimate by `widen`."""
+    tail = 100 * (1 - level) / 2
+    low, high = np.nanpercentile(replicates, [tail, 100 - tail], axis=axis)
+    return estimate - widen * (estimate - low), estimate + widen * (high - estimate)
 
 
 @dataclass(frozen=True)
 class LimitFit:
-    """X(r0) = x_inf + k (d/r0)^p fitted to n runs; p_fitted says whether p was fitted (else 1)."""
+    """X(r0) = x_inf + k (d/r0)^p fitted to n runs; p_fitted says whether p was fitted (else given)."""
     x_inf: float
     k: float
     p: float
     p_fitted: bool
     sse: float
     n: int
-
-    @property
-    def parameters(self) -> int:
-        return 3 if self.p_fitted else 2
-
-    @property
-    def aicc(self) -> float:
-        """The small-sample Akaike criterion (module docstring); inf when n <= q + 1."""
-        n, q = self.n, self.parameters
-        if n <= q + 1:
-            return np.inf
-        return n * np.log(max(self.sse, 1e-300) / n) + 2 * q + 2 * q * (q + 1) / (n - q - 1)
 
     def at(self, d_over_r0) -> np.ndarray:
         """The fitted X at d/r0."""
@@ -85,69 +172,65 @@ def fit_limit(d_over_r0, values, p: float | None = 1.0) -> LimitFit:
     return LimitFit(x_inf, k, float(found.x), True, sse, len(x))
 
 
-def choose_fit(d_over_r0, values) -> LimitFit:
-    """The p = 1 fit, or the fitted-p one where there are 4 sizes or more and its AICc is lower by
-    more than AICC_MARGIN."""
-    linear = fit_limit(d_over_r0, values, p=1.0)
-    if len(np.unique(d_over_r0)) < 4:
-        return linear
-    free = fit_limit(d_over_r0, values, p=None)
-    return free if free.aicc < linear.aicc - AICC_MARGIN else linear
-
-
 @dataclass(frozen=True, eq=False)
 class Limit:
-    """The chosen fit and the bootstrap's percentile interval [low, high] of x_inf (level, e.g. 0.95);
-    [linear_low, linear_high] the interval when every replicate keeps p = 1; free_share the share of
-    replicates whose criterion chose the fitted p; replicate_fits the chosen (x_inf, k, p) of every
-    replicate, shape (replicates, 3)."""
+    """The p = 1 fit and the interval [low, high] of its x_inf (level, e.g. 0.95; the module
+    docstring's method, its percentile interval widened by `widening`); replicate_fits the (x_inf, k,
+    p) of every replicate, shape (replicates, 3); free the fit with p fitted and [p_low, p_high] the
+    percentile interval of p over the same resampled seeds (None and NaN under 4 sizes)."""
     fit: LimitFit
     low: float
     high: float
     level: float
-    replicates: int
-    linear_low: float
-    linear_high: float
-    free_share: float
+    widening: float
     replicate_fits: np.ndarray
+    free: LimitFit | None = None
+    p_low: float = np.nan
+    p_high: float = np.nan
 
     def band(self, d_over_r0) -> tuple[np.ndarray, np.ndarray]:
-        """The pointwise percentile band (low, high) of the replicates' fitted X at d_over_r0 (1-D);
-        at d/r0 = 0 it is [low, high] of x_inf."""
+        """The pointwise band (low, high) of the fitted X at d_over_r0 (1-D): the replicates' curves'
+        percentiles widened about the fit's as the interval is; at d/r0 = 0 it is [low, high]."""
         x = np.asarray(d_over_r0, dtype=float)
         x_inf, k, p = (column[:, None] for column in self.replicate_fits.T)
-        curves = x_inf + k * x[None, :] ** p
-        tail = 100 * (1 - self.level) / 2
-        low, high = np.percentile(curves, [tail, 100 - tail], axis=0)
-        return low, high
+        return widened(self.fit.at(x), x_inf + k * x[None, :] ** p, self.level, self.widening)
 
 
-def size_limit(runs: dict, diameter: float, replicates: int = 2000, level: float = 0.95,
-               seed: int = 0) -> Limit:
-    """X_inf with its bootstrap interval from runs {r0: values of X over the seeds at that r0}
-    (length units of r0 and `diameter`, the mean particle diameter). Reproducible from `seed`."""
+def size_table(runs: dict, diameter: float) -> RunTable:
+    """The RunTable of one measure at one (mu_r, a) from runs {r0: values over the seeds at r0}."""
     sizes = sorted(runs)
-    values = {r0: np.asarray(runs[r0], dtype=float) for r0 in sizes}
+    slots = max(len(runs[r0]) for r0 in sizes)
+    values = np.full((1, 1, 1, len(sizes), slots), np.nan)
+    d_over_r0 = np.full(values.shape[1:], np.nan)
+    for r, r0 in enumerate(sizes):
+        seeds = np.asarray(runs[r0], dtype=float)
+        values[0, 0, 0, r, :len(seeds)], d_over_r0[0, 0, r, :len(seeds)] = seeds, diameter / r0
+    return RunTable(values, d_over_r0, tuple(tuple(range(len(runs[r0]))) for r0 in sizes))
 
-    def flat(chosen: dict) -> tuple[np.ndarray, np.ndarray]:
-        x = np.concatenate([np.full(len(v), diameter / r0) for r0, v in chosen.items()])
-        return x, np.concatenate(list(chosen.values()))
 
-    fit = choose_fit(*flat(values))
+def size_limit(runs: dict, diameter: float, replicates: int = 2000, level: float = 0.95, seed: int = 0,
+               exponents=EXPONENT_RANGE, student: bool = True, fit_exponent: bool = True) -> Limit:
+    """X_inf with its interval (module docstring) from runs {r0: values of X over the seeds at that
+    r0} (length units of r0 and `diameter`, the mean particle diameter); exponents and student as
+    colsim.study.calibration.calibrate takes them; fit_exponent: with 4 sizes or more, fit p too.
+    Reproducible from `seed`."""
+    table = size_table(runs, diameter)
+    present = table.present[0, 0]
+    x, y = table.d_over_r0[0, 0][present], table.values[0, 0, 0][present]
+    fit = fit_limit(x, y, p=1.0)
     rng = np.random.default_rng(seed)
-    fits, linear = [], []
-    for _ in range(replicates):
-        kept = sizes
-        if len(sizes) > 3:
-            left_out = sizes[rng.integers(len(sizes))]
-            kept = [r0 for r0 in sizes if r0 != left_out]
-        sample = {r0: rng.choice(values[r0], size=len(values[r0])) for r0 in kept}
-        chosen = choose_fit(*flat(sample))
-        fits.append((chosen.x_inf, chosen.k, chosen.p, chosen.p_fitted))
-        linear.append(chosen.x_inf if not chosen.p_fitted else fit_limit(*flat(sample), p=1.0).x_inf)
-    fits = np.array(fits)
+    counts, p = bootstrap_draws(table, replicates, rng, exponents)
+    p = np.broadcast_to(np.asarray(p, dtype=float), (replicates,))
+    x_inf, k = (part[:, 0, 0, 0] for part in table_fits(inflated(table), counts, p))
+    widen = interval_widening(table, level) if student else 1.0
+    low, high = widened(fit.x_inf, x_inf, level, widen)
+    limit = Limit(fit, float(low), float(high), level, widen, np.column_stack([x_inf, k, p]))
+    if not fit_exponent or len(runs) < 4:
+        return limit
+    spread = inflated(table).values[0, 0, 0][present]
+    exponents_ = [fit_limit(np.repeat(x, c), np.repeat(spread, c), p=None).p
+                  for c in counts[:, present].astype(int)]
     tail = 100 * (1 - level) / 2
-    low, high = np.percentile(fits[:, 0], [tail, 100 - tail])
-    linear_low, linear_high = np.percentile(linear, [tail, 100 - tail])
-    return Limit(fit, float(low), float(high), level, replicates, float(linear_low), float(linear_high),
-                 float(fits[:, 3].mean()), fits[:, :3])
+    p_low, p_high = np.percentile(exponents_, [tail, 100 - tail])
+    return Limit(fit, limit.low, limit.high, level, widen, limit.replicate_fits, fit_limit(x, y, p=None),
+                 float(p_low), float(p_high))
