@@ -125,11 +125,32 @@ def pile() -> Pile:
                 tolerance, k)
 
 
+def made_once(name: str, tmp_path_factory, make):
+    """make() once for the whole run: under pytest-xdist the workers share its result through a
+    pickle beside their temporary folders, the first to need it making it while the others wait
+    on a lock (a worker's session fixture is its own otherwise); in one process, make()."""
+    import fcntl
+    import pickle
+
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return make()
+    shared = tmp_path_factory.getbasetemp().parent / f"{name}.pickle"
+    with open(f"{shared}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not shared.is_file():
+            with open(f"{shared}.part", "wb") as stream:
+                pickle.dump(make(), stream)
+            os.replace(f"{shared}.part", shared)
+        with open(shared, "rb") as stream:
+            return pickle.load(stream)
+
+
 @pytest.fixture(scope="session")
-def packing() -> ParticleState:
+def packing(tmp_path_factory) -> ParticleState:
     """The stage tests' packing: ~450 spheres poured by the pack stage into a cylinder of radius
-    1.5 (PACKING_R0), 3 high, with Clarabel (about 10 s)."""
-    return pack(PackSettings(r0=PACKING_R0, height=3.0), np.random.default_rng([7, 0]), ClarabelSolver())
+    1.5 (PACKING_R0), 3 high, with Clarabel (about 10 s), made once for all workers."""
+    return made_once("packing", tmp_path_factory, lambda: pack(PackSettings(r0=PACKING_R0, height=3.0),
+                                                               np.random.default_rng([7, 0]), ClarabelSolver()))
 
 
 @pytest.fixture(scope="session")

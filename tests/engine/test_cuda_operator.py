@@ -27,6 +27,7 @@ def test_the_kernels_equal_the_cpu_operator(pile_with_every_contact):
         np.testing.assert_allclose(ours, theirs, rtol=1e-14, atol=1e-14 * np.abs(theirs).max())
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_the_dot_product_sums_in_a_fixed_order():
     """Over several blocks (1,000 values, blocks of THREADS: 128 on a GPU, 32 on the simulator):
     numpy's dot to rounding, and the same bits on every call."""
@@ -78,6 +79,7 @@ def test_an_array_filled_on_the_device_holds_its_value_everywhere(shape, value, 
     assert np.array_equal(ours, np.full(shape, value, dtype=dtype))
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_vector_normalised_on_the_device_has_unit_length_and_the_same_bits_every_run():
     """normalise_on_device: v / ||v|| to rounding (the norm's sum in another order than numpy's), and
     the same bits on a second run (a fixed order)."""
@@ -94,6 +96,7 @@ def test_a_vector_normalised_on_the_device_has_unit_length_and_the_same_bits_eve
     assert np.array_equal(runs[0], runs[1])
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_each_bodys_contacts_are_listed_on_the_device_as_on_the_cpu(pile_with_every_contact):
     """body_contacts_on_device: the CPU's lists (colsim.engine.operator.body_contacts) exactly, on a
     pile with walls and fixed spheres (no second body) and on random pairs among bodies some of which

@@ -42,6 +42,7 @@ def program(solver_pile):
     return program
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 @pytest.mark.parametrize("start", ["warm", "cold"])
 def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
     """Everything ApgdSolver.prepare makes, made on the device: the row scales, the scaled
@@ -60,6 +61,7 @@ def test_the_start_made_on_the_device_equals_the_cpu_s(program, start):
     np.testing.assert_allclose(gpu.forces(), cpu.forces(), rtol=0, atol=1e-12 * np.abs(cpu.forces()).max() + 1e-300)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_trial_step_and_the_residuals_equal_the_cpu_kernels(program):
     cpu = ApgdSolver().prepare(program)
     gpu = ApgdSolver(backend=CUDA).prepare(program)
@@ -141,6 +143,7 @@ def test_a_solve_on_the_device_agrees_with_clarabel(program):
     assert du <= 1e-3 and np.linalg.norm(net - net_ref) <= 1e-3 * np.linalg.norm(net_ref), du
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_float32_storage_holds_the_nearest_float32_and_checks_in_float64(program):
     """storage='float32': the trial steps' slots and contact arrays (NARROW_GEOMETRY, the wrenches)
     hold the float64 ones' nearest float32, the check's stay float64. After ten iterations the iterate
@@ -166,6 +169,7 @@ def test_float32_storage_holds_the_nearest_float32_and_checks_in_float64(program
         assert gpu.residuals(program.mu, program.mu_r, scale, floor) == pytest.approx(expected, rel=1e-12, abs=1e-12)
 
 
+@pytest.mark.slow   # the CUDA simulator's longer runs, or studies end to end: `pytest -m slow`
 def test_a_solve_stored_in_float32_agrees_with_clarabel(program):
     """The float32-stored solve, warm-started as the float64 one above: it stops on its float64 check
     within the same bounds of Clarabel (1e-3), its increments B' lam of its own forces to 1e-12."""
