@@ -23,6 +23,7 @@ contacts with the CPU's.
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -428,6 +429,14 @@ def _put_tangents(k, n0, n1, n2, tangent1, tangent2):
     tangent2[k, 2] = n0 * a1 - n1 * a0
 
 
+@functools.lru_cache(maxsize=16)
+def _planes_on_device(planes: bytes):
+    """The plane walls (p, 4) of a run's walls on the device, copied there once, not every step (a
+    (1, 4) array of zeros stands for none: no empty array on a device)."""
+    array = np.frombuffer(planes, dtype=np.float64).reshape(-1, 4)
+    return cuda.to_device(array if len(array) else np.zeros((1, 4)))
+
+
 class _WallContacts:
     """The floor's, the cylinder's and the plane walls' contacts of the particles of `found` (a
     :class:`_SweptPairs`), made on the device as :func:`colsim.engine.contacts._wall_contacts` makes
@@ -443,8 +452,8 @@ class _WallContacts:
         self.found, self.most_recovered, self.kept = found, float(most_recovered), float(kept)
         self.cylinder_radius = math.nan if walls.cylinder_radius is None else float(walls.cylinder_radius)
         planes = walls.plane_array()
-        self.n_planes = len(planes)   # a (1, 4) array of zeros stands for none: no empty array on a device
-        self.planes = cuda.to_device(planes if len(planes) else np.zeros((1, 4)))
+        self.n_planes = len(planes)
+        self.planes = _planes_on_device(planes.tobytes())
         flags = cuda.device_array((2 + self.n_planes) * n, dtype=np.int64)
         launch(_wall_flags_kernel, blocks_for(n), THREADS, found.position, found.radius, found.predicted,
                bool(walls.floor), self.cylinder_radius, self.planes, self.n_planes, float(margin), float(slack),
