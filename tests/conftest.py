@@ -170,3 +170,10 @@ def pile_with_every_contact(solver_pile):
     program, found = collapse_program(solver_pile, settings)
     assert {0, 1, 2} <= set(found.family.tolist()) and np.any(found.j <= -2)
     return solver_pile, found, program
+
+
+def pytest_collection_modifyitems(config, items):
+    """The workflow's tests first (each runs Snakemake: tests/workflow/test_workflow.py is the
+    longest file): under pytest-xdist, which hands out whole files in this order, the workers then
+    end together instead of one running the longest file alone at the end."""
+    items.sort(key=lambda item: not item.nodeid.startswith("tests/workflow/"))
