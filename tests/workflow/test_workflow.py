@@ -384,6 +384,21 @@ def test_a_wrong_configuration_stops_the_run_in_one_line(tmp_path, setting, mess
     assert not (directory / "results").exists()
 
 
+def test_a_configuration_too_deep_for_snakemakes_reader_is_reported_by_it_and_writes_nothing(tmp_path):
+    """Issue 80.7: a mapping 5,000 levels deep fails in Snakemake's YAML reader, before the Snakefile
+    runs, so colsim cannot name it. docs/study-config.md says so: Snakemake's traceback ends in the
+    reader's RecursionError, and nothing is planned or written."""
+    directory = copy_workflow(tmp_path)
+    depth = 5000
+    (directory / "deep.yaml").write_text("study: deep\nr0: " + "{a: " * depth + "1" + "}" * depth + "\n")
+    result = snakemake(directory, "-n", "all", "--configfile", "deep.yaml", timeout=120)
+    assert result.returncode != 0
+    last_lines = [stream.strip().splitlines()[-1] for stream in (result.stdout, result.stderr) if stream.strip()]
+    assert any(line.startswith("RecursionError") for line in last_lines), last_lines
+    assert not (directory / "results").exists()
+    assert "RecursionError" in (ROOT / "docs" / "study-config.md").read_text()
+
+
 def test_the_schema_the_cli_and_the_docs_offer_the_same_solvers():
     """colsim.solvers.SOLVERS is the one list: the schema's enum, the CLI's choices and the table of
     back-ends in docs/solvers.md hold the same names."""

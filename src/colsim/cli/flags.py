@@ -154,8 +154,9 @@ def check_settings_key(path, key: str) -> None:
     found = settings_key(_settings_mapping(path))
     if found != key:
         raise ValueError(f"settings file {path} holds settings of key {found}, not {key}, the key its folder"
-                         " names: a setting was changed after the study was planned (delete the file and"
-                         " run the workflow again to write it back)")
+                         " names: a setting was changed after the study was planned (`snakemake -n` with the"
+                         " study's configuration names it; delete the file and run the workflow again to write"
+                         " it back)")
 
 
 def stage_settings(args, *classes):
