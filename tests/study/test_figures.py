@@ -327,6 +327,20 @@ def test_front_figure_draws_the_mass_share_front_above_the_main_mass_edge(tmp_pa
         assert "farthest reach" in ax.get_ylabel() and ax.get_xlabel() == "t / sqrt(h0/g)"
 
 
+def test_a_channels_fronts_are_labelled_along_the_channel(tmp_path):
+    """Issue 82: a channel's front figure names x from the back wall, L0 and H0, not the cylinder's
+    r, r0 and h0."""
+    channel = [analysis(a, 0.12, 1) for a in (0.5, 2.0)]
+    for run in channel:
+        run.attrs.update(geometry="channel", channel_length=R0, channel_width=2.0)
+    KEPT.clear()
+    with matplotlib.rc_context({"figure.hooks": ["test_figures:keep_figure"]}):
+        runs.front_figure(channel, tmp_path / "front.png")
+    [figure] = KEPT
+    labels = [ax.get_ylabel() for ax in figure.axes] + [figure.axes[-1].get_xlabel()]
+    assert labels == ["front (x_front - L0) / L0\n(farthest reach of the main mass so far)", "t / sqrt(H0/g)"]
+
+
 def test_front_panels_share_one_y_scale_across_mu_r(tmp_path):
     """Issue 48.6: the front reaches 3 at mu_r = 0 and 1 at mu_r = 0.12; both panels span the same
     y range, so the figure compares mu_r at a glance."""

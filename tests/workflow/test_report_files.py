@@ -61,3 +61,38 @@ def test_plain_values_read_as_they_are():
     """Escaping changes how a value is written, not how it reads: numbers, lists and names."""
     html = _as_snakemake_renders(rst_text("[0.5, 1] paper_lever t/sqrt(h0/g) = 4.0"))
     assert "[0.5, 1] paper_lever t/sqrt(h0/g) = 4.0" in html
+
+
+#: the captions of the figures and the table that a study's geometry words differently
+GEOMETRY_CAPTIONS = ("final_height", "runout", "front_position", "deposit_profiles", "lube_table", "side_views",
+                     "mu_r_effect")
+
+
+def _caption(name: str, config: dict) -> str:
+    """A caption as `snakemake --report` renders it (Jinja with the job's `snakemake`, then docutils),
+    as plain text."""
+    import re
+    import types
+
+    import jinja2
+    from docutils.core import publish_parts
+
+    text = (ROOT / "workflow" / "report" / f"{name}.rst").read_text()
+    rendered = jinja2.Environment(trim_blocks=True, lstrip_blocks=True).from_string(text).render(
+        snakemake=types.SimpleNamespace(config=config))
+    html = publish_parts(rendered, writer="html")["html_body"]
+    assert "System Message" not in html, html
+    return re.sub(r"<[^>]+>", "", html)
+
+
+def test_a_channel_studys_captions_speak_of_the_channel_and_a_cylinders_of_the_cylinder():
+    """Issue 82: the report's captions name a channel's quantities (L0, H0, x along the channel, the
+    2005 laws) for `geometry: channel`, and the cylinder's (r0, h0) otherwise: no caption of a channel
+    study speaks of r0."""
+    for name in GEOMETRY_CAPTIONS:
+        cylinder = _caption(name, {})
+        assert cylinder == _caption(name, {"geometry": "cylinder"})
+        channel = _caption(name, {"geometry": "channel"})
+        assert "r0" not in channel and "h0" not in channel, (name, channel)
+        assert "L0" in channel or "H0" in channel or "channel" in channel, (name, channel)
+        assert "L0" not in cylinder and "channel" not in cylinder, (name, cylinder)

@@ -136,10 +136,12 @@ def outward_front(front) -> np.ndarray:
 #: the front_position figure's rows: the analysis variable, the y label, whether to draw its running maximum
 
 
+#: each row's label ({r}, {r0}: the run's distance along the spread and length scale, _axis_names)
+#: and whether the front is drawn as its farthest reach so far
 FRONT_ROWS = {
-    FRONT_MASS_VARIABLE: (f"front (r_{FRONT_MASS_SHARE * 100:.0f} - r0) / r0\n"
-                          f"(radius holding {FRONT_MASS_SHARE:.0%} of the mass)", False),
-    "front_position": ("front (r_front - r0) / r0\n(farthest reach of the main mass so far)", True),
+    FRONT_MASS_VARIABLE: (f"front ({{r}}_{FRONT_MASS_SHARE * 100:.0f} - {{r0}}) / {{r0}}\n"
+                          f"(distance holding {FRONT_MASS_SHARE:.0%} of the mass)", False),
+    "front_position": ("front ({r}_front - {r0}) / {r0}\n(farthest reach of the main mass so far)", True),
 }
 
 
@@ -175,10 +177,12 @@ def front_figure(analyses, path: Path) -> Path:
                     ax.plot(time[-1:], front[-1:], "o", mfc="none", color=colours[a], ms=5, gid="end")
                 labelled.add(a)
             ax.set_title(f"$\\mu_r$ = {m:g}", fontsize=9)
-            ax.set_ylabel(label, fontsize=8)
+            scale, along = _axis_names(runs[keys[0]])
+            ax.set_ylabel(label.format(r=along, r0=scale), fontsize=8)
             ax.grid(alpha=0.3)
+    height = "H0" if runs and _axis_names(next(iter(runs.values())))[0] == "L0" else "h0"
     for ax in axes[-1]:
-        ax.set_xlabel("t / sqrt(h0/g)")
+        ax.set_xlabel(f"t / sqrt({height}/g)")
     handles = axes.flat[0].get_legend_handles_labels()[0]
     if any(line.get_gid() == "end" for ax in axes.flat for line in ax.get_lines()):
         from matplotlib.lines import Line2D
