@@ -219,10 +219,27 @@ def recovery_relaxation(true_gap: np.ndarray, most_recovered: float, kept: float
     shrinks towards it by at most most_recovered a step. Between rigid walls a chain of grains from
     wall to wall may have no motion but dilating ones under the associated law's friction, so that
     asking an overlap back leaves the step no solution (a one-grain slot's first step did)."""
-    relaxation = np.maximum(0.0, -np.asarray(true_gap) - most_recovered)
-    if kept > 0:
-        relaxation = np.maximum(relaxation, np.minimum(-np.asarray(true_gap), kept))
-    return relaxation
+    true_gap = np.ascontiguousarray(true_gap, dtype=float)
+    out = np.empty_like(true_gap)
+    _relaxations(true_gap.reshape(-1), float(most_recovered), float(kept), out.reshape(-1))
+    return out
+
+
+def relaxation_of(true_gap, most_recovered, kept):
+    """:func:`recovery_relaxation` of one gap: max(0, -g - most_recovered, min(-g, kept)) (kept 0 adds
+    nothing: min(-g, 0) <= max(0, ...)) (scalar code: compiled by numba, and for the GPU by
+    numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
+    return max(0.0, -true_gap - most_recovered, min(-true_gap, kept))
+
+
+def _relaxations(true_gap, most_recovered, kept, out):
+    """out (m,) = :func:`relaxation_of` of each gap of `true_gap` (m,)."""
+    for k in prange(len(out)):
+        out[k] = relaxation_of(true_gap[k], most_recovered, kept)
+
+
+relaxation_of = numba.njit(cache=True, inline="always")(relaxation_of)
+_relaxations = numba.njit(cache=True, parallel=True)(_relaxations)
 
 
 def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylinder_margin=0.0,
@@ -252,7 +269,7 @@ def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylind
         normal[:, 1] = np.where(on_axis, 0.0, state.position[idx, 1] / safe_rho)
         parts.append((idx, np.full(len(idx), CYLINDER), normal, gap[idx]))
     for p, plane in enumerate(walls.plane_array()):
-        true_gap = plane_distance(state.position, plane) - state.radius
+        true_gap = plane_gaps(state, plane)
         gap = true_gap + recovery_relaxation(true_gap, most_recovered, kept)
         idx = np.flatnonzero(gap < reach)
         parts.append((idx, np.full(len(idx), PLANE + p), np.tile(-plane[:3], (len(idx), 1)), gap[idx]))
@@ -261,14 +278,32 @@ def _wall_contacts(state: ParticleState, walls: Walls, reach: np.ndarray, cylind
     return tuple(np.concatenate(arrays) for arrays in zip(*parts))
 
 
-def plane_distance(position: np.ndarray, plane: np.ndarray) -> np.ndarray:
-    """(n,) the signed distance n . x - offset (length) of each centre of `position` (n, 3) from a plane
-    wall (n_x, n_y, n_z, offset) (:class:`colsim.engine.state.Walls`), the products summed in order x,
-    y, z as the GPU's kernels sum them."""
-    distance = position[:, 0] * plane[0]
-    distance += position[:, 1] * plane[1]
-    distance += position[:, 2] * plane[2]
-    return distance - plane[3]
+def plane_gap(position, radius, i, normal_x, normal_y, normal_z, offset):
+    """Particle i's gap n . x_i - offset - R_i (length) to the plane wall (n_x, n_y, n_z, offset)
+    (:class:`colsim.engine.state.Walls`), the products summed in the order x, y, z (scalar code:
+    compiled by numba, and for the GPU by numba.cuda, :mod:`colsim.engine.cuda_contacts`)."""
+    distance = position[i, 0] * normal_x
+    distance += position[i, 1] * normal_y
+    distance += position[i, 2] * normal_z
+    return (distance - offset) - radius[i]
+
+
+def _plane_gaps(position, radius, plane, out):
+    """out (n,) = :func:`plane_gap` of each particle to `plane` (4,)."""
+    for i in prange(len(out)):
+        out[i] = plane_gap(position, radius, i, plane[0], plane[1], plane[2], plane[3])
+
+
+plane_gap = numba.njit(cache=True, inline="always")(plane_gap)
+_plane_gaps = numba.njit(cache=True, parallel=True)(_plane_gaps)
+
+
+def plane_gaps(state: ParticleState, plane: np.ndarray) -> np.ndarray:
+    """(n,) each particle's gap to the plane wall `plane` (n_x, n_y, n_z, offset) (length)."""
+    out = np.empty(state.n)
+    _plane_gaps(np.ascontiguousarray(state.position, dtype=float), np.ascontiguousarray(state.radius, dtype=float),
+                np.ascontiguousarray(plane, dtype=float), out)
+    return out
 
 
 def fixed_pairs(state: ParticleState, fixed: FixedSpheres | None, reach: np.ndarray):
@@ -461,7 +496,7 @@ def largest_plane_overlap(state: ParticleState, walls: Walls) -> float:
     largest = 0.0
     for plane in walls.plane_array():
         if state.n:
-            largest = max(largest, float(np.max(state.radius - plane_distance(state.position, plane))))
+            largest = max(largest, float(np.max(-plane_gaps(state, plane))))
     return largest
 
 

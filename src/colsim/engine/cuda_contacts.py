@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from .contacts import WALL, Contacts, lever_of, pair_overlaps, swept_close
+from .contacts import WALL, Contacts, lever_of, pair_overlaps, plane_gap, relaxation_of, swept_close
 from .state import CYLINDER, FLOOR, PARTICLE, PLANE, pair_key
 from .cuda_launch import launch
 from .cuda_state import (DeviceParticleArray, axis_distance, midpoints_on_device, particle_array_on_device,
@@ -245,6 +245,8 @@ def join_given_pairs(found: DeviceContacts, given: dict, n: int, rolling_lever: 
 
 #: the CPU's lever (colsim.engine.contacts.lever_of) and pair key (colsim.engine.state.pair_key), for the GPU
 _lever_of = cuda.jit(device=True)(getattr(lever_of, "py_func", lever_of))
+_relaxation_of = cuda.jit(device=True)(getattr(relaxation_of, "py_func", relaxation_of))
+_plane_gap = cuda.jit(device=True)(getattr(plane_gap, "py_func", plane_gap))
 _pair_key = cuda.jit(device=True)(pair_key)
 
 
@@ -372,7 +374,7 @@ class _SweptPairs:
 def _frames_kernel(position, radius, offsets, partners, most_recovered, kept, normal, gap, tangent1, tangent2,
                    largest):
     """Each pair (i, j) of particle i (one thread a particle): the unit normal from i to j, the gap
-    along it relaxed as :func:`_relaxation` relaxes |d| - R_i - R_j, and the tangents of
+    along it relaxed as :func:`_relaxation_of` relaxes |d| - R_i - R_j, and the tangents of
     colsim.engine.contacts.tangent_basis (helper x unless |n_x| >= 0.9, then y; t1 = helper x n,
     normalised; t2 = n x t1), in the CPU's arithmetic; and largest[b] the largest overlap
     R_i + R_j - |d| of block b's particles' pairs (-inf: none)."""
@@ -401,17 +403,10 @@ def _pair_frames(i, position, radius, offsets, partners, most_recovered, kept, n
         largest = max(largest, radius[i] + radius[j] - distance)
         n0, n1, n2 = d0 / distance, d1 / distance, d2 / distance
         g = n0 * d0 + n1 * d1 + n2 * d2 - radius[i] - radius[j]
-        gap[k] = g + _relaxation(distance - radius[i] - radius[j], most_recovered, kept)
+        gap[k] = g + _relaxation_of(distance - radius[i] - radius[j], most_recovered, kept)
         normal[k, 0], normal[k, 1], normal[k, 2] = n0, n1, n2
         _put_tangents(k, n0, n1, n2, tangent1, tangent2)
     return largest
-
-
-@cuda.jit(device=True)
-def _relaxation(true_gap, most_recovered, kept):
-    """:func:`colsim.engine.contacts.recovery_relaxation` of one gap: max(0, -g - most_recovered,
-    min(-g, kept)), the same number as the host's (kept 0 adds nothing: min(-g, 0) <= max(0, ...))."""
-    return max(0.0, -true_gap - most_recovered, min(-true_gap, kept))
 
 
 @cuda.jit(device=True)
@@ -487,19 +482,15 @@ def _cylinder_gap(i, position, radius, cylinder_radius, most_recovered, kept):
     relaxes it; its distance rho from the axis, :func:`colsim.engine.cuda_state.axis_distance`)."""
     rho = axis_distance(position, i)
     true_gap = cylinder_radius - rho - radius[i]
-    return true_gap + _relaxation(true_gap, most_recovered, kept), rho
+    return true_gap + _relaxation_of(true_gap, most_recovered, kept), rho
 
 
 @cuda.jit(device=True)
-def _plane_gap(i, position, radius, planes, p, most_recovered, kept):
-    """Particle i's gap n . x_i - offset - R_i to plane wall p of `planes` (p, 4), relaxed as
-    :func:`colsim.engine.contacts.recovery_relaxation` relaxes it, in the arithmetic of
-    :func:`colsim.engine.contacts.plane_distance`."""
-    distance = position[i, 0] * planes[p, 0]
-    distance += position[i, 1] * planes[p, 1]
-    distance += position[i, 2] * planes[p, 2]
-    true_gap = (distance - planes[p, 3]) - radius[i]
-    return true_gap + _relaxation(true_gap, most_recovered, kept)
+def _relaxed_plane_gap(i, position, radius, planes, p, most_recovered, kept):
+    """Particle i's gap to plane wall p of `planes` (p, 4) (:func:`colsim.engine.contacts.plane_gap`),
+    relaxed as :func:`colsim.engine.contacts.recovery_relaxation` relaxes it."""
+    true_gap = _plane_gap(position, radius, i, planes[p, 0], planes[p, 1], planes[p, 2], planes[p, 3])
+    return true_gap + _relaxation_of(true_gap, most_recovered, kept)
 
 
 @cuda.jit
@@ -519,7 +510,7 @@ def _wall_flags_kernel(position, radius, predicted, floor, cylinder_radius, plan
         gap, _ = _cylinder_gap(i, position, radius, cylinder_radius, most_recovered, kept)
         flags[n + i] = 1 if gap < reach else 0
     for q in range(n_planes):
-        flags[(2 + q) * n + i] = 1 if _plane_gap(i, position, radius, planes, q, most_recovered, kept) < reach else 0
+        flags[(2 + q) * n + i] = 1 if _relaxed_plane_gap(i, position, radius, planes, q, most_recovered, kept) < reach else 0
 
 
 @cuda.jit
@@ -537,7 +528,7 @@ def _wall_rows_kernel(position, radius, start, cylinder_radius, planes, n_planes
     if start[i + 1] > start[i]:
         k = first + start[i]
         gap = position[i, 2] - radius[i]
-        _put_wall_row(k, i, FLOOR, 0.0, 0.0, -1.0, gap + _relaxation(gap, most_recovered, kept), radius[i], mu_floor,
+        _put_wall_row(k, i, FLOOR, 0.0, 0.0, -1.0, gap + _relaxation_of(gap, most_recovered, kept), radius[i], mu_floor,
                       mu_r_floor, normal, tangent1, tangent2, numbers, bodies)
     if start[n + i + 1] > start[n + i]:
         k = first + start[n + i]
@@ -548,7 +539,7 @@ def _wall_rows_kernel(position, radius, start, cylinder_radius, planes, n_planes
     for q in range(n_planes):
         at = (2 + q) * n + i
         if start[at + 1] > start[at]:
-            gap = _plane_gap(i, position, radius, planes, q, most_recovered, kept)
+            gap = _relaxed_plane_gap(i, position, radius, planes, q, most_recovered, kept)
             _put_wall_row(first + start[at], i, PLANE + q, -planes[q, 0], -planes[q, 1], -planes[q, 2], gap,
                           radius[i], mu_cylinder, mu_r_cylinder, normal, tangent1, tangent2, numbers, bodies)
 
