@@ -173,3 +173,16 @@ def test_the_step_wall_clock_time_is_named_for_what_it_holds(outputs):
     assert simulated.attrs["units"] == "s" and "simulation" in simulated.attrs["long_name"]
     assert np.all(wall.values > 0) and np.all(wall.values >= trajectory["step_solve_time"].values)
     np.testing.assert_allclose(simulated.values[-1], trajectory["time"].values[-1])
+
+
+def test_a_channels_run_coordinates_name_the_box_length():
+    """Issue 82: a channel's r0 coordinate holds its box length L0, and its long names say so (the
+    aspect ratio is H0/L0); a cylinder's are the radius and h0/r0."""
+    from colsim.io.netcdf import run_coordinates
+
+    channel = run_coordinates({"geometry": "channel", "r0": 6.0, "aspect_ratio": 2.0, "mu_r": 0.12, "seed": 1})
+    cylinder = run_coordinates({"r0": 3.0, "aspect_ratio": 2.0, "mu_r": 0.12, "seed": 1})
+    assert "L0" in channel["r0"][2]["long_name"] and channel["aspect_ratio"][2]["long_name"] == "aspect ratio H0/L0"
+    assert cylinder["r0"][2]["long_name"] == "cylinder radius"
+    assert cylinder["aspect_ratio"][2]["long_name"] == "aspect ratio h0/r0"
+    assert channel["r0"][1] == 6.0 and channel["r0"][2]["units"] == "length"

@@ -59,8 +59,10 @@ def at_rest_variable(dims, values) -> tuple:
 def run_coordinates(attrs) -> dict:
     """The run's swept values as scalar coordinates (aspect_ratio, mu_r, seed, r0), so that xarray
     combines many runs' files along a new dimension by them (:func:`colsim.study.runs.open_runs`)."""
-    found = {"aspect_ratio": ("1", "aspect ratio h0/r0"), "mu_r": ("1", "rolling resistance coefficient"),
-             "seed": ("1", "packing seed"), "r0": ("length", "cylinder radius")}
+    channel = attrs.get("geometry") == "channel"
+    found = {"aspect_ratio": ("1", "aspect ratio H0/L0" if channel else "aspect ratio h0/r0"),
+             "mu_r": ("1", "rolling resistance coefficient"), "seed": ("1", "packing seed"),
+             "r0": ("length", "the channel's box length L0 (r0's role)" if channel else "cylinder radius")}
     return {name: ((), int(attrs[name]) if name == "seed" else float(attrs[name]), {"units": units, "long_name": long})
             for name, (units, long) in found.items() if name in attrs}
 
