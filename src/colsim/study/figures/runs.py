@@ -133,11 +133,8 @@ def outward_front(front) -> np.ndarray:
     return np.fmax.accumulate(front) if front.size else front
 
 
-#: the front_position figure's rows: the analysis variable, the y label, whether to draw its running maximum
-
-
-#: each row's label ({r}, {r0}: the run's distance along the spread and length scale, _axis_names)
-#: and whether the front is drawn as its farthest reach so far
+#: the front_position figure's rows: the analysis variable, the y label ({r}, {r0}: the run's distance
+#: along the spread and its length scale, _axis_names), whether to draw its running maximum
 FRONT_ROWS = {
     FRONT_MASS_VARIABLE: (f"front ({{r}}_{FRONT_MASS_SHARE * 100:.0f} - {{r0}}) / {{r0}}\n"
                           f"(distance holding {FRONT_MASS_SHARE:.0%} of the mass)", False),
