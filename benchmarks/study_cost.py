@@ -14,7 +14,9 @@ has one (runs since CPU time was saved), else unknown.
 
 Printed: one row a packing and one a collapse at each `--aspect-ratio`, then one row a column size
 (means over seeds) with the growth of the mean collapse CPU with the spheres, N^k between
-successive sizes. CPU above wall means the job ran on several threads.
+successive sizes. CPU above wall means the job ran on several threads. A results folder holding
+cylinders and channels (whose box length L0 takes r0's place) keeps them apart: each row names its
+column, "cylinder" or "channel W = ..." (the channel's width).
 """
 from __future__ import annotations
 
@@ -40,6 +42,13 @@ def benchmark_of(results: Path, run_file: Path, name: str) -> dict | None:
     return {"wall": float(last["s"]), "cpu": float(last["cpu_time"]), "rss": float(last["max_rss"])}
 
 
+def column_of(attrs) -> str:
+    """The kind of column a file holds: "cylinder", or a channel with its width ("channel W = 2")."""
+    if attrs.get("geometry", "cylinder") == "channel":
+        return f"channel W = {float(attrs['channel_width']):g}"
+    return "cylinder"
+
+
 def packing_rows(results: Path) -> list[dict]:
     import xarray as xr
 
@@ -47,7 +56,8 @@ def packing_rows(results: Path) -> list[dict]:
     for path in sorted(results.glob("r0_*/seed_*/pack_*/packing.nc")):
         with xr.open_dataset(path) as ds:
             attrs = ds.attrs
-            row = {"r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "spheres": ds.sizes["particle"],
+            row = {"column": column_of(attrs), "r0": float(attrs["r0"]), "seed": int(attrs["seed"]),
+                   "spheres": ds.sizes["particle"],
                    "steps": int(attrs["steps"]), "wall_all": float(attrs["wall_time"]),
                    "cpu_file": float(attrs.get("cpu_time", np.nan)),
                    "threads": json.loads(attrs["config"]).get("threads", 1), "file": str(path),
@@ -68,7 +78,8 @@ def collapse_rows(results: Path, aspect_ratios) -> list[dict]:
             if not any(np.isclose(a, wanted) for wanted in aspect_ratios):
                 continue
             iterations = ds["step_solver_iterations"].values
-            row = {"r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "a": a, "mu_r": float(attrs["mu_r"]),
+            row = {"column": column_of(attrs), "r0": float(attrs["r0"]), "seed": int(attrs["seed"]), "a": a,
+                   "mu_r": float(attrs["mu_r"]),
                    "spheres": int(attrs["n_particles"]), "steps": len(iterations),
                    "iterations": float(np.mean(iterations)), "wall_all": float(attrs["wall_time"]),
                    "cpu_file": float(attrs.get("cpu_time", np.nan)),
@@ -118,38 +129,46 @@ def main(argv=None):
 
     print(f"{args.results}: {len(packings)} packings, {len(collapses)} collapses at a = "
           f"{', '.join(f'{a:g}' for a in args.aspect_ratio)}")
-    table = record.table(["job", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s, all segments",
+    table = record.table(["job", "column", "r0", "seed", "a", "spheres", "steps", "threads", "CPU s, all segments",
                           "wall s, all segments", "last segment: CPU s", "wall s", "peak MB", "iterations a step"])
     for row in packings:
-        table.row("pack" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"], "",
+        table.row("pack" + (" (resumed)" if row["resumed"] else ""), row["column"], f"{row['r0']:g}", row["seed"], "",
                   f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
                   number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]),
                   number(row["iterations"]), data=row)
     for row in collapses:
-        table.row("collapse" + (" (resumed)" if row["resumed"] else ""), f"{row['r0']:g}", row["seed"],
+        table.row("collapse" + (" (resumed)" if row["resumed"] else ""), row["column"], f"{row['r0']:g}", row["seed"],
                   f"{row['a']:g}", f"{row['spheres']:,}", row["steps"], row["threads"], number(row["cpu_all"]),
                   number(row["wall_all"]), number(row["cpu"]), number(row["wall"]), number(row["rss"]),
                   f"{row['iterations']:.0f}", data=row)
 
     print()
-    sizes = record.table(["r0", "a", "spheres (mean)", "packing CPU s (mean)", "collapse CPU s (mean)",
+    sizes = record.table(["column", "r0", "a", "spheres (mean)", "packing CPU s (mean)", "collapse CPU s (mean)",
                           "collapse CPU growth N^k", "iterations a step (mean)", "peak MB (largest)"])
-    for a in args.aspect_ratio:
-        by_size = []
-        for r0 in sorted({row["r0"] for row in collapses if np.isclose(row["a"], a)}):
-            runs = [row for row in collapses if row["r0"] == r0 and np.isclose(row["a"], a)]
-            packs = [row for row in packings if row["r0"] == r0 and row["cpu_all"] is not None]
-            timed = [row["cpu_all"] for row in runs if row["cpu_all"] is not None]
-            by_size.append((r0, runs, packs, timed))
-        ks = growth([(np.mean([r["spheres"] for r in runs]), np.mean(timed) if timed else np.nan)
-                     for _, runs, _, timed in by_size])
-        for (r0, runs, packs, timed), k in zip(by_size, ks):
-            pack_cpu = np.mean([p["cpu_all"] for p in packs]) if packs else None
-            rss = max((r["rss"] for r in runs + packs if r["rss"] is not None), default=None)
-            sizes.row(f"{r0:g}", f"{a:g}", f"{np.mean([r['spheres'] for r in runs]):,.0f}", number(pack_cpu),
-                      number(np.mean(timed) if timed else None), number(k, "{:.2f}"),
-                      f"{np.mean([r['iterations'] for r in runs]):.0f}", number(rss),
-                      data={"r0": r0, "a": a, "packing_cpu": pack_cpu, "collapse_cpu": timed, "growth": k})
+    for column in sorted({row["column"] for row in collapses}):
+        for a in args.aspect_ratio:
+            size_rows(sizes, [row for row in collapses if row["column"] == column],
+                      [row for row in packings if row["column"] == column], column, a)
+
+
+def size_rows(sizes, collapses: list[dict], packings: list[dict], column: str, a: float) -> None:
+    """One row of `sizes` a column size at aspect ratio a: the means over seeds of one column's runs."""
+    by_size = []
+    for r0 in sorted({row["r0"] for row in collapses if np.isclose(row["a"], a)}):
+        runs = [row for row in collapses if row["r0"] == r0 and np.isclose(row["a"], a)]
+        packs = [row for row in packings if row["r0"] == r0 and row["cpu_all"] is not None]
+        timed = [row["cpu_all"] for row in runs if row["cpu_all"] is not None]
+        by_size.append((r0, runs, packs, timed))
+    ks = growth([(np.mean([r["spheres"] for r in runs]), np.mean(timed) if timed else np.nan)
+                 for _, runs, _, timed in by_size])
+    for (r0, runs, packs, timed), k in zip(by_size, ks):
+        pack_cpu = np.mean([p["cpu_all"] for p in packs]) if packs else None
+        rss = max((r["rss"] for r in runs + packs if r["rss"] is not None), default=None)
+        sizes.row(column, f"{r0:g}", f"{a:g}", f"{np.mean([r['spheres'] for r in runs]):,.0f}", number(pack_cpu),
+                  number(np.mean(timed) if timed else None), number(k, "{:.2f}"),
+                  f"{np.mean([r['iterations'] for r in runs]):.0f}", number(rss),
+                  data={"column": column, "r0": r0, "a": a, "packing_cpu": pack_cpu, "collapse_cpu": timed,
+                        "growth": k})
 
 
 if __name__ == "__main__":

@@ -5,9 +5,11 @@ then checks results/tiny/summary.nc, the figures and the report, that adding a s
 schedules only the new jobs, and that a wrong configuration stops snakemake naming the culprit.
 """
 import json
+import os
 import re
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -130,10 +132,6 @@ def test_study_cost_reads_the_studys_own_benchmark_files(tiny_study, tmp_path):
     """`python -m benchmarks study_cost` on the study's results: one row a packing and one a
     collapse, each with the CPU, wall and memory of its Snakemake benchmark file (none resumed),
     the spheres of its file, and APGD's iterations a step."""
-    import os
-    import subprocess
-    import sys
-
     env = {**os.environ, "COLSIM_BENCHMARK_RESULTS": str(tmp_path), "PYTHONPATH": str(ROOT)}
     done = subprocess.run([sys.executable, "-m", "benchmarks", "study_cost", str(tiny_study / "results"),
                            "--aspect-ratio", "0.5", "1"], cwd=ROOT, env=env, capture_output=True, text=True)
@@ -722,3 +720,12 @@ def test_the_tiny_channel_study_runs_end_to_end(tmp_path):
     assert "channel laws" in (study / "report_description.rst").read_text()
     for path in (directory / "results").glob("r0_*/seed_1/pack_*/a_1/mu_r_0.12/run_*/collapse.nc"):
         assert xr.open_dataset(path).attrs["geometry"] == "channel"
+    # the study's cost names the channel, so that it is not averaged with a cylinder of r0 = L0
+    env = {**os.environ, "COLSIM_BENCHMARK_RESULTS": str(tmp_path / "records"), "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "benchmarks", "study_cost", str(directory / "results"),
+                           "--aspect-ratio", "1"], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    (record,) = (tmp_path / "records").glob("study_cost-*.json")
+    jobs, sizes = json.loads(record.read_text())["tables"]
+    assert {row["column"] for row in jobs["data"] + sizes["data"]} == {"channel W = 1"}
+    assert sorted(row["r0"] for row in sizes["data"]) == [1.0, 1.5]
