@@ -301,3 +301,16 @@ def test_the_project_speaks_only_of_itself():
 def test_the_engine_and_solvers_speak_only_of_themselves():
     found = _forbidden_lines(path for path in _shipped_files() if _in_engine_or_solvers(path))
     assert not found, found
+
+
+def test_the_calibrations_direct_run_at_0_15_is_printed_from_its_data():
+    """Issue 81: the table of mu_r = 0.15 run directly (docs/validation/calibration.md) is the output of
+    docs/data/calibration_mu_r_015.py on the runs kept in docs/data, row for row."""
+    done = subprocess.run([sys.executable, "docs/data/calibration_mu_r_015.py"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    rows = [line for line in done.stdout.splitlines() if line.startswith("| ")]
+    assert len(rows) == 1 + 12                      # the header and six a by two measures
+    page = (ROOT / "docs" / "validation" / "calibration.md").read_text().splitlines()
+    assert all(row in page for row in rows)
+    assert "- lube, measured: root-mean-square 10.7%" in done.stdout and "10.7 %" in "\n".join(page)
