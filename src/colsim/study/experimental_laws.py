@@ -194,11 +194,6 @@ BREAKPOINTS = {"cylinder": (LAJEUNESSE_BREAK, LUBE_HEIGHT_BREAK, LUBE_RUNOUT_BRE
 """Where each geometry's laws change branch (a figure leaves a gap there rather than draw a jump)."""
 
 
-def geometry_of(dataset) -> str:
-    """The geometry a summary or analysis holds: its `geometry` attribute, "cylinder" where absent."""
-    return str(dataset.attrs.get("geometry", "cylinder"))
-
-
 def power_law_exponent(a, values) -> float:
     """The exponent b of values ~ c a^b fitted by least squares in log-log (dimensionless), over
     the finite positive pairs; NaN with fewer than two distinct a."""

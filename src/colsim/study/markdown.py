@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from .collect import FLAGS, MAIN_MASS_SHARE, counted, rest_energy_of, run_status
-from .experimental_laws import REFERENCE, geometry_of, laws_for
+from ..stages.analyse import geometry_of
+from .experimental_laws import REFERENCE, laws_for
 
 
 def _sd(values) -> float:
@@ -63,13 +64,13 @@ def _flag_cell(flags, seeds) -> str:
 
 def _reference(summary, variable: str):
     """The law of :data:`REFERENCE` for the summary's geometry that predicts `variable`."""
-    return laws_for(geometry_of(summary))[variable][REFERENCE[geometry_of(summary)]]
+    return laws_for(geometry_of(summary.attrs))[variable][REFERENCE[geometry_of(summary.attrs)]]
 
 
 def _other(summary, variable: str):
     """The second law of the summary's geometry for `variable` (Lajeunesse et al.'s)."""
-    return [law for name, law in laws_for(geometry_of(summary))[variable].items()
-            if name != REFERENCE[geometry_of(summary)]][0]
+    return [law for name, law in laws_for(geometry_of(summary.attrs))[variable].items()
+            if name != REFERENCE[geometry_of(summary.attrs)]][0]
 
 
 def lube_markdown(summary) -> str:
@@ -121,7 +122,7 @@ def lube_markdown(summary) -> str:
                   runout_measures_markdown(summary)]
     if "undisturbed_top_radius" in summary and "n_main_mass" in summary:
         lines += ["### The paper's qualitative claims", "", claims_markdown(summary)]
-    if geometry_of(summary) == "channel":
+    if geometry_of(summary.attrs) == "channel":
         from .channel import exponents_markdown
 
         lines += ["### Exponents against the channel laws (fitted over every seed)", "", exponents_markdown(summary)]
@@ -178,7 +179,7 @@ def lube_rst(summary, mu_r: float) -> str:
                      f"{r:.3f}", _law_cell(runout(a)), _error(r, runout(a)), flag or "-"])
     caveat = size_caveat(float(summary.attrs["r0"])) if "r0" in summary.attrs else ""
     lines = ([caveat, ""] if caveat else []) + [
-        f".. list-table:: mu_r = {float(m):g}, mean over seeds, against {REFERENCE[geometry_of(summary)]}",
+        f".. list-table:: mu_r = {float(m):g}, mean over seeds, against {REFERENCE[geometry_of(summary.attrs)]}",
         "   :header-rows: 1", ""]
     for row in rows:
         lines += [f"   * - {row[0]}"] + [f"     - {cell}" for cell in row[1:]]

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..collect import FLAGS
-from ..experimental_laws import BREAKPOINTS, REFERENCE, geometry_of, laws_for
+from ...stages.analyse import geometry_of
+from ..experimental_laws import BREAKPOINTS, REFERENCE, laws_for
 from .style import (MARKERS, QUANTITY_LABELS, _bar_kind, _bar_note, _bars, _colours, _draw_flags, _flag_handles,
                     _flags_of, _label, _pyplot, _save)
 
@@ -96,7 +97,7 @@ def law_figure(summary, variable: str, path: Path) -> Path:
     standing for L0)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 4.2))
-    geometry = geometry_of(summary)
+    geometry = geometry_of(summary.attrs)
     laws = laws_for(geometry)[variable]
     ratios = summary["aspect_ratio"].values
     span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0), geometry)
@@ -118,7 +119,7 @@ def law_figure(summary, variable: str, path: Path) -> Path:
 
 def _size(summary) -> str:
     """The column's size for a title: "r0 = 3", or a channel's "L0 = 6, W = 2"."""
-    if geometry_of(summary) == "channel":
+    if geometry_of(summary.attrs) == "channel":
         return (f"L0 = {summary.attrs.get('channel_length', float('nan')):g}, "
                 f"W = {summary.attrs.get('channel_width', float('nan')):g}")
     return f"r0 = {summary.attrs.get('r0', float('nan')):g}"
@@ -129,7 +130,7 @@ def friction_law_figure(comparison, path: Path) -> Path:
     :func:`_against_aspect_ratio`), at the comparison's first mu_r, with Lube's laws drawn."""
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained")
-    geometry = geometry_of(comparison)
+    geometry = geometry_of(comparison.attrs)
     reference = REFERENCE[geometry]
     ratios = comparison["aspect_ratio"].values
     span = _law_abscissa(max(float(np.max(ratios)) * 1.1, 1.0), geometry)
@@ -156,7 +157,7 @@ def mu_r_figure(summary, path: Path) -> Path:
 
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
-    geometry = geometry_of(summary)
+    geometry = geometry_of(summary.attrs)
     reference = REFERENCE[geometry]
     mu_r = summary["mu_r"].values
     ratios = summary["aspect_ratio"].values
