@@ -39,6 +39,7 @@ from ..engine.state import LEVER_OF_OLDER_FILES, ParticleState
 from ..io.netcdf import at_rest_flag, at_rest_variable, run_coordinates
 from ..io.state_file import state_from_dataset
 from ..solvers import defaults
+from .pour_geometry import geometry_of
 from .settings import AnalysisSettings
 
 DEFAULT_CONTACT_TOLERANCE = AnalysisSettings.contact_tolerance  # fraction of the smallest diameter
@@ -46,19 +47,9 @@ DEFAULT_CONTACT_TOLERANCE = AnalysisSettings.contact_tolerance  # fraction of th
 #: stored in the analysis as FRONT_MASS_VARIABLE over time
 FRONT_MASS_SHARE = 0.95
 FRONT_MASS_VARIABLE = "mass_front_95_over_r0"
-GEOMETRIES = ("cylinder", "channel")
 BACK_WALL_BAND = 1.0
 """A channel's h_inf: the highest grain top among grains whose back edge is within this many mean
 diameters of the back wall."""
-
-
-def geometry_of(attrs) -> str:
-    """The geometry a file's attributes name ("cylinder" where the attribute is absent, as in every
-    file written before channels existed); ValueError for any other name."""
-    geometry = str(attrs.get("geometry", "cylinder"))
-    if geometry not in GEOMETRIES:
-        raise ValueError(f"geometry {geometry[:60]!r} is not one of {', '.join(GEOMETRIES)}")
-    return geometry
 
 
 def column_length(attrs) -> float:

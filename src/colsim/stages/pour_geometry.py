@@ -31,10 +31,19 @@ def footprint_area(footprint) -> float:
     return np.pi * footprint**2
 
 
+def geometry_of(attrs) -> str:
+    """The geometry a file's attributes name ("cylinder" where the attribute is absent, as in every
+    file written before channels existed); ValueError for any other name."""
+    geometry = str(attrs.get("geometry", "cylinder"))
+    if geometry not in GEOMETRIES:
+        raise ValueError(f"geometry {geometry[:60]!r} is not one of {', '.join(GEOMETRIES)}")
+    return geometry
+
+
 def footprint_of(attrs) -> float | Channel:
     """The footprint a packing's or a column's file attributes record: a Channel where their geometry
     is channel (channel_length, channel_width), else the cylinder's r0."""
-    if attrs.get("geometry", "cylinder") == "channel":
+    if geometry_of(attrs) == "channel":
         return Channel(float(attrs["channel_length"]), float(attrs["channel_width"]))
     return float(attrs["r0"])
 

@@ -14,6 +14,7 @@ from ..engine.state import FRICTION_LAWS, LEVER_OF_OLDER_FILES, ROLLING_LEVERS
 from ..io.checks import FileProblem, check_attributes
 from ..io.netcdf import AT_REST_FLAGS, at_rest_flag, at_rest_variable
 from ..solvers.defaults import FLOAT64_FALLBACK, SOLVERS
+from ..stages.pour_geometry import geometry_of
 from ..stages.settings import CollapseSettings
 
 SUMMARY_VARIABLES = ("h_inf_over_r0", "runout_over_r0", "h_inf", "r_inf", "n_particles",
@@ -225,7 +226,7 @@ def _geometry_attributes(analyses) -> dict:
     """The runs' geometry ("cylinder" where an analysis has no attribute, as every file written
     before channels) and its GEOMETRY_ATTRIBUTES, from the first run; ValueError where the runs
     hold more than one geometry (a study compares one with its own laws)."""
-    geometries = {str(a.attrs.get("geometry", "cylinder")) for a in analyses}
+    geometries = {geometry_of(a.attrs) for a in analyses}
     if len(geometries) > 1:
         raise ValueError(f"the runs hold more than one geometry ({', '.join(sorted(geometries))}); "
                          "a summary holds one")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from .collect import FLAGS, MAIN_MASS_SHARE, counted, rest_energy_of, run_status
-from ..stages.analyse import geometry_of
+from ..stages.pour_geometry import geometry_of
 from .experimental_laws import REFERENCE, laws_for
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..collect import FLAGS
-from ...stages.analyse import geometry_of
+from ...stages.pour_geometry import geometry_of
 from ..experimental_laws import BREAKPOINTS, REFERENCE, laws_for
 from .style import (MARKERS, QUANTITY_LABELS, _bar_kind, _bar_note, _bars, _colours, _draw_flags, _flag_handles,
                     _flags_of, _label, _pyplot, _save)
