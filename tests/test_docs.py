@@ -314,3 +314,18 @@ def test_the_calibrations_direct_run_at_0_15_is_printed_from_its_data():
     page = (ROOT / "docs" / "validation" / "calibration.md").read_text().splitlines()
     assert all(row in page for row in rows)
     assert "- lube, measured: root-mean-square 10.7%" in done.stdout and "10.7 %" in "\n".join(page)
+
+
+def test_the_size_laws_fitted_exponent_is_printed_from_its_data():
+    """Issue 81: the column-size page's exponent tables are the output of
+    docs/data/column_size_exponent.py, verbatim, between its markers; and the fitted p it quotes is
+    the script's pooled run-out row."""
+    done = subprocess.run([sys.executable, "docs/data/column_size_exponent.py"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    page = (ROOT / "docs" / "validation" / "column-size.md").read_text()
+    start = page.index("<!-- column-size-exponent:")
+    block = page[page.index("\n", start) + 1:page.index("<!-- /column-size-exponent -->")]
+    assert block.strip() == done.stdout.strip()
+    assert "| runout | all, one p | | 28 | **0.45 [<= 0.25, 1.06]** |" in done.stdout
+    assert "**The run-outs, one p for every a: 0.45 [<= 0.25, 1.06].**" in page

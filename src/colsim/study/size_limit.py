@@ -34,8 +34,8 @@ from scipy.optimize import minimize_scalar
 from scipy.stats import norm
 from scipy.stats import t as student_t
 
-#: the size law's exponents p a bootstrap replicate draws from (uniformly): X = X_inf + k (d/r0)^p holds
-#: with p = 1 over r0 <= 6 to about 5 % (docs/validation/column-size.md), which the sizes cannot test
+#: the size law's exponents p a bootstrap replicate draws from (uniformly): sizes up to r0 = 6 fit the
+#: run-outs' p as 0.45 [<= 0.25, 1.06] (docs/validation/column-size.md), so they cannot test p = 1
 EXPONENT_RANGE = (0.5, 1.5)
 P_BOUNDS = (0.25, 4.0)   #: the exponents a fitted p may take
 

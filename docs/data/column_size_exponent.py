@@ -1,0 +1,139 @@
+# The size law's exponent p fitted to the column-size study (docs/validation/column-size.md, "The size
+# law's exponent, fitted"). From the repository root:
+#   python docs/data/column_size_exponent.py
+# X(r0) = X_inf + k (d/r0)^p is fitted to each size's mean (docs/data/column-size-limits.csv, r0 = 2-6,
+# three seeds up to r0 = 4 and two above), weighted by its seeds over a run's variance. The runs
+# themselves were not kept, so a run's scatter comes from the calibration's mu_r = 0.15 runs
+# (docs/data/calibration-mu_r-0.15-runs.csv: three seeds at each r0 = 2, 3, 4 and a, their relative
+# sample variance pooled over r0, 6 degrees of freedom). p's 95 % interval is the profile of chi^2:
+# every p within 3.84 of the least chi^2 (one parameter, Gaussian noise), searched on P_BOUNDS; an end
+# at a bound prints as "<= 0.25" or ">= 4". Pooled: one p for every a of a measure (X_inf and k per a).
+# It also prints the p = 1 line through r0 = 2-4's means extrapolated to r0 = 5 and 6, beside their
+# measured means: the direct test of p = 1.
+import csv
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from colsim.study.size_limit import P_BOUNDS
+
+HERE = Path(__file__).parent
+SIZES = (2, 3, 4, 5, 6)
+MEASURES = (("h_inf_over_r0", "height"), ("runout_over_r0", "runout"))
+GRID = np.linspace(*P_BOUNDS, 1501)
+CRITICAL = chi2.ppf(0.95, 1)
+
+
+def _rows(name) -> list:
+    with open(HERE / name, newline="") as stream:
+        return list(csv.DictReader(line for line in stream if not line.startswith("#")))
+
+
+def run_scatter(measure: str, a: float) -> float:
+    """A run's relative scatter at a: the mu_r = 0.15 runs' sample variance within each r0, pooled."""
+    runs = [row for row in _rows("calibration-mu_r-0.15-runs.csv") if float(row["aspect_ratio"]) == a]
+    squares, dof = 0.0, 0
+    for r0 in {row["r0"] for row in runs}:
+        values = np.array([float(row[measure]) for row in runs if row["r0"] == r0])
+        squares, dof = squares + np.sum((values / values.mean() - 1) ** 2), dof + len(values) - 1
+    return float(np.sqrt(squares / dof))
+
+
+def series(variable: str, measure: str) -> list:
+    """[(a, 1/r0, the means over their scale, seeds a size, a run's relative scatter, the scale: the means'
+    mean)] of one measure."""
+    out = []
+    for row in _rows("column-size-limits.csv"):
+        if row["variable"] == variable:
+            sizes = [r0 for r0 in SIZES if row[f"r0_{r0}"]]
+            means = np.array([float(row[f"r0_{r0}"]) for r0 in sizes])
+            seeds = np.array([3 if r0 <= 4 else 2 for r0 in sizes])
+            a = float(row["aspect_ratio"])
+            scale = np.average(means, weights=seeds)
+            out.append((a, 1.0 / np.array(sizes), means / scale, seeds, run_scatter(measure, a), scale))
+    return out
+
+
+def chi_squared(p: float, inverse_r0, means, seeds, scatter) -> float:
+    """chi^2 of the weighted least-squares fit of means = X_inf + k (1/r0)^p (d's scale moves k only)."""
+    weight = np.sqrt(seeds) / scatter
+    design = np.column_stack([np.ones_like(inverse_r0), inverse_r0**p]) * weight[:, None]
+    coefficients, *_ = np.linalg.lstsq(design, means * weight, rcond=None)
+    return float(np.sum((design @ coefficients - means * weight) ** 2))
+
+
+def profile(curve) -> str:
+    """'p [low, high]' from chi^2 over GRID."""
+    inside = GRID[curve - curve.min() <= CRITICAL]
+    low = f"<= {P_BOUNDS[0]:g}" if inside[0] == GRID[0] else f"{inside[0]:.2f}"
+    high = f">= {P_BOUNDS[1]:g}" if inside[-1] == GRID[-1] else f"{inside[-1]:.2f}"
+    best = curve.argmin()
+    estimate = low if best == 0 else high if best == len(GRID) - 1 else f"{GRID[best]:.2f}"
+    return f"{estimate} [{low}, {high}]"
+
+
+def chi_squared_curves(variable: str, measure: str) -> list:
+    """[(a, number of sizes, chi^2 over GRID)] of one measure's series."""
+    return [(a, len(means), np.array([chi_squared(p, inverse_r0, means, seeds, scatter) for p in GRID]))
+            for a, inverse_r0, means, seeds, scatter, _ in series(variable, measure)]
+
+
+def pooled_exponent(variable: str, measure: str) -> float:
+    """The one p that fits every a of a measure best."""
+    return float(GRID[sum(curve for *_, curve in chi_squared_curves(variable, measure)).argmin()])
+
+
+def exponent_table() -> str:
+    lines = ["| measure | a | a run's scatter | sizes | fitted p [95 %] | least chi^2 (dof) |", "|---|---|---|---|---|---|"]
+    for variable, measure in MEASURES:
+        curves = chi_squared_curves(variable, measure)
+        for (a, sizes, curve), fit in zip(curves, series(variable, measure)):
+            lines.append(f"| {measure} | {a:g} | {fit[4]:.1%} | {sizes} | {profile(curve)} | "
+                         f"{curve.min():.1f} ({sizes - 3}) |")
+        pooled, points = sum(curve for *_, curve in curves), sum(sizes for _, sizes, _ in curves)
+        lines.append(f"| {measure} | all, one p | | {points} | **{profile(pooled)}** | "
+                     f"{pooled.min():.1f} ({points - 2 * len(curves) - 1}) |")
+    return "\n".join(lines)
+
+
+def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
+    """((X_inf, k), their covariance) of the weighted fit of means = X_inf + k (1/r0)^p."""
+    weight = np.sqrt(seeds) / scatter
+    design = np.column_stack([np.ones_like(inverse_r0), inverse_r0**p]) * weight[:, None]
+    coefficients, *_ = np.linalg.lstsq(design, means * weight, rcond=None)
+    return coefficients, np.linalg.inv(design.T @ design)
+
+
+def prediction_table() -> str:
+    """The p = 1 line through r0 = 2-4's means at r0 = 5 and 6 against their means, the difference over
+    its standard error (the line's and the two seeds' mean's, in a run's scatter)."""
+    lines = ["| measure | a | r0 | p = 1 from r0 = 2-4 | measured | measured - predicted | in standard errors |",
+             "|---|---|---|---|---|---|---|"]
+    for variable, measure in MEASURES:
+        for a, inverse_r0, means, seeds, scatter, scale in series(variable, measure):
+            small = inverse_r0 >= 1 / 4
+            line, covariance = fitted(1.0, inverse_r0[small], means[small], seeds[small], scatter)
+            for x, mean, n in zip(inverse_r0[~small], means[~small], seeds[~small]):
+                at = np.array([1.0, x])
+                predicted, error = at @ line, np.sqrt(at @ covariance @ at + scatter**2 / n)
+                lines.append(f"| {measure} | {a:g} | {1 / x:.0f} | {scale * predicted:.3f} | {scale * mean:.3f} | "
+                             f"{mean / predicted - 1:+.1%} | {(mean - predicted) / error:+.1f} |")
+    return "\n".join(lines)
+
+
+def runout_limits(p: float) -> str:
+    """The run-outs' limits from r0 = 2-6's means at p = 1 and at p, relative to their own mean."""
+    lines = [f"| a | limit at p = 1 | limit at p = {p:g} | difference |", "|---|---|---|---|"]
+    for a, inverse_r0, means, seeds, scatter, scale in series("runout_over_r0", "runout"):
+        one, other = (scale * fitted(q, inverse_r0, means, seeds, scatter)[0][0] for q in (1.0, p))
+        lines.append(f"| {a:g} | {one:.3f} | {other:.3f} | {other / one - 1:+.1%} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    print(exponent_table())
+    print()
+    print(prediction_table())
+    print()
+    print(runout_limits(pooled_exponent("runout_over_r0", "runout")))
