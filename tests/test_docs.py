@@ -329,3 +329,16 @@ def test_the_size_laws_fitted_exponent_is_printed_from_its_data():
     assert block.strip() == done.stdout.strip()
     assert "| runout | all, one p | | 28 | **0.45 [<= 0.25, 1.06]** |" in done.stdout
     assert "**The run-outs, one p for every a: 0.45 [<= 0.25, 1.06].**" in page
+
+
+def test_the_seed_designs_limits_are_printed_from_its_data():
+    """Issue 81: the calibration page's limits of the seed design (config/limits.yaml) are the output of
+    docs/data/limits_design.py on the runs kept in docs/data, verbatim, between its markers."""
+    done = subprocess.run([sys.executable, "docs/data/limits_design.py"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    page = (ROOT / "docs" / "validation" / "calibration.md").read_text()
+    start = page.index("<!-- limits-design:")
+    block = page[page.index("\n", start) + 1:page.index("<!-- /limits-design -->")]
+    assert block.strip() == done.stdout.strip()
+    assert "mu_r = 0.15 [95 %], half-width" in done.stdout

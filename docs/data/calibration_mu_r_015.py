@@ -14,9 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.study.calibration import LAWS, misfits, on_grid, relative_errors, run_table
-from colsim.study.size_limit import (EXPONENT_RANGE, bootstrap_draws, inflated, interval_widening, table_limits,
-                                     widened)
+from colsim.study.calibration import LAWS, limit_intervals, misfits, on_grid, relative_errors
 
 HERE = Path(__file__).parent
 RUNS = HERE / "calibration-mu_r-0.15-runs.csv"
@@ -59,14 +57,9 @@ def read_runs():
     return Runs(*(np.array([float(row[name]) for row in rows]) for name in COLUMNS))
 
 
-def measured_limits(runs, seed: int = 0):
+def measured_limits(runs):
     """((2, n_a) limits, (2, n_a) low ends, (2, n_a) high ends) of height and run-out at the one mu_r."""
-    table = run_table(runs)
-    counts, exponent = bootstrap_draws(table, REPLICATES, np.random.default_rng(seed), EXPONENT_RANGE)
-    boot = table_limits(inflated(table), counts, exponent)[:, :, 0]              # (B, 2, n_a)
-    limits = table_limits(table)[:, 0]
-    low, high = widened(limits, boot, LEVEL, interval_widening(table, LEVEL))
-    return limits, low, high
+    return tuple(part[:, 0] for part in limit_intervals(runs, REPLICATES, LEVEL))
 
 
 def interpolated_limits(ratios):

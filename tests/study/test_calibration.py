@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from colsim.study.calibration import (MEASURED_COVERAGE, MEASURES, Runs, best_mu_r, calibrate, calibration_markdown,
-                                      fitting_range, misfits, mu_r_interval, relative_errors)
+                                      fitting_range, limit_intervals, misfits, mu_r_interval, relative_errors)
 from colsim.study.coverage import CASES, coverage
 from colsim.study.experimental_laws import lube_height, lube_runout
 
@@ -202,3 +202,21 @@ def test_the_calibrate_command_writes_its_table_dataset_and_figure(tmp_path):
     one = [p for p in paths if "_0" in p.name.split("analysis")[1][:2]]
     assert main(["calibrate", *map(str, one), "--output", str(tmp_path / "x.nc")]) == 2
     assert not (tmp_path / "x.nc").exists()
+
+
+def test_limit_intervals_are_calibrates_and_the_seeds_part_is_narrower():
+    """limit_intervals gives calibrate's limits and interval ends (the same bootstrap); with p kept at
+    1 the median interval is narrower (the exponent's range no longer moves the extrapolation), and on
+    exact runs the intervals shrink to the limit itself (to 1e-9)."""
+    runs = synthetic_runs(np.random.default_rng(3))
+    limits, low, high = limit_intervals(runs, replicates=200, seed=5)
+    result = calibrate(runs, replicates=200, seed=5)
+    for q, name in enumerate(("height", "runout")):
+        np.testing.assert_allclose(limits[q], result[f"{name}_limit"].values, rtol=1e-12)
+        np.testing.assert_allclose(low[q], result[f"{name}_low"].values, rtol=1e-12)
+        np.testing.assert_allclose(high[q], result[f"{name}_high"].values, rtol=1e-12)
+    _, low_1, high_1 = limit_intervals(runs, replicates=200, seed=5, exponents=None)
+    assert np.median((high_1 - low_1) / (high - low)) < 1
+    exact = limit_intervals(synthetic_runs(np.random.default_rng(0), noise=0.0), replicates=20, exponents=None)
+    np.testing.assert_allclose(exact[1], exact[0], rtol=1e-9)
+    np.testing.assert_allclose(exact[2], exact[0], rtol=1e-9)

@@ -99,6 +99,26 @@ def run_table(runs: Runs) -> RunTable:
     return RunTable(values, x, seeds)
 
 
+def limit_replicates(table: RunTable, replicates: int, seed: int, exponents=EXPONENT_RANGE):
+    """(limits (2, n_mu, n_a) of height and run-out, their bootstrap replicates (B, 2, n_mu, n_a)) by
+    the module docstring's steps 1 and 5; reproducible from `seed`."""
+    limits = table_limits(table)
+    if np.isnan(limits).any():
+        raise ValueError("every (mu_r, a) needs runs at two r0 or more for its limit")
+    counts, exponent = bootstrap_draws(table, replicates, np.random.default_rng(seed), exponents)
+    return limits, table_limits(inflated(table), counts, exponent)
+
+
+def limit_intervals(runs: Runs, replicates: int = 1000, level: float = 0.95, seed: int = 0,
+                    exponents=EXPONENT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(limits, low ends, high ends), each (2, n_mu, n_a): the large-column limits of height and
+    run-out with the calibration's intervals (exponents None: p kept at 1, the seeds' part alone)."""
+    table = run_table(runs)
+    limits, boot = limit_replicates(table, replicates, seed, exponents)
+    low, high = widened(limits, boot, level, interval_widening(table, level))
+    return limits, low, high
+
+
 def relative_errors(limits: np.ndarray, ratios: np.ndarray, law: str) -> np.ndarray:
     """(..., 2, n, n_a) relative errors (X_inf - law)/law of the height and run-out limits (..., 2, n, n_a)."""
     height_law, runout_law = LAWS[law]
@@ -155,12 +175,7 @@ def calibrate(runs: Runs, replicates: int = 1000, level: float = 0.95, seed: int
         raise ValueError("a calibration needs at least two values of mu_r")
     grid = np.linspace(mu_rs[0], mu_rs[-1], GRID_POINTS)
     table = run_table(runs)
-    limits = table_limits(table)
-    if np.isnan(limits).any():
-        raise ValueError("every (mu_r, a) needs runs at two r0 or more for its limit")
-    rng = np.random.default_rng(seed)
-    counts, exponent = bootstrap_draws(table, replicates, rng, exponents)
-    boot = table_limits(inflated(table), counts, exponent)                  # (B, 2, n_mu, n_a)
+    limits, boot = limit_replicates(table, replicates, seed, exponents)     # (2, n_mu, n_a), (B, 2, n_mu, n_a)
     widen = interval_widening(table, level) if student else 1.0
 
     def interval(estimate, replicates_, axis=0):

@@ -1,0 +1,142 @@
+# The large-column limits at mu_r = 0.12, 0.15 and 0.2 from the seed design of config/limits.yaml
+# (docs/validation/calibration.md, "Seeds where they pay"). From the repository root:
+#   python docs/data/limits_design.py
+# It reads the design's runs, one row each, from docs/data/limits-design-runs.csv (5 seeds at r0 = 2,
+# 2 at r0 = 3 and 4; runs of other seeds are left out), fits each limit by the calibration's method
+# (colsim.study.calibration.limit_intervals: X = X_inf + k d/r0 over every run, the seeds resampled
+# within each r0, p drawn from 0.5-1.5, Student's t) and prints, for every mu_r whose every a has runs
+# at two r0 or more, the limits with their 95 % half-widths; then the design's CPU and how far the
+# half-widths are from 3 %: the seeds' part (the same bootstrap with p kept at 1) shrinks as one over
+# the square root of the design's repetitions, the exponent's part does not.
+#   python docs/data/limits_design.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
+# writes that CSV from the study's analysis files first, with each run's collapse and pour CPU time
+# (the cpu_time of the collapse.nc beside the analysis and of its packing.nc).
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from colsim.study.calibration import Runs, limit_intervals
+
+HERE = Path(__file__).parent
+RUNS = HERE / "limits-design-runs.csv"
+DESIGN = {2: 5, 3: 2, 4: 2}      #: seeds a size (colsim.study.seed_design.best_seeds)
+MU_RS = (0.12, 0.15, 0.2)
+TARGET = 0.03                    #: the half-width the issue asks of every limit
+REPLICATES = 1000
+MEASURES = ("height", "runout")
+FIT = ("mu_r", "aspect_ratio", "r0", "seed", "d_over_r0", "height", "runout")
+COLUMNS = FIT + ("collapse_cpu_time", "pour_cpu_time", "commit")
+
+
+def _in_design(r0: float, seed: float) -> bool:
+    return seed <= DESIGN.get(int(r0), 0)
+
+
+def write_runs(paths) -> None:
+    """The design's runs among the analysis files `paths` into RUNS, sorted by mu_r, r0, seed and a."""
+    import netCDF4
+    import xarray as xr
+
+    rows = []
+    for path in map(Path, paths):
+        analysis = xr.load_dataset(path)
+        r0, seed, mu_r = float(analysis.attrs["r0"]), int(analysis.attrs["seed"]), float(analysis.attrs["mu_r"])
+        if not _in_design(r0, seed) or not any(np.isclose(mu_r, MU_RS)):
+            continue
+        with netCDF4.Dataset(path.parent / "collapse.nc") as collapse, \
+                netCDF4.Dataset(path.parents[3] / "packing.nc") as packing:
+            cpu = (float(collapse.getncattr("cpu_time")), float(packing.getncattr("cpu_time")))
+        rows.append((mu_r, float(analysis.attrs["aspect_ratio"]), r0, seed,
+                     float(analysis["mean_diameter"]) / r0, float(analysis["h_inf_over_r0"]),
+                     float(analysis["runout_over_r0"]), *cpu, analysis.attrs["colsim_commit"][:7]))
+    rows.sort(key=lambda row: (row[0], row[2], row[3], row[1]))
+    with open(RUNS, "w", newline="") as stream:
+        stream.write("# The seed design of config/limits.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
+                     "# (r_inf - r0)/r0 (runout) and mean diameter over r0, the CPU seconds of its collapse and of its\n"
+                     "# packing's pour, and the commit it ran at; written by limits_design.py. Machine: the 2-core AMD EPYC.\n")
+        writer = csv.writer(stream)
+        writer.writerow(COLUMNS)
+        writer.writerows([*(f"{value:.10g}" for value in row[:-1]), row[-1]] for row in rows)
+
+
+def read_rows() -> list:
+    with open(RUNS, newline="") as stream:
+        return list(csv.DictReader(line for line in stream if not line.startswith("#")))
+
+
+def runs_of(rows) -> Runs:
+    return Runs(*(np.array([float(row[name]) for row in rows]) for name in FIT))
+
+
+def complete(rows, mu_r: float) -> bool:
+    """Whether every a at mu_r has runs at two r0 or more (so that it has a limit)."""
+    mine = [row for row in rows if np.isclose(float(row["mu_r"]), mu_r)]
+    ratios = {row["aspect_ratio"] for row in mine}
+    return bool(mine) and all(len({row["r0"] for row in mine if row["aspect_ratio"] == a}) >= 2 for a in ratios)
+
+
+def half_widths(limits, low, high) -> np.ndarray:
+    """The relative 95 % half-width of each limit: its interval's longer side over the limit."""
+    return np.maximum(high - limits, limits - low) / np.abs(limits)
+
+
+def progress(rows) -> list:
+    """Per mu_r: its runs against the design's 6 a times its seeds, per r0."""
+    lines = []
+    for mu_r in MU_RS:
+        counts = [f"r0 = {r0}: {sum(np.isclose(float(row['mu_r']), mu_r) and float(row['r0']) == r0 for row in rows)}"
+                  f" of {6 * seeds}" for r0, seeds in DESIGN.items()]
+        lines.append(f"- mu_r = {mu_r:g}: {', '.join(counts)} runs")
+    return lines
+
+
+def cost(rows) -> float:
+    """CPU seconds of the rows' collapses and of their distinct pours."""
+    pours = {(row["r0"], row["seed"]): float(row["pour_cpu_time"]) for row in rows}
+    return sum(float(row["collapse_cpu_time"]) for row in rows) + sum(pours.values())
+
+
+def report(rows) -> str:
+    rows = [row for row in rows if _in_design(float(row["r0"]), float(row["seed"]))]
+    done = [mu_r for mu_r in MU_RS if complete(rows, mu_r)]
+    lines = progress(rows)
+    if not done:
+        return "\n".join(lines + ["", "No mu_r has runs at two r0 or more for every a yet."])
+    chosen = [row for row in rows if any(np.isclose(float(row["mu_r"]), done))]
+    runs = runs_of(chosen)
+    limits, low, high = limit_intervals(runs, REPLICATES)
+    widths = half_widths(limits, low, high)
+    seeds_only = half_widths(*limit_intervals(runs, REPLICATES, exponents=None))
+    ratios = np.unique(runs.aspect_ratio)
+    header = " | ".join(f"mu_r = {mu_r:g} [95 %], half-width" for mu_r in done)
+    lines += ["", f"| a | measure | {header} |", "|---|---|" + "---|" * len(done)]
+    for j, a in enumerate(ratios):
+        for q, measure in enumerate(MEASURES):
+            cells = " | ".join(f"{limits[q, i, j]:.3f} [{low[q, i, j]:.3f}, {high[q, i, j]:.3f}], "
+                               f"{widths[q, i, j]:.1%}" for i in range(len(done)))
+            lines.append(f"| {a:g} | {measure} | {cells} |")
+    lines.append("")
+    for i, mu_r in enumerate(done):
+        mine = [row for row in chosen if np.isclose(float(row["mu_r"]), mu_r)]
+        hours = cost(mine) / 3600
+        repeats = (seeds_only[:, i] / TARGET) ** 2
+        lines.append(
+            f"- mu_r = {mu_r:g}: {len(mine)} runs, {hours:.1f} h of CPU; half-widths {widths[:, i].min():.1%}-"
+            f"{widths[:, i].max():.1%} (median {np.median(widths[:, i]):.1%}), {int((widths[:, i] <= TARGET).sum())} of "
+            f"{widths[:, i].size} within {TARGET:.0%}; with p kept at 1 {seeds_only[:, i].min():.1%}-"
+            f"{seeds_only[:, i].max():.1%}: seeds bring the median to {TARGET:.0%} after "
+            f"{max(np.median(repeats) - 1, 0) * hours:.0f} h more and the widest after "
+            f"{max(repeats.max() - 1, 0) * hours:.0f} h")
+    lines.append(f"\n{REPLICATES} replicates, bootstrap seed 0.")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--from-analyses", nargs="+", metavar="FILE", help="write the runs' CSV from these first")
+    args = parser.parse_args()
+    if args.from_analyses:
+        write_runs(args.from_analyses)
+    print(report(read_rows()))
