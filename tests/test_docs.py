@@ -316,29 +316,35 @@ def test_the_calibrations_direct_run_at_0_15_is_printed_from_its_data():
     assert "- lube, measured: root-mean-square 10.7%" in done.stdout and "10.7 %" in "\n".join(page)
 
 
+def _script_output(script: str) -> str:
+    """What `python docs/data/SCRIPT` prints, run from the repository root."""
+    done = subprocess.run([sys.executable, f"docs/data/{script}"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout
+
+
+def _generated_block(page: str, marker: str) -> str:
+    """The text of `page` (under docs/) between <!-- marker: ... --> and <!-- /marker -->."""
+    text = (ROOT / "docs" / page).read_text()
+    start = text.index(f"<!-- {marker}:")
+    return text[text.index("\n", start) + 1:text.index(f"<!-- /{marker} -->")]
+
+
 def test_the_size_laws_fitted_exponent_is_printed_from_its_data():
     """Issue 81: the column-size page's exponent tables are the output of
     docs/data/column_size_exponent.py, verbatim, between its markers; and the fitted p it quotes is
     the script's pooled run-out row."""
-    done = subprocess.run([sys.executable, "docs/data/column_size_exponent.py"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
+    printed = _script_output("column_size_exponent.py")
+    assert _generated_block("validation/column-size.md", "column-size-exponent").strip() == printed.strip()
+    assert "| runout | all, one p | | 28 | **0.45 [<= 0.25, 1.06]** |" in printed
     page = (ROOT / "docs" / "validation" / "column-size.md").read_text()
-    start = page.index("<!-- column-size-exponent:")
-    block = page[page.index("\n", start) + 1:page.index("<!-- /column-size-exponent -->")]
-    assert block.strip() == done.stdout.strip()
-    assert "| runout | all, one p | | 28 | **0.45 [<= 0.25, 1.06]** |" in done.stdout
     assert "**The run-outs, one p for every a: 0.45 [<= 0.25, 1.06].**" in page
 
 
 def test_the_seed_designs_limits_are_printed_from_its_data():
     """Issue 81: the calibration page's limits of the seed design (config/limits.yaml) are the output of
     docs/data/limits_design.py on the runs kept in docs/data, verbatim, between its markers."""
-    done = subprocess.run([sys.executable, "docs/data/limits_design.py"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    page = (ROOT / "docs" / "validation" / "calibration.md").read_text()
-    start = page.index("<!-- limits-design:")
-    block = page[page.index("\n", start) + 1:page.index("<!-- /limits-design -->")]
-    assert block.strip() == done.stdout.strip()
-    assert "mu_r = 0.15 [95 %], half-width" in done.stdout
+    printed = _script_output("limits_design.py")
+    assert _generated_block("validation/calibration.md", "limits-design").strip() == printed.strip()
+    assert "mu_r = 0.15 [95 %], half-width" in printed

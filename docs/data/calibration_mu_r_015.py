@@ -8,13 +8,12 @@
 # 0.15 by PCHIP, as the calibration interpolates them. It prints the page's table in Markdown.
 #   python docs/data/calibration_mu_r_015.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_0.15/run_*/analysis_*.nc
 # writes that CSV from the study's analysis files first (colsim.study.calibration.runs_from_analyses).
-import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
 
 from colsim.study.calibration import LAWS, limit_intervals, misfits, on_grid, relative_errors
+from runs_csv import main, read_rows, write_rows
 
 HERE = Path(__file__).parent
 RUNS = HERE / "calibration-mu_r-0.15-runs.csv"
@@ -35,25 +34,15 @@ def write_runs(paths) -> None:
     analyses = [xr.load_dataset(path) for path in paths]
     runs = runs_from_analyses(analyses)
     rows = sorted(zip(*(getattr(runs, name) for name in COLUMNS)), key=lambda row: (row[2], row[3], row[1]))
-    with open(RUNS, "w", newline="") as stream:
-        stream.write("# mu_r = 0.15 of config/calibration.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
-                     "# (r_inf - r0)/r0 (runout) and mean diameter over r0; written by calibration_mu_r_015.py.\n"
-                     f"# provenance: {PROVENANCE}\n")
-        writer = csv.writer(stream)
-        writer.writerow(COLUMNS)
-        writer.writerows([f"{value:.10g}" for value in row] for row in rows)
-
-
-def _rows(path) -> list:
-    """The rows of a CSV file of docs/data as dicts, its leading # lines skipped."""
-    with open(path, newline="") as stream:
-        return list(csv.DictReader(line for line in stream if not line.startswith("#")))
+    write_rows(RUNS, "mu_r = 0.15 of config/calibration.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
+               "(r_inf - r0)/r0 (runout) and mean diameter over r0; written by calibration_mu_r_015.py.\n"
+               f"provenance: {PROVENANCE}", COLUMNS, rows)
 
 
 def read_runs():
     from colsim.study.calibration import Runs
 
-    rows = _rows(RUNS)
+    rows = read_rows(RUNS)
     return Runs(*(np.array([float(row[name]) for row in rows]) for name in COLUMNS))
 
 
@@ -64,7 +53,7 @@ def measured_limits(runs):
 
 def interpolated_limits(ratios):
     """(2, n_a) the page's limits interpolated to MU_R (PCHIP over its four mu_r, per a and measure)."""
-    rows = _rows(LIMITS)
+    rows = read_rows(LIMITS)
     mu_rs = np.unique([float(row["mu_r"]) for row in rows])
     table = np.full((2, len(mu_rs), len(ratios)), np.nan)
     for row in rows:
@@ -100,9 +89,4 @@ def report(runs) -> str:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--from-analyses", nargs="+", metavar="FILE", help="write the runs' CSV from these first")
-    args = parser.parse_args()
-    if args.from_analyses:
-        write_runs(args.from_analyses)
-    print(report(read_runs()))
+    main(__doc__, write_runs, lambda: report(read_runs()))

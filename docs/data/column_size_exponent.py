@@ -10,13 +10,13 @@
 # at a bound prints as "<= 0.25" or ">= 4". Pooled: one p for every a of a measure (X_inf and k per a).
 # It also prints the p = 1 line through r0 = 2-4's means extrapolated to r0 = 5 and 6, beside their
 # measured means: the direct test of p = 1.
-import csv
 from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
 
 from colsim.study.size_limit import P_BOUNDS
+from runs_csv import read_rows
 
 HERE = Path(__file__).parent
 SIZES = (2, 3, 4, 5, 6)
@@ -25,14 +25,9 @@ GRID = np.linspace(*P_BOUNDS, 1501)
 CRITICAL = chi2.ppf(0.95, 1)
 
 
-def _rows(name) -> list:
-    with open(HERE / name, newline="") as stream:
-        return list(csv.DictReader(line for line in stream if not line.startswith("#")))
-
-
 def run_scatter(measure: str, a: float) -> float:
     """A run's relative scatter at a: the mu_r = 0.15 runs' sample variance within each r0, pooled."""
-    runs = [row for row in _rows("calibration-mu_r-0.15-runs.csv") if float(row["aspect_ratio"]) == a]
+    runs = [row for row in read_rows(HERE / "calibration-mu_r-0.15-runs.csv") if float(row["aspect_ratio"]) == a]
     squares, dof = 0.0, 0
     for r0 in {row["r0"] for row in runs}:
         values = np.array([float(row[measure]) for row in runs if row["r0"] == r0])
@@ -44,7 +39,7 @@ def series(variable: str, measure: str) -> list:
     """[(a, 1/r0, the means over their scale, seeds a size, a run's relative scatter, the scale: the means'
     mean)] of one measure."""
     out = []
-    for row in _rows("column-size-limits.csv"):
+    for row in read_rows(HERE / "column-size-limits.csv"):
         if row["variable"] == variable:
             sizes = [r0 for r0 in SIZES if row[f"r0_{r0}"]]
             means = np.array([float(row[f"r0_{r0}"]) for r0 in sizes])

@@ -11,13 +11,12 @@
 #   python docs/data/limits_design.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
 # writes that CSV from the study's analysis files first, with each run's collapse and pour CPU time
 # (the cpu_time of the collapse.nc beside the analysis and of its packing.nc).
-import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
 
 from colsim.study.calibration import Runs, limit_intervals
+from runs_csv import main, read_rows, run_costs, write_rows
 
 HERE = Path(__file__).parent
 RUNS = HERE / "limits-design-runs.csv"
@@ -36,34 +35,21 @@ def _in_design(r0: float, seed: float) -> bool:
 
 def write_runs(paths) -> None:
     """The design's runs among the analysis files `paths` into RUNS, sorted by mu_r, r0, seed and a."""
-    import netCDF4
     import xarray as xr
 
     rows = []
-    for path in map(Path, paths):
+    for path in paths:
         analysis = xr.load_dataset(path)
         r0, seed, mu_r = float(analysis.attrs["r0"]), int(analysis.attrs["seed"]), float(analysis.attrs["mu_r"])
-        if not _in_design(r0, seed) or not any(np.isclose(mu_r, MU_RS)):
-            continue
-        with netCDF4.Dataset(path.parent / "collapse.nc") as collapse, \
-                netCDF4.Dataset(path.parents[3] / "packing.nc") as packing:
-            cpu = (float(collapse.getncattr("cpu_time")), float(packing.getncattr("cpu_time")))
-        rows.append((mu_r, float(analysis.attrs["aspect_ratio"]), r0, seed,
-                     float(analysis["mean_diameter"]) / r0, float(analysis["h_inf_over_r0"]),
-                     float(analysis["runout_over_r0"]), *cpu, analysis.attrs["colsim_commit"][:7]))
+        if _in_design(r0, seed) and any(np.isclose(mu_r, MU_RS)):
+            rows.append((mu_r, float(analysis.attrs["aspect_ratio"]), r0, seed,
+                         float(analysis["mean_diameter"]) / r0, float(analysis["h_inf_over_r0"]),
+                         float(analysis["runout_over_r0"]), *run_costs(path)))
     rows.sort(key=lambda row: (row[0], row[2], row[3], row[1]))
-    with open(RUNS, "w", newline="") as stream:
-        stream.write("# The seed design of config/limits.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
-                     "# (r_inf - r0)/r0 (runout) and mean diameter over r0, the CPU seconds of its collapse and of its\n"
-                     "# packing's pour, and the commit it ran at; written by limits_design.py. Machine: the 2-core AMD EPYC.\n")
-        writer = csv.writer(stream)
-        writer.writerow(COLUMNS)
-        writer.writerows([*(f"{value:.10g}" for value in row[:-1]), row[-1]] for row in rows)
-
-
-def read_rows() -> list:
-    with open(RUNS, newline="") as stream:
-        return list(csv.DictReader(line for line in stream if not line.startswith("#")))
+    write_rows(RUNS, "The seed design of config/limits.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
+               "(r_inf - r0)/r0 (runout) and mean diameter over r0, the CPU seconds of its collapse and of its\n"
+               "packing's pour, and the commit of its collapse; written by limits_design.py. Machine: the 2-core AMD EPYC.",
+               COLUMNS, rows)
 
 
 def runs_of(rows) -> Runs:
@@ -134,9 +120,4 @@ def report(rows) -> str:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--from-analyses", nargs="+", metavar="FILE", help="write the runs' CSV from these first")
-    args = parser.parse_args()
-    if args.from_analyses:
-        write_runs(args.from_analyses)
-    print(report(read_rows()))
+    main(__doc__, write_runs, lambda: report(read_rows(RUNS)))
