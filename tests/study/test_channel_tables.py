@@ -38,6 +38,21 @@ def test_an_exponent_needs_two_aspect_ratios_with_runs():
     assert "| - (1) |" in channel.exponents_markdown(summary)
 
 
+def test_a_column_that_stood_has_no_run_out_exponent():
+    """Run-outs under one mean diameter (0.375 over L0 = 6: 0.0625) at a = 4 and 5 are left out of the
+    fit: the column stood. With a = 3's alone, fewer than two a remain; the heights still fit."""
+    ratios = (3.0, 4.0, 5.0)
+    summary = _summary(ratios, lambda a, m: 0.5 if a == 3.0 else 0.06, lambda a, m: a ** 0.5)
+    summary["mean_diameter"] = xr.full_like(summary.runout_over_r0, 0.375)
+    summary.attrs["channel_length"] = 6.0
+    value, used = channel.fitted_exponent(summary, "runout_over_r0", 0.12)
+    assert np.isnan(value) and used == 1
+    height, used = channel.fitted_exponent(summary, "h_inf_over_r0", 0.12)
+    assert height == pytest.approx(0.5, abs=1e-9) and used == 3
+    summary["runout_over_r0"] = summary.runout_over_r0 * 0 + 0.07     # a grain's length or more: kept
+    assert channel.fitted_exponent(summary, "runout_over_r0", 0.12)[1] == 3
+
+
 def test_length_convergence_is_the_spread_between_the_two_largest_lengths():
     """Run-outs 2.0, 2.2, 2.25 and 2.28 at L0 = 3, 4.5, 6, 8 (a = 1); 3.0, 3.3, 3.5, 3.9 (a = 3): the
     spreads are 0.03/2.28 and 0.4/3.9; the first is within 2 %, the second not."""

@@ -24,9 +24,15 @@ CONVERGED_SPREAD = 0.02
 
 def fitted_exponent(summary, variable: str, mu_r: float, a_min: float | None = None) -> tuple[float, int]:
     """(b, number of aspect ratios) of `variable` ~ c a^b fitted over every run (each seed a point)
-    at `mu_r` with a >= a_min (default FIT_FROM[variable]); NaN where fewer than two a have runs."""
+    at `mu_r` with a >= a_min (default FIT_FROM[variable]); NaN where fewer than two a have runs. A
+    run-out shorter than one mean diameter (where the summary has the diameters and L0) is left out:
+    the column stood, and its run-out is the settling of the front, not a spread with a power of a."""
     a_min = FIT_FROM[variable] if a_min is None else a_min
     part = summary[variable].sel(mu_r=mu_r).transpose("aspect_ratio", "seed")
+    if variable == "runout_over_r0" and "mean_diameter" in summary and "channel_length" in summary.attrs:
+        grain = summary.mean_diameter.sel(mu_r=mu_r).transpose("aspect_ratio", "seed") / float(
+            summary.attrs["channel_length"])
+        part = part.where(part >= grain)
     ratios = part.aspect_ratio.values
     keep = ratios >= a_min
     values = part.values[keep]
@@ -40,7 +46,7 @@ def exponents_markdown(summary) -> str:
     FIT_FROM's aspect ratios) beside Balmforth & Kerswell's for narrow slots and wide channels and,
     for the run-out, Lube's and Lajeunesse's 2/3."""
     narrow, wide = BALMFORTH_KERSWELL["narrow"], BALMFORTH_KERSWELL["wide"]
-    lines = ["| mu_r | run-out exponent (a >= {r:g}; a values) | B&K narrow | B&K wide | Lube, Lajeunesse 2005 "
+    lines = ["| mu_r | run-out exponent (a >= {r:g}, run-outs of a grain or more; a values) | B&K narrow | B&K wide | Lube, Lajeunesse 2005 "
              "| height exponent (a >= {h:g}; a values) | B&K narrow | B&K wide |".format(
                  r=FIT_FROM["runout_over_r0"], h=FIT_FROM["h_inf_over_r0"]),
              "|---|---|---|---|---|---|---|---|"]
