@@ -340,6 +340,9 @@ def test_the_size_laws_fitted_exponent_is_printed_from_its_data():
     assert "| runout | all, one p | | 28 | **0.45 [<= 0.25, 1.06]** |" in printed
     page = (ROOT / "docs" / "validation" / "column-size.md").read_text()
     assert "**The run-outs, one p for every a: 0.45 [<= 0.25, 1.06].**" in page
+    readme = " ".join((ROOT / "README.md").read_text().split())
+    assert "the run-outs' exponent is 0.45 [<= 0.25, 1.06], and under it their limits would be 24-30 % longer" in readme
+    assert all(f"| {a} | " in printed and f"+{share}" in printed for a, share in ((2, "24.3%"), (3, "29.6%")))
 
 
 def test_the_seed_designs_limits_are_printed_from_its_data():
