@@ -69,6 +69,23 @@ def test_length_convergence_is_the_spread_between_the_two_largest_lengths():
     assert "| 0.12 | 3 | 3.000 | 3.300 | 3.500 | 3.900 | 10.3 % | above 2 % |" in text
 
 
+def test_a_column_that_stood_has_no_spread_in_length():
+    """At a = 1 the mean run-out at L0 = 6 is 0.05, under one mean diameter (0.375 / 6 = 0.0625): the
+    column stood there, the table says so and gives no spread; a = 3 (2.0 and 2.02) has its 1 %."""
+    def at(length, short):
+        summary = _summary((1.0, 3.0), lambda a, m: short if a == 1.0 else 2.0 + length / 300, lambda a, m: a)
+        summary["mean_diameter"] = xr.full_like(summary.runout_over_r0, 0.375)
+        summary.attrs["channel_length"] = length
+        return summary
+
+    convergence = channel.length_convergence({3.0: at(3.0, 0.3), 6.0: at(6.0, 0.05)})
+    assert convergence.stood.sel(mu_r=0.12).values.tolist() == [[0, 0], [1, 0]]
+    assert np.isnan(float(convergence.relative_spread.sel(mu_r=0.12, aspect_ratio=1.0)))
+    assert float(convergence.relative_spread.sel(mu_r=0.12, aspect_ratio=3.0)) == pytest.approx(0.01 / 2.02, rel=1e-12)
+    text = channel.length_convergence_markdown(convergence)
+    assert "| 0.12 | 1 | 0.300 | stood | - | - |" in text
+
+
 def test_length_convergence_refuses_one_length_or_other_sweeps():
     one = _summary((1.0,), lambda a, m: a, lambda a, m: a)
     with pytest.raises(ValueError, match="two box lengths"):

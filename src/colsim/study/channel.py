@@ -22,17 +22,27 @@ TWO_THIRDS = 2.0 / 3.0
 CONVERGED_SPREAD = 0.02
 
 
+def stood(summary, runout=None) -> xr.DataArray:
+    """Where a column stood: its run-out (`runout`, default the summary's runs) shorter than one mean
+    diameter, the settling of the front rather than a spread (False where the summary lacks the
+    diameters or L0)."""
+    runout = summary.runout_over_r0 if runout is None else runout
+    if "mean_diameter" not in summary or "channel_length" not in summary.attrs:
+        return xr.zeros_like(runout, dtype=bool)
+    diameter = summary.mean_diameter.mean("seed") if "seed" not in runout.dims else summary.mean_diameter
+    return runout < diameter / float(summary.attrs["channel_length"])
+
+
 def fitted_exponent(summary, variable: str, mu_r: float, a_min: float | None = None) -> tuple[float, int]:
     """(b, number of aspect ratios) of `variable` ~ c a^b fitted over every run (each seed a point)
     at `mu_r` with a >= a_min (default FIT_FROM[variable]); NaN where fewer than two a have runs. A
     run-out shorter than one mean diameter (where the summary has the diameters and L0) is left out:
     the column stood, and its run-out is the settling of the front, not a spread with a power of a."""
     a_min = FIT_FROM[variable] if a_min is None else a_min
-    part = summary[variable].sel(mu_r=mu_r).transpose("aspect_ratio", "seed")
-    if variable == "runout_over_r0" and "mean_diameter" in summary and "channel_length" in summary.attrs:
-        grain = summary.mean_diameter.sel(mu_r=mu_r).transpose("aspect_ratio", "seed") / float(
-            summary.attrs["channel_length"])
-        part = part.where(part >= grain)
+    part = summary[variable]
+    if variable == "runout_over_r0":
+        part = part.where(~stood(summary))
+    part = part.sel(mu_r=mu_r).transpose("aspect_ratio", "seed")
     ratios = part.aspect_ratio.values
     keep = ratios >= a_min
     values = part.values[keep]
@@ -70,43 +80,52 @@ def _law(exponent: tuple) -> str:
 
 def length_convergence(summaries: dict) -> xr.Dataset:
     """The run-outs' convergence in the box length: {L0: summary} -> a Dataset over (aspect_ratio,
-    mu_r) of the mean run-out over seeds at each L0 (`runout_by_length`, over `channel_length`) and
-    `relative_spread`, |R(L_max) - R(L_next)| / |R(L_max)| between the two largest L0 (NaN where
-    either has no run). ValueError with fewer than two lengths or aspect ratios and mu_r that differ."""
+    mu_r) of the mean run-out over seeds at each L0 (`runout_by_length`, over `channel_length`), where
+    the column stood (`stood`: :func:`stood` of the mean) and `relative_spread`, |R(L_max) - R(L_next)|
+    / |R(L_max)| between the two largest L0 (NaN where either has no run or stood: a spread of
+    settlings is no convergence). ValueError with fewer than two lengths or aspect ratios and mu_r that differ."""
     if len(summaries) < 2:
         raise ValueError(f"the convergence in L0 needs two box lengths or more, got {len(summaries)}")
     summaries = {float(length): summary for length, summary in summaries.items()}
     lengths = sorted(summaries)
     first = summaries[lengths[0]]
-    means = []
+    means, stands = [], []
     for length in lengths:
         summary = summaries[length]
         for dim in ("aspect_ratio", "mu_r"):
             if not np.array_equal(summary[dim].values, first[dim].values):
                 raise ValueError(f"the summary at L0 = {length:g} has other {dim} values than at L0 = {lengths[0]:g}")
-        means.append(summary.runout_over_r0.mean("seed", skipna=True).reset_coords(drop=True))   # r0 differs
-    stacked = xr.concat(means, dim=xr.DataArray(lengths, dims="channel_length", name="channel_length",
-                                                attrs={"units": "length", "long_name": "box length L0"}))
+        mean = summary.runout_over_r0.mean("seed", skipna=True)
+        means.append(mean.reset_coords(drop=True))   # r0 differs
+        stands.append(stood(summary, mean).reset_coords(drop=True))
+    length = xr.DataArray(lengths, dims="channel_length", name="channel_length",
+                          attrs={"units": "length", "long_name": "box length L0"})
+    stacked, standing = xr.concat(means, dim=length), xr.concat(stands, dim=length)
     largest, next_largest = stacked.isel(channel_length=-1), stacked.isel(channel_length=-2)
-    spread = abs(largest - next_largest) / abs(largest)
+    spread = (abs(largest - next_largest) / abs(largest)).where(~standing.isel(channel_length=slice(-2, None)).any(
+        "channel_length"))
     return xr.Dataset({
         "runout_by_length": stacked.assign_attrs(units="1", long_name="run-out (L_inf - L0)/L0, mean over seeds"),
+        "stood": standing.astype(np.int8).assign_attrs(
+            long_name="the mean run-out is shorter than one mean diameter: the column stood"),
         "relative_spread": spread.assign_attrs(
-            units="1", long_name=f"|run-out at L0 = {lengths[-1]:g} - at {lengths[-2]:g}| over the first"),
+            units="1", long_name=f"|run-out at L0 = {lengths[-1]:g} - at {lengths[-2]:g}| over the first (NaN "
+                                 "where either stood)"),
     })
 
 
 def length_convergence_markdown(convergence: xr.Dataset) -> str:
-    """Markdown table per mu_r and a: the mean run-out at each box length and the relative spread
-    between the two largest, marked "converged" within CONVERGED_SPREAD."""
+    """Markdown table per mu_r and a: the mean run-out at each box length ("stood" where the column
+    stood) and the relative spread between the two largest, marked "converged" within CONVERGED_SPREAD."""
     lengths = convergence.channel_length.values
     header = ["mu_r", "a"] + [f"L0 = {length:g}" for length in lengths] + ["spread, two largest", ""]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for m in convergence.mu_r.values:
         for a in convergence.aspect_ratio.values:
             values = convergence.runout_by_length.sel(mu_r=m, aspect_ratio=a).values
+            standing = convergence.stood.sel(mu_r=m, aspect_ratio=a).values
             spread = float(convergence.relative_spread.sel(mu_r=m, aspect_ratio=a))
-            cells = [f"{v:.3f}" if np.isfinite(v) else "-" for v in values]
+            cells = ["stood" if s else f"{v:.3f}" if np.isfinite(v) else "-" for v, s in zip(values, standing)]
             verdict = "-" if not np.isfinite(spread) else (
                 "converged" if spread <= CONVERGED_SPREAD else f"above {100 * CONVERGED_SPREAD:g} %")
             spread_cell = f"{100 * spread:.1f} %" if np.isfinite(spread) else "-"
