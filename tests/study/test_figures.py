@@ -411,3 +411,20 @@ def test_every_figure_says_the_study_s_size_caveat_above_it(tmp_path, r0, words)
             assert not any("SMOKE" in t or "converged" in t for t in texts), (name, texts)
         else:
             assert any(t.startswith(words) for t in texts), (name, texts)
+
+
+def test_a_channels_law_figure_names_its_walls_friction(tmp_path):
+    """Issue 82: a channel's run-out doubles from walls as rough as the floor to frictionless ones
+    (docs/validation/channel.md), so the law figure's title names wall_mu beside L0 and W."""
+    from colsim.study.figures.laws import law_figure
+
+    dims = ("aspect_ratio", "mu_r", "seed")
+    summary = xr.Dataset({"runout_over_r0": (dims, [[[1.0]], [[2.0]]]), "h_inf_over_r0": (dims, [[[1.0]], [[1.3]]])},
+                         coords={"aspect_ratio": [1.0, 2.0], "mu_r": [0.12], "seed": [1]},
+                         attrs={"geometry": "channel", "channel_length": 6.0, "channel_width": 2.0, "wall_mu": 0.25,
+                                "mu": 0.577})
+    KEPT.clear()
+    with matplotlib.rc_context({"figure.hooks": ["test_figures:keep_figure"]}):
+        law_figure(summary, "runout_over_r0", tmp_path / "runout.png")
+    [figure] = KEPT
+    assert figure.axes[0].get_title().startswith("L0 = 6, W = 2, wall_mu = 0.25, mu = 0.577")

@@ -118,10 +118,12 @@ def law_figure(summary, variable: str, path: Path) -> Path:
 
 
 def _size(summary) -> str:
-    """The column's size for a title: "r0 = 3", or a channel's "L0 = 6, W = 2"."""
+    """The column's size for a title: "r0 = 3", or a channel's "L0 = 6, W = 2, wall_mu = 0.577" (its
+    walls' friction, which sets a channel's run-out as much as mu_r: docs/validation/channel.md)."""
     if geometry_of(summary.attrs) == "channel":
+        walls = f", wall_mu = {summary.attrs['wall_mu']:g}" if "wall_mu" in summary.attrs else ""
         return (f"L0 = {summary.attrs.get('channel_length', float('nan')):g}, "
-                f"W = {summary.attrs.get('channel_width', float('nan')):g}")
+                f"W = {summary.attrs.get('channel_width', float('nan')):g}{walls}")
     return f"r0 = {summary.attrs.get('r0', float('nan')):g}"
 
 
