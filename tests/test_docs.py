@@ -351,3 +351,20 @@ def test_the_seed_designs_limits_are_printed_from_its_data():
     printed = _script_output("limits_design.py")
     assert _generated_block("validation/calibration.md", "limits-design").strip() == printed.strip()
     assert "mu_r = 0.15 [95 %], half-width" in printed
+    page = " ".join((ROOT / "docs" / "validation" / "calibration.md").read_text().split())
+    assert "(median 21.8%)" in printed and "(median 25.8%), against the design's median 21.8%" in printed
+    assert "median half-width of 21.8 %, against 25.8 %" in page
+
+
+def test_the_channel_answer_is_printed_from_its_runs():
+    """Issue 82: the channel page's tables are the output of docs/data/channel_tables.py on the runs kept
+    in docs/data, verbatim, between its markers; the walls' runs the answer quotes are among them; and
+    its figures are in the repository."""
+    printed = _script_output("channel_tables.py")
+    assert _generated_block("validation/channel.md", "channel-tables").strip() == printed.strip()
+    assert "#### W = 2, wall_mu = 0.577 (the study's walls)" in printed
+    for row in ("| 0.75 | 6 | 1 | 0.12 | 5 | 0 | 7.133 |", "| 2 | 6 | 1 | 0.12 | 5 | 0.25 | 4.216 |"):
+        assert row in printed
+    page = (ROOT / "docs" / "validation" / "channel.md").read_text()
+    for figure in re.findall(r"\(\.\./figures/(channel_[^)]+\.png)\)", page):
+        assert (ROOT / "docs" / "figures" / figure).is_file(), figure

@@ -84,6 +84,16 @@ def cost(rows) -> float:
     return sum(float(row["collapse_cpu_time"]) for row in rows) + sum(pours.values())
 
 
+def three_seeds_line(design_widths) -> str:
+    """The design's half-widths at mu_r = 0.15 beside those of the three seeds a size that ran there first
+    (calibration-mu_r-0.15-runs.csv, the same method)."""
+    earlier = runs_of(read_rows(HERE / "calibration-mu_r-0.15-runs.csv"))
+    widths = half_widths(*limit_intervals(earlier, REPLICATES))[:, 0]
+    return (f"- mu_r = 0.15 with three seeds at each r0 ({len(earlier.mu_r)} runs): half-widths {widths.min():.1%}-"
+            f"{widths.max():.1%} (median {np.median(widths):.1%}), against the design's median "
+            f"{np.median(design_widths):.1%}")
+
+
 def report(rows) -> str:
     rows = [row for row in rows if _in_design(float(row["r0"]), float(row["seed"]))]
     done = [mu_r for mu_r in MU_RS if complete(rows, mu_r)]
@@ -115,6 +125,8 @@ def report(rows) -> str:
             f"{seeds_only[:, i].max():.1%}: seeds bring the median to {TARGET:.0%} after "
             f"{max(np.median(repeats) - 1, 0) * hours:.0f} h more and the widest after "
             f"{max(repeats.max() - 1, 0) * hours:.0f} h")
+    if 0.15 in done:
+        lines.append(three_seeds_line(widths[:, done.index(0.15)]))
     lines.append(f"\n{REPLICATES} replicates, bootstrap seed 0.")
     return "\n".join(lines)
 
