@@ -29,7 +29,7 @@ def run_scatter(measure: str, a: float) -> float:
     """A run's relative scatter at a: the mu_r = 0.15 runs' sample variance within each r0, pooled."""
     runs = [row for row in read_rows(HERE / "calibration-mu_r-0.15-runs.csv") if float(row["aspect_ratio"]) == a]
     squares, dof = 0.0, 0
-    for r0 in {row["r0"] for row in runs}:
+    for r0 in sorted({row["r0"] for row in runs}):
         values = np.array([float(row[measure]) for row in runs if row["r0"] == r0])
         squares, dof = squares + np.sum((values / values.mean() - 1) ** 2), dof + len(values) - 1
     return float(np.sqrt(squares / dof))
@@ -50,12 +50,22 @@ def series(variable: str, measure: str) -> list:
     return out
 
 
+def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
+    """((X_inf, k), their covariance) of the weighted least-squares fit of means = X_inf + k (1/r0)^p,
+    from its normal equations written out (sums only: the same digits with any BLAS and thread count)."""
+    weight, x = seeds / scatter**2, inverse_r0**p
+    total, sum_x, sum_y = weight.sum(), (weight * x).sum(), (weight * means).sum()
+    sum_xx, sum_xy = (weight * x * x).sum(), (weight * x * means).sum()
+    determinant = total * sum_xx - sum_x**2
+    k = (total * sum_xy - sum_x * sum_y) / determinant
+    covariance = np.array([[sum_xx, -sum_x], [-sum_x, total]]) / determinant
+    return np.array([(sum_y - k * sum_x) / total, k]), covariance
+
+
 def chi_squared(p: float, inverse_r0, means, seeds, scatter) -> float:
-    """chi^2 of the weighted least-squares fit of means = X_inf + k (1/r0)^p (d's scale moves k only)."""
-    weight = np.sqrt(seeds) / scatter
-    design = np.column_stack([np.ones_like(inverse_r0), inverse_r0**p]) * weight[:, None]
-    coefficients, *_ = np.linalg.lstsq(design, means * weight, rcond=None)
-    return float(np.sum((design @ coefficients - means * weight) ** 2))
+    """chi^2 of :func:`fitted` (d's scale moves k only)."""
+    (limit, k), _ = fitted(p, inverse_r0, means, seeds, scatter)
+    return float((seeds / scatter**2 * (means - limit - k * inverse_r0**p) ** 2).sum())
 
 
 def profile(curve) -> str:
@@ -90,14 +100,6 @@ def exponent_table() -> str:
         lines.append(f"| {measure} | all, one p | | {points} | **{profile(pooled)}** | "
                      f"{pooled.min():.1f} ({points - 2 * len(curves) - 1}) |")
     return "\n".join(lines)
-
-
-def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
-    """((X_inf, k), their covariance) of the weighted fit of means = X_inf + k (1/r0)^p."""
-    weight = np.sqrt(seeds) / scatter
-    design = np.column_stack([np.ones_like(inverse_r0), inverse_r0**p]) * weight[:, None]
-    coefficients, *_ = np.linalg.lstsq(design, means * weight, rcond=None)
-    return coefficients, np.linalg.inv(design.T @ design)
 
 
 def prediction_table() -> str:
