@@ -1,7 +1,7 @@
 # What the scripts of docs/data share: a CSV with leading "#" lines (what it holds, where it came from),
 # the CPU of a run's collapse and pour beside its analysis file, and the command line
-#   python docs/data/SCRIPT.py [--from-analyses FILE ...]
-# that rewrites a script's runs from a study's analysis files, then prints its tables.
+#   python docs/data/SCRIPT.py [--from-analyses FILE ...] [--figures DIR]
+# that rewrites a script's runs from a study's analysis files, draws its figures, then prints its tables.
 import argparse
 import csv
 from pathlib import Path
@@ -35,12 +35,16 @@ def run_costs(analysis_path) -> tuple[float, float, str]:
                 str(collapse.getncattr("colsim_commit"))[:7])
 
 
-def main(description: str, write_runs, report) -> None:
-    """The scripts' command line: --from-analyses FILE ... calls write_runs(files) first; then the
-    report is printed."""
+def main(description: str, write_runs, report, figures=None) -> None:
+    """The scripts' command line: --from-analyses FILE ... calls write_runs(files) first; --figures DIR
+    (where the script draws figures) calls figures(DIR); then the report is printed."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--from-analyses", nargs="+", metavar="FILE", help="write the runs' CSV from these first")
+    if figures:
+        parser.add_argument("--figures", type=Path, metavar="DIR", help="draw the figures into this folder")
     args = parser.parse_args()
     if args.from_analyses:
         write_runs(args.from_analyses)
+    if figures and args.figures:
+        figures(args.figures)
     print(report())
