@@ -145,6 +145,18 @@ def sweeps(rows) -> list:
     return sorted(full, key=lambda group: (not np.isclose(group[1], STUDY_WALL_MU), group))
 
 
+def progress_line(length: float, part) -> str:
+    """The runs at one box length: per seed against the plan, at rest, spheres and CPU."""
+    seeds = sorted({int(row["seed"]) for row in part})
+    counts = ", ".join(f"seed {s}: {sum(int(row['seed']) == s for row in part)} of {PLANNED}" for s in seeds)
+    resting = sum(int(row["at_rest"]) for row in part)
+    spheres = sorted({int(row["n_particles"]) for row in part})
+    pours = sum({int(row["seed"]): _value(row, "pour_cpu_time") for row in part}.values())
+    collapses = sum(_value(row, "collapse_cpu_time") for row in part)
+    return (f"- L0 = {length:g}: {counts}; {resting} of {len(part)} at rest; {spheres[0]:,}-{spheres[-1]:,} spheres; "
+            f"CPU {pours:,.0f} s of pours, {collapses:,.0f} s of collapses")
+
+
 def sweep_section(rows, width: float, wall_mu: float) -> list:
     """One sweep: progress at each L0, the laws' table at TABLE_LENGTH, exponents, the run-outs by L0."""
     mine = _of(rows, channel_width=width, wall_mu=wall_mu)
@@ -154,15 +166,7 @@ def sweep_section(rows, width: float, wall_mu: float) -> list:
     by_length = {length: _of(mine, channel_length=length) for length in lengths}
     walls = "the study's walls" if np.isclose(wall_mu, STUDY_WALL_MU) else "other walls"
     lines = [f"#### W = {width:g}, wall_mu = {wall_mu:g} ({walls})", ""]
-    for length, part in by_length.items():
-        seeds = sorted({int(row["seed"]) for row in part})
-        counts = ", ".join(f"seed {s}: {sum(int(row['seed']) == s for row in part)} of {PLANNED}" for s in seeds)
-        resting = sum(int(row["at_rest"]) for row in part)
-        spheres = sorted({int(row["n_particles"]) for row in part})
-        pours = sum({int(row["seed"]): _value(row, "pour_cpu_time") for row in part}.values())
-        collapses = sum(_value(row, "collapse_cpu_time") for row in part)
-        lines.append(f"- L0 = {length:g}: {counts}; {resting} of {len(part)} at rest; "
-                     f"{spheres[0]:,}-{spheres[-1]:,} spheres; CPU {pours:,.0f} s of pours, {collapses:,.0f} s of collapses")
+    lines += [progress_line(length, part) for length, part in by_length.items()]
     table = summary(by_length[TABLE_LENGTH], ratios, mu_rs)
     lines += ["", f"At L0 = {TABLE_LENGTH:g} (each law's value, and the runs' error against it):", ""]
     lines += laws_table(table) + [""] + misfit_lines(table) + ["", exponents_markdown(table).strip()]
