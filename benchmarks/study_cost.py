@@ -44,7 +44,9 @@ def benchmark_of(results: Path, run_file: Path, name: str) -> dict | None:
 
 def column_of(attrs) -> str:
     """The kind of column a file holds: "cylinder", or a channel with its width ("channel W = 2")."""
-    if attrs.get("geometry", "cylinder") == "channel":
+    from colsim.stages.pour_geometry import geometry_of
+
+    if geometry_of(attrs) == "channel":
         return f"channel W = {float(attrs['channel_width']):g}"
     return "cylinder"
 

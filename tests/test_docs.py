@@ -306,14 +306,12 @@ def test_the_engine_and_solvers_speak_only_of_themselves():
 def test_the_calibrations_direct_run_at_0_15_is_printed_from_its_data():
     """Issue 81: the table of mu_r = 0.15 run directly (docs/validation/calibration.md) is the output of
     docs/data/calibration_mu_r_015.py on the runs kept in docs/data, row for row."""
-    done = subprocess.run([sys.executable, "docs/data/calibration_mu_r_015.py"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    rows = [line for line in done.stdout.splitlines() if line.startswith("| ")]
+    printed = _script_output("calibration_mu_r_015.py")
+    rows = [line for line in printed.splitlines() if line.startswith("| ")]
     assert len(rows) == 1 + 12                      # the header and six a by two measures
     page = (ROOT / "docs" / "validation" / "calibration.md").read_text().splitlines()
     assert all(row in page for row in rows)
-    assert "- lube, measured: root-mean-square 10.7%" in done.stdout and "10.7 %" in "\n".join(page)
+    assert "- lube, measured: root-mean-square 10.7%" in printed and "10.7 %" in "\n".join(page)
 
 
 def _script_output(script: str) -> str:

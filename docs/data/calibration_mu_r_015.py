@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from colsim.study.calibration import LAWS, limit_intervals, misfits, on_grid, relative_errors
-from runs_csv import main, read_rows, write_rows
+from runs_csv import calibration_runs, main, read_rows, write_rows
 
 HERE = Path(__file__).parent
 RUNS = HERE / "calibration-mu_r-0.15-runs.csv"
@@ -40,10 +40,7 @@ def write_runs(paths) -> None:
 
 
 def read_runs():
-    from colsim.study.calibration import Runs
-
-    rows = read_rows(RUNS)
-    return Runs(*(np.array([float(row[name]) for row in rows]) for name in COLUMNS))
+    return calibration_runs(read_rows(RUNS))
 
 
 def measured_limits(runs):

@@ -51,8 +51,9 @@ def series(variable: str, measure: str) -> list:
 
 
 def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
-    """((X_inf, k), their covariance) of the weighted least-squares fit of means = X_inf + k (1/r0)^p,
-    from its normal equations written out (sums only: the same digits with any BLAS and thread count)."""
+    """((X_inf, k), their covariance) of the least-squares fit of means =
+    X_inf + k (1/r0)^p, each mean weighted by its seeds over a run's variance (colsim's fit_limit weighs
+    runs alike and gives no covariance)."""
     weight, x = seeds / scatter**2, inverse_r0**p
     total, sum_x, sum_y = weight.sum(), (weight * x).sum(), (weight * means).sum()
     sum_xx, sum_xy = (weight * x * x).sum(), (weight * x * means).sum()
@@ -104,7 +105,9 @@ def exponent_table() -> str:
 
 def prediction_table() -> str:
     """The p = 1 line through r0 = 2-4's means at r0 = 5 and 6 against their means, the difference over
-    its standard error (the line's and the two seeds' mean's, in a run's scatter)."""
+    its standard error (the line's and the two seeds' mean's, in a run's scatter). The line is printed
+    to 4 decimals: through three means of 3 decimals, its value at r0 = 6 often ends in a 5 at the 4th,
+    where 3 decimals would round by the last bit."""
     lines = ["| measure | a | r0 | p = 1 from r0 = 2-4 | measured | measured - predicted | in standard errors |",
              "|---|---|---|---|---|---|---|"]
     for variable, measure in MEASURES:
@@ -114,7 +117,7 @@ def prediction_table() -> str:
             for x, mean, n in zip(inverse_r0[~small], means[~small], seeds[~small]):
                 at = np.array([1.0, x])
                 predicted, error = at @ line, np.sqrt(at @ covariance @ at + scatter**2 / n)
-                lines.append(f"| {measure} | {a:g} | {1 / x:.0f} | {scale * predicted:.3f} | {scale * mean:.3f} | "
+                lines.append(f"| {measure} | {a:g} | {1 / x:.0f} | {scale * predicted:.4f} | {scale * mean:.3f} | "
                              f"{mean / predicted - 1:+.1%} | {(mean - predicted) / error:+.1f} |")
     return "\n".join(lines)
 

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.study.calibration import Runs, limit_intervals
-from runs_csv import main, read_rows, run_costs, write_rows
+from colsim.study.calibration import limit_intervals
+from runs_csv import calibration_runs, main, read_rows, run_costs, write_rows
 
 HERE = Path(__file__).parent
 RUNS = HERE / "limits-design-runs.csv"
@@ -37,23 +37,19 @@ def write_runs(paths) -> None:
     """The design's runs among the analysis files `paths` into RUNS, sorted by mu_r, r0, seed and a."""
     import xarray as xr
 
-    rows = []
-    for path in paths:
-        analysis = xr.load_dataset(path)
-        r0, seed, mu_r = float(analysis.attrs["r0"]), int(analysis.attrs["seed"]), float(analysis.attrs["mu_r"])
-        if _in_design(r0, seed) and any(np.isclose(mu_r, MU_RS)):
-            rows.append((mu_r, float(analysis.attrs["aspect_ratio"]), r0, seed,
-                         float(analysis["mean_diameter"]) / r0, float(analysis["h_inf_over_r0"]),
-                         float(analysis["runout_over_r0"]), *run_costs(path)))
+    from colsim.study.calibration import runs_from_analyses
+
+    kept = [(path, analysis) for path, analysis in ((path, xr.load_dataset(path)) for path in paths)
+            if _in_design(float(analysis.attrs["r0"]), int(analysis.attrs["seed"]))
+            and any(np.isclose(float(analysis.attrs["mu_r"]), MU_RS))]
+    runs = runs_from_analyses([analysis for _, analysis in kept])
+    rows = [(*values, *run_costs(path)) for values, (path, _) in
+            zip(zip(*(getattr(runs, name) for name in FIT)), kept)]
     rows.sort(key=lambda row: (row[0], row[2], row[3], row[1]))
     write_rows(RUNS, "The seed design of config/limits.yaml, one row a run: its analysis file's h_inf/r0 (height),\n"
                "(r_inf - r0)/r0 (runout) and mean diameter over r0, the CPU seconds of its collapse and of its\n"
                "packing's pour, and the commit of its collapse; written by limits_design.py. Machine: the 2-core AMD EPYC.",
                COLUMNS, rows)
-
-
-def runs_of(rows) -> Runs:
-    return Runs(*(np.array([float(row[name]) for row in rows]) for name in FIT))
 
 
 def complete(rows, mu_r: float) -> bool:
@@ -87,7 +83,7 @@ def cost(rows) -> float:
 def three_seeds_line(design_widths) -> str:
     """The design's half-widths at mu_r = 0.15 beside those of the three seeds a size that ran there first
     (calibration-mu_r-0.15-runs.csv, the same method)."""
-    earlier = runs_of(read_rows(HERE / "calibration-mu_r-0.15-runs.csv"))
+    earlier = calibration_runs(read_rows(HERE / "calibration-mu_r-0.15-runs.csv"))
     widths = half_widths(*limit_intervals(earlier, REPLICATES))[:, 0]
     return (f"- mu_r = 0.15 with three seeds at each r0 ({len(earlier.mu_r)} runs): half-widths {widths.min():.1%}-"
             f"{widths.max():.1%} (median {np.median(widths):.1%}), against the design's median "
@@ -101,7 +97,7 @@ def report(rows) -> str:
     if not done:
         return "\n".join(lines + ["", "No mu_r has runs at two r0 or more for every a yet."])
     chosen = [row for row in rows if any(np.isclose(float(row["mu_r"]), done))]
-    runs = runs_of(chosen)
+    runs = calibration_runs(chosen)
     limits, low, high = limit_intervals(runs, REPLICATES)
     widths = half_widths(limits, low, high)
     seeds_only = half_widths(*limit_intervals(runs, REPLICATES, exponents=None))

@@ -13,6 +13,18 @@ def read_rows(path) -> list:
         return list(csv.DictReader(line for line in stream if not line.startswith("#")))
 
 
+def calibration_runs(rows):
+    """colsim.study.calibration.Runs of CSV rows that have its columns (mu_r, aspect_ratio, r0, seed,
+    d_over_r0, height, runout)."""
+    from dataclasses import fields
+
+    import numpy as np
+
+    from colsim.study.calibration import Runs
+
+    return Runs(*(np.array([float(row[field.name]) for row in rows]) for field in fields(Runs)))
+
+
 def write_rows(path, comments: str, columns, rows) -> None:
     """`rows` (tuples in `columns`' order) into `path` under `comments` (# lines); numbers to 10 digits."""
     with open(path, "w", newline="") as stream:
