@@ -35,7 +35,7 @@ from scipy.stats import norm
 from scipy.stats import t as student_t
 
 #: the size law's exponents p a bootstrap replicate draws from (uniformly): sizes up to r0 = 6 fit the
-#: run-outs' p as 0.45 [<= 0.25, 1.06] (docs/validation/column-size.md), so they cannot test p = 1
+#: run-outs' p as 0.45 [<= 0.25, 1.47] (docs/validation/column-size.md), so they cannot test p = 1
 EXPONENT_RANGE = (0.5, 1.5)
 P_BOUNDS = (0.25, 4.0)   #: the exponents a fitted p may take
 
