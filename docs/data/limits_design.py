@@ -90,6 +90,19 @@ def three_seeds_line(design_widths) -> str:
             f"{np.median(design_widths):.1%}")
 
 
+def each_mu_r(rows, mu_rs) -> tuple:
+    """(limits, low ends, high ends, half-widths, half-widths with p kept at 1), each (2, n_mu, n_a):
+    every mu_r's from its own runs (a mu_r's interval does not move while another's runs come in: the
+    Student's t widening counts its own degrees of freedom)."""
+    parts = []
+    for mu_r in mu_rs:
+        runs = calibration_runs([row for row in rows if np.isclose(float(row["mu_r"]), mu_r)])
+        limits, low, high = limit_intervals(runs, REPLICATES)
+        parts.append((limits, low, high, half_widths(limits, low, high),
+                      half_widths(*limit_intervals(runs, REPLICATES, exponents=None))))
+    return tuple(np.concatenate(arrays, axis=1) for arrays in zip(*parts))
+
+
 def report(rows) -> str:
     rows = [row for row in rows if _in_design(float(row["r0"]), float(row["seed"]))]
     done = [mu_r for mu_r in MU_RS if complete(rows, mu_r)]
@@ -97,11 +110,8 @@ def report(rows) -> str:
     if not done:
         return "\n".join(lines + ["", "No mu_r has runs at two r0 or more for every a yet."])
     chosen = [row for row in rows if any(np.isclose(float(row["mu_r"]), done))]
-    runs = calibration_runs(chosen)
-    limits, low, high = limit_intervals(runs, REPLICATES)
-    widths = half_widths(limits, low, high)
-    seeds_only = half_widths(*limit_intervals(runs, REPLICATES, exponents=None))
-    ratios = np.unique(runs.aspect_ratio)
+    limits, low, high, widths, seeds_only = each_mu_r(chosen, done)
+    ratios = np.unique(calibration_runs(chosen).aspect_ratio)
     header = " | ".join(f"mu_r = {mu_r:g} [95 %], half-width" for mu_r in done)
     lines += ["", f"| a | measure | {header} |", "|---|---|" + "---|" * len(done)]
     for j, a in enumerate(ratios):
