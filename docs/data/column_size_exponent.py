@@ -70,14 +70,9 @@ def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.
     return np.array([(sum_y - k * sum_x) / total, k]), covariance
 
 
-def chi_squared(p: float, inverse_r0, means, seeds, scatter) -> float:
-    """chi^2 of :func:`fitted` (d's scale moves k only)."""
-    (limit, k), _ = fitted(p, inverse_r0, means, seeds, scatter)
-    return float((seeds / scatter**2 * (means - limit - k * inverse_r0**p) ** 2).sum())
-
-
 def chi_squared_curve(inverse_r0, means, seeds, scatter) -> np.ndarray:
-    """:func:`chi_squared` at every p of GRID, the same sums over the grid's rows at once."""
+    """chi^2 of :func:`fitted` at every p of GRID, its sums taken over the grid's rows at once (d's
+    scale moves k only)."""
     weight, x = seeds / scatter**2, inverse_r0[None, :] ** GRID[:, None]
     total, sum_x, sum_y = weight.sum(), (weight * x).sum(axis=1), (weight * means).sum()
     sum_xx, sum_xy = (weight * x * x).sum(axis=1), (weight * x * means).sum(axis=1)
