@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from colsim.study.calibration import limit_intervals
+from colsim.study.calibration import calibrate, limit_intervals, mu_r_interval
 from runs_csv import calibration_runs, main, read_rows, run_costs, write_rows
 
 HERE = Path(__file__).parent
@@ -64,12 +64,15 @@ def half_widths(limits, low, high) -> np.ndarray:
     return np.maximum(high - limits, limits - low) / np.abs(limits)
 
 
+def runs_made(rows, mu_r: float, r0: float) -> int:
+    return sum(np.isclose(float(row["mu_r"]), mu_r) and float(row["r0"]) == r0 for row in rows)
+
+
 def progress(rows) -> list:
     """Per mu_r: its runs against the design's 6 a times its seeds, per r0."""
     lines = []
     for mu_r in MU_RS:
-        counts = [f"r0 = {r0}: {sum(np.isclose(float(row['mu_r']), mu_r) and float(row['r0']) == r0 for row in rows)}"
-                  f" of {6 * seeds}" for r0, seeds in DESIGN.items()]
+        counts = [f"r0 = {r0}: {runs_made(rows, mu_r, r0)} of {6 * seeds}" for r0, seeds in DESIGN.items()]
         lines.append(f"- mu_r = {mu_r:g}: {', '.join(counts)} runs")
     return lines
 
@@ -103,6 +106,21 @@ def each_mu_r(rows, mu_rs) -> tuple:
     return tuple(np.concatenate(arrays, axis=1) for arrays in zip(*parts))
 
 
+def calibration_line(rows) -> str:
+    """The design's runs at every mu_r as one calibration against Lube et al.
+    (colsim.study.calibration.calibrate, the swept 0.12-0.2 only): the best mu_r for both measures,
+    the minimax mu_r with its worst error, and the share of replicates in which some mu_r puts every a
+    within 10 %."""
+    result = calibrate(calibration_runs(rows), REPLICATES).sel(law="lube")
+    sweep, best = (MU_RS[0], MU_RS[-1]), result.sel(measure="both")
+    return (f"- the design's runs as one calibration against Lube et al. (mu_r = {MU_RS[0]:g}-{MU_RS[-1]:g} only): "
+            f"both measures fit best at mu_r = {float(best.best_mu_r):.3f} "
+            f"{mu_r_interval(float(best.best_mu_r_low), float(best.best_mu_r_high), sweep)}; the smallest worst-case "
+            f"error, {float(result.minimax_error):.1%}, is at mu_r = {float(result.minimax_mu_r):.3f} "
+            f"{mu_r_interval(float(result.minimax_mu_r_low), float(result.minimax_mu_r_high), sweep)}; some mu_r puts "
+            f"every a within 10 % in {float(result.fitting_share):.1%} of the replicates")
+
+
 def report(rows) -> str:
     rows = [row for row in rows if _in_design(float(row["r0"]), float(row["seed"]))]
     done = [mu_r for mu_r in MU_RS if complete(rows, mu_r)]
@@ -133,6 +151,8 @@ def report(rows) -> str:
             f"{max(repeats.max() - 1, 0) * hours:.0f} h")
     if 0.15 in done:
         lines.append(three_seeds_line(widths[:, done.index(0.15)]))
+    if all(runs_made(rows, mu_r, r0) == 6 * seeds for mu_r in MU_RS for r0, seeds in DESIGN.items()):
+        lines.append(calibration_line(chosen))
     lines.append(f"\n{REPLICATES} replicates, bootstrap seed 0.")
     return "\n".join(lines)
 
