@@ -346,7 +346,6 @@ def test_the_size_laws_fitted_exponent_is_printed_from_its_data():
     assert all(f"| {a} | " in printed and f"+{share}" in printed for a, share in ((2, "24.3%"), (3, "29.6%")))
 
 
-
 def test_the_predictions_beyond_r0_6_are_printed_from_their_data_and_hold_what_they_claim():
     """Issue 83: the column-size page's predictions for r0 = 8 and 10 are the output of
     docs/data/beyond_r0_6.py, verbatim; today's p = 1 intervals hold a synthetic run where p = 1 holds
@@ -373,7 +372,6 @@ def test_the_predictions_beyond_r0_6_are_printed_from_their_data_and_hold_what_t
             missed += shares
     page = " ".join((ROOT / "docs" / "validation" / "column-size.md").read_text().split())
     assert f"still holds one run at r0 = 8 or 10 in {min(missed):.1f}-{max(missed):.1f} % of the studies" in page
-
 
 
 def test_a_column_measured_beyond_r0_6_joins_the_data_beside_its_prediction(tmp_path):
