@@ -15,9 +15,17 @@
 # else the column of a pour of r0 = 6 made on this machine (results/gpu-pour/r0_6_seed1/column.nc:
 # `STAGES=pour` in the same command or an earlier one).
 set -euo pipefail
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/colsim-site \
-    .gpu/whl/*.whl
+if ls .gpu/whl/*.whl > /dev/null 2>&1; then   # none where the Python already has them
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/colsim-site \
+        .gpu/whl/*.whl
+fi
 export PYTHONPATH="/tmp/colsim-site:$PWD/src:$PWD${PYTHONPATH:+:$PYTHONPATH}"
+# On numba's simulator (NUMBA_ENABLE_CUDASIM=1, no card), every process sets the simulator up as the
+# tests do (tests/simulator_site): numba's own swaps a device function's cuda module without a lock,
+# and a kernel of many threads then fails ("module 'numba.cuda' has no attribute 'blockIdx'").
+if [ "${NUMBA_ENABLE_CUDASIM:-0}" = 1 ]; then
+    export PYTHONPATH="$PWD/tests/simulator_site:$PYTHONPATH"
+fi
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv 2>/dev/null || echo "no nvidia-smi"
 echo "CPUs: $(nproc); python: $(python3 --version); numpy: $(python3 -c 'import numpy; print(numpy.__version__)')"
 # With GPU_TESTS set (pytest arguments, e.g. "tests/engine/test_cuda_launch.py"), those tests first, on the
