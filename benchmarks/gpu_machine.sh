@@ -146,7 +146,11 @@ done
 # (its run's settings.yaml), `colsim pack --device cuda` stopped after POUR_LIMIT seconds (default
 # 300), `colsim trim --aspect-ratio ${POUR_ASPECT:-5}`, then the collapse to rest as above. The logs
 # and the analysis come back in pour.tgz; the files stay in results/gpu-pour/NAME there (git-ignored:
-# kept on a warm machine between calls; a packing already there is not poured again).
+# kept on a warm machine between calls; a packing already there is not poured again). The trimmed
+# column comes back too, as NAME.aA.column.nc (A the aspect ratio; benchmarks/travelling_column.py:
+# its particles without the contact forces, 81 bytes a sphere, 13 MB at r0 = 8, a = 5), and one for
+# each aspect ratio of TRAVEL_ASPECTS (e.g. "2"): put in .gpu/pour/, a later call on another machine
+# collapses it (POUR_ASPECT=A) instead of pouring.
 # With POUR_PROFILE=1 the pour and the collapse run under cProfile and PyTorch's CUDA profiler
 # (`benchmarks kernel_trace`: slower, so not the target's timing; a command stopped by its limit
 # still writes both): their statistics (NAME.pack.prof, NAME.collapse.prof) and, in the logs, the 30
@@ -171,18 +175,35 @@ for settings in .gpu/pour/*.pack.yaml; do
                       --summary "$out/$name.collapse.kernels" colsim.cli)
     fi
     start=$(date +%s)
-    [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
-    busy timeout "${POUR_LIMIT:-300}" python3 "${pack_run[@]}" pack --settings "$settings" --max-spheres 1000000 \
-        --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
-        || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
-    poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
-    grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
-    [ -e "$work/packing.nc" ] && phases "$work/packing.nc" "$out/$name.pack.log" || true
-    profile_top "$out/$name.pack"
-    tar czf "$results/pour.tgz" -C /tmp pour-out
-    [ -e "$work/packing.nc" ] || continue
-    python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "${POUR_ASPECT:-5}" \
-        --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
+    aspect=${POUR_ASPECT:-5}
+    travelled=.gpu/pour/$name.a$aspect.column.nc   # a column an earlier call returned: poured and trimmed there
+    if [ -e "$travelled" ]; then
+        cp "$travelled" "$work/column.nc"; poured=$start
+        echo "$name: the column of an earlier call ($travelled)" | tee "$out/$name.collapse.log"
+    else
+        [ -e "$work/packing.nc" ] && echo "$name: poured in an earlier call ($work/packing.nc)" || \
+        busy timeout "${POUR_LIMIT:-300}" python3 "${pack_run[@]}" pack --settings "$settings" --max-spheres 1000000 \
+            --device cuda --threads "$(nproc)" --output "$work/packing.nc" > "$out/$name.pack.log" 2>&1 \
+            || echo "$name: the pour stopped or failed (exit $?); see pour.tgz"
+        poured=$(date +%s); echo "$name: pour $(( poured - start )) s of wall"
+        grep "^GPU busy" "$out/$name.pack.log" 2>/dev/null || true; tail -n 2 "$out/$name.pack.log" 2>/dev/null || true
+        [ -e "$work/packing.nc" ] && phases "$work/packing.nc" "$out/$name.pack.log" || true
+        profile_top "$out/$name.pack"
+        tar czf "$results/pour.tgz" -C /tmp pour-out
+        [ -e "$work/packing.nc" ] || continue
+        python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "$aspect" \
+            --output "$work/column.nc" > "$out/$name.collapse.log" 2>&1 || { echo "$name: the trim failed"; continue; }
+        # the columns without their contact forces come back, for later calls on other machines: this
+        # one, and one trimmed at each of TRAVEL_ASPECTS
+        python3 benchmarks/travelling_column.py "$work/column.nc" "$results/$name.a$aspect.column.nc" \
+            || echo "$name: the travelling column failed (exit $?)"
+        for other in ${TRAVEL_ASPECTS:-}; do
+            python3 -m colsim.cli trim --input "$work/packing.nc" --aspect-ratio "$other" --output "$work/column-a$other.nc" \
+                >> "$out/$name.collapse.log" 2>&1 \
+                && python3 benchmarks/travelling_column.py "$work/column-a$other.nc" "$results/$name.a$other.column.nc" \
+                || echo "$name: the travelling column at a = $other failed (exit $?)"
+        done
+    fi
     busy timeout "${REST_LIMIT:-240}" python3 "${collapse_run[@]}" collapse \
         --settings ".gpu/pour/$name.collapse.yaml" \
         --input "$work/column.nc" --device cuda --threads "$(nproc)" --checkpoint-every 50 \

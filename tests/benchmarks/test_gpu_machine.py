@@ -1,13 +1,15 @@
 """benchmarks/gpu_machine.sh, the prepared call for a machine with one NVIDIA GPU, run whole on numba's
 CUDA simulator on a 29-sphere column (issue 83: each prepared call tested on a tiny column): its stage
 "rest" (a column's collapse on the GPU, its analysis and its steps by phase) and its stage "pour" from
-a packing an earlier call left (the trim, the collapse and the analysis), and the logs and analyses it
-returns in rest.tgz and pour.tgz. The pour itself is tests/stages/test_pack.py's (a pour to rest takes
-the simulator many minutes)."""
+a packing an earlier call left (the trim, the collapse and the analysis), the logs and analyses it
+returns in rest.tgz and pour.tgz, and the trimmed columns it returns for a later call on another
+machine, which collapses one instead of pouring. The pour itself is tests/stages/test_pack.py's (a
+pour to rest takes the simulator many minutes)."""
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -67,24 +69,48 @@ def _analysis(archive: Path, member: str) -> xr.Dataset:
 def test_the_gpu_call_collapses_analyses_and_returns_its_files_on_the_simulator(machine):
     """STAGES="rest pour": the column's collapse and the pour's trim and collapse each run to their end
     on the (simulated) GPU and are analysed; rest.tgz and pour.tgz hold each run's log and analysis
-    (finite height and run-out, 29 spheres), and the script says what it did, never "failed"."""
+    (finite height and run-out, 29 spheres); the trimmed column comes back without its contact forces,
+    and one at TRAVEL_ASPECTS' a = 0.5; and on a machine without the packing, a later call collapses
+    the returned column instead of pouring. The script says what it did, never "failed"."""
     results = machine / "out"
+    done = _call(machine, results, STAGES="rest pour", TRAVEL_ASPECTS="0.5")
+    assert "tiny: poured in an earlier call" in done.stdout and "tiny: trim and collapse" in done.stdout
+    assert "| tiny.nc | 29 | 2 |" in done.stdout   # the rest stage's steps by phase
+    for archive, folder, log in (("rest.tgz", "rest-out", "tiny.log"), ("pour.tgz", "pour-out", "tiny.collapse.log")):
+        with tarfile.open(results / archive) as tar:
+            assert f"{folder}/{log}" in tar.getnames()
+        _check_analysis(results / archive, f"{folder}/tiny.analysis.nc")
+    travelling = {a: xr.load_dataset(results / f"tiny.a{a}.column.nc") for a in ("1", "0.5")}
+    assert travelling["1"].sizes["particle"] == 29 and "contact_force" not in travelling["1"]
+    assert 0 < travelling["0.5"].sizes["particle"] < 29
+
+    # another machine: no packing there, the column the first call returned in .gpu/pour/
+    shutil.rmtree(machine / "results")
+    shutil.copy(results / "tiny.a1.column.nc", machine / ".gpu" / "pour")
+    again = machine / "again"
+    done = _call(machine, again, STAGES="pour")
+    assert "tiny: the column of an earlier call (.gpu/pour/tiny.a1.column.nc)" in done.stdout
+    assert "tiny: pour" not in done.stdout
+    _check_analysis(again / "pour.tgz", "pour-out/tiny.analysis.nc")
+
+
+def _call(machine: Path, results: Path, **settings) -> subprocess.CompletedProcess:
+    """bash benchmarks/gpu_machine.sh on the simulator with `settings` (environment variables), its
+    records into `results`; it exits 0 and says no step failed."""
     # no PYTHONPATH from the tests: the script sets up the simulator's processes itself, as a user's shell runs it
     env = {**{name: value for name, value in os.environ.items() if name != "PYTHONPATH"},
-           "PATH": f"{machine / 'bin'}:{os.environ['PATH']}", "NUMBA_ENABLE_CUDASIM": "1",
-           "STAGES": "rest pour", "POUR_NAMES": "tiny", "POUR_ASPECT": "1", "REST_LIMIT": "600",
-           "POUR_LIMIT": "600", "COLSIM_BENCHMARK_RESULTS": str(results)}
+           "PATH": f"{machine / 'bin'}:{os.environ['PATH']}", "NUMBA_ENABLE_CUDASIM": "1", "POUR_NAMES": "tiny",
+           "POUR_ASPECT": "1", "REST_LIMIT": "600", "POUR_LIMIT": "600", "COLSIM_BENCHMARK_RESULTS": str(results),
+           **settings}
     done = subprocess.run(["bash", "benchmarks/gpu_machine.sh"], cwd=machine, env=env, capture_output=True, text=True,
                           timeout=1200)
     assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
     assert "failed" not in done.stdout, done.stdout[-3000:]
-    assert "tiny: poured in an earlier call" in done.stdout and "tiny: trim and collapse" in done.stdout
-    assert "| tiny.nc | 29 | 2 |" in done.stdout   # the rest stage's steps by phase
-    for archive, folder, logs in (("rest.tgz", "rest-out", ["tiny.log"]),
-                                  ("pour.tgz", "pour-out", ["tiny.collapse.log"])):
-        with tarfile.open(results / archive) as tar:
-            names = tar.getnames()
-        assert all(f"{folder}/{log}" in names for log in logs), names
-        analysis = _analysis(results / archive, f"{folder}/tiny.analysis.nc")
-        assert int(analysis.n_particles) == 29
-        assert np.isfinite(float(analysis.h_inf_over_r0)) and np.isfinite(float(analysis.runout_over_r0))
+    return done
+
+
+def _check_analysis(archive: Path, member: str) -> None:
+    """The analysis `member` of a returned archive is the 29-sphere column's, with a finite deposit."""
+    analysis = _analysis(archive, member)
+    assert int(analysis.n_particles) == 29
+    assert np.isfinite(float(analysis.h_inf_over_r0)) and np.isfinite(float(analysis.runout_over_r0))
