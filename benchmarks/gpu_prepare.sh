@@ -12,7 +12,8 @@
 # - .gpu/pour/r0_6_seed1 (.pack.yaml, .collapse.yaml): the settings of an r0 = 6, a = 5 pour and its
 #   collapse (`STAGES=pour`), which the GPU makes itself; `STAGES=big` tiles the r0 = 13 column from
 #   that pour's column, on the same warm machine (BIG_SOURCE);
-# - .gpu/pour/r0_8_seed1: likewise for r0 = 8, a = 5 (about 166,000 spheres; `POUR_NAMES=r0_8_seed1`).
+# - .gpu/pour/r0_8_seed1, r0_8_seed2, r0_8_seed3 and r0_10_seed1: likewise for r0 = 8, a = 5 (about
+#   166,000 spheres; `POUR_NAMES=r0_8_seed1`), its seeds 2 and 3, and r0 = 10, a = 5 (about 310,000).
 #
 # A machine's earlier .gpu/ is kept where its files are already there. The columns are this commit's
 # pour: a CPU scatter to compare the GPU's collapses with is `python -m benchmarks scatter` on them.
@@ -25,8 +26,8 @@ if ! ls .gpu/whl/clarabel-*.whl > /dev/null 2>&1; then
         -d .gpu/whl clarabel==0.11.1 netCDF4==1.7.5.1.post1 cftime==1.6.6.1
 fi
 
-study() {   # the config of a one-seed study at mu_r = 0.12: study() NAME R0 "ASPECT RATIOS"
-    printf 'study: %s\nr0: %s\naspect_ratios: [%s]\nmu_r: [0.12]\nseeds: [1]\n' "$1" "$2" "${3// /, }" \
+study() {   # the config of a one-seed study at mu_r = 0.12: study() NAME R0 "ASPECT RATIOS" [SEED, default 1]
+    printf 'study: %s\nr0: %s\naspect_ratios: [%s]\nmu_r: [0.12]\nseeds: [%s]\n' "$1" "$2" "${3// /, }" "${4:-1}" \
         > ".gpu/$1.yaml"
     echo ".gpu/$1.yaml"
 }
@@ -53,10 +54,13 @@ snakemake -j 1 --configfile "$config" --until packing_settings run_settings > .g
     || { echo "the r0 = 6 settings failed: see .gpu/gpu-pour.log"; exit 1; }
 cp "$(planned "$config" "/pack_[^/]*/settings.yaml$")" .gpu/pour/r0_6_seed1.pack.yaml
 cp "$(planned "$config" "/run_[^/]*/settings.yaml$")" .gpu/pour/r0_6_seed1.collapse.yaml
-# r0 = 8, a = 5: likewise
-config=$(study gpu-pour-8 8 "5")
-snakemake -j 1 --configfile "$config" --until packing_settings run_settings > .gpu/gpu-pour-8.log 2>&1 \
-    || { echo "the r0 = 8 settings failed: see .gpu/gpu-pour-8.log"; exit 1; }
-cp "$(planned "$config" "/pack_[^/]*/settings.yaml$")" .gpu/pour/r0_8_seed1.pack.yaml
-cp "$(planned "$config" "/run_[^/]*/settings.yaml$")" .gpu/pour/r0_8_seed1.collapse.yaml
+# r0 = 8, a = 5, seeds 1-3, and r0 = 10, a = 5, seed 1: likewise
+for column in "8 1" "8 2" "8 3" "10 1"; do
+    read -r r0 seed <<< "$column"
+    config=$(study "gpu-pour-$r0-seed$seed" "$r0" "5" "$seed")
+    snakemake -j 1 --configfile "$config" --until packing_settings run_settings > ".gpu/gpu-pour-$r0-seed$seed.log" 2>&1 \
+        || { echo "the r0 = $r0, seed $seed settings failed: see .gpu/gpu-pour-$r0-seed$seed.log"; exit 1; }
+    cp "$(planned "$config" "/pack_[^/]*/settings.yaml$")" ".gpu/pour/r0_${r0}_seed$seed.pack.yaml"
+    cp "$(planned "$config" "/run_[^/]*/settings.yaml$")" ".gpu/pour/r0_${r0}_seed$seed.collapse.yaml"
+done
 du -sh .gpu
