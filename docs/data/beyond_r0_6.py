@@ -102,9 +102,9 @@ def column_size(variable: str, measure: str, a: float, r0: float) -> tuple[float
     line, covariance = exponent.fitted(1.0, inverse_r0, means, seeds, scatter)
     point = np.array([1.0, 1.0 / r0])
     value, error = point @ line, np.sqrt(point @ covariance @ point + scatter**2)
-    pooled = sum(curve for *_, curve in exponent.chi_squared_curves(variable, measure))
-    inside = exponent.GRID[pooled - pooled.min() <= exponent.pooled_critical(variable, measure)]
-    values = [exponent.fitted(p, inverse_r0, means, seeds, scatter)[0] @ np.array([1.0, r0**-p]) for p in inside]
+    exponents = exponent.pooled_inside(variable, measure)
+    (limits, slopes), _ = exponent.fitted(exponents, inverse_r0, means, seeds, scatter)
+    values = limits + slopes * r0**-exponents
     return (scale * value, tuple(scale * np.array(interval(value, error, exponent.SCATTER_DOF))),
             (scale * min(values), scale * max(values)))
 

@@ -57,35 +57,42 @@ def series(variable: str, measure: str) -> list:
     return out
 
 
-def fitted(p: float, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
-    """((X_inf, k), their covariance) of the least-squares fit of means =
-    X_inf + k (1/r0)^p, each mean weighted by its seeds over a run's variance (colsim's fit_limit weighs
-    runs alike and gives no covariance)."""
-    weight, x = seeds / scatter**2, inverse_r0**p
-    total, sum_x, sum_y = weight.sum(), (weight * x).sum(), (weight * means).sum()
-    sum_xx, sum_xy = (weight * x * x).sum(), (weight * x * means).sum()
+def fitted(p, inverse_r0, means, seeds, scatter) -> tuple[np.ndarray, np.ndarray]:
+    """((X_inf, k), their covariance) of the least-squares fit of means = X_inf + k (1/r0)^p, each mean
+    weighted by its seeds over a run's variance (colsim's fit_limit weighs runs alike and gives no
+    covariance); p a number, or an array of them (then (2, *p's shape) and (2, 2, *p's shape))."""
+    weight, x = seeds / scatter**2, inverse_r0 ** np.asarray(p, dtype=float)[..., None]
+    total, sum_x, sum_y = weight.sum(), (weight * x).sum(-1), (weight * means).sum()
+    sum_xx, sum_xy = (weight * x * x).sum(-1), (weight * x * means).sum(-1)
     determinant = total * sum_xx - sum_x**2
     k = (total * sum_xy - sum_x * sum_y) / determinant
-    covariance = np.array([[sum_xx, -sum_x], [-sum_x, total]]) / determinant
+    covariance = np.array([[sum_xx, -sum_x], [-sum_x, np.full_like(sum_xx, total)]]) / determinant
     return np.array([(sum_y - k * sum_x) / total, k]), covariance
 
 
 def chi_squared_curve(inverse_r0, means, seeds, scatter) -> np.ndarray:
-    """chi^2 of :func:`fitted` at every p of GRID, its sums taken over the grid's rows at once (d's
-    scale moves k only)."""
-    weight, x = seeds / scatter**2, inverse_r0[None, :] ** GRID[:, None]
-    total, sum_x, sum_y = weight.sum(), (weight * x).sum(axis=1), (weight * means).sum()
-    sum_xx, sum_xy = (weight * x * x).sum(axis=1), (weight * x * means).sum(axis=1)
-    k = (total * sum_xy - sum_x * sum_y) / (total * sum_xx - sum_x**2)
-    limit = (sum_y - k * sum_x) / total
-    return (weight * (means - limit[:, None] - k[:, None] * x) ** 2).sum(axis=1)
+    """chi^2 of :func:`fitted` at every p of GRID (d's scale moves k only)."""
+    (limit, k), _ = fitted(GRID, inverse_r0, means, seeds, scatter)
+    x = inverse_r0 ** GRID[:, None]
+    return (seeds / scatter**2 * (means - limit[:, None] - k[:, None] * x) ** 2).sum(axis=1)
+
+
+def inside(curve, critical: float = CRITICAL) -> np.ndarray:
+    """The p of GRID within `critical` of the least chi^2: the profile interval's points."""
+    return GRID[curve - curve.min() <= critical]
+
+
+def pooled_inside(variable: str, measure: str) -> np.ndarray:
+    """The points of the one p's interval of a measure (its critical value :func:`pooled_critical`)."""
+    pooled = sum(curve for *_, curve in chi_squared_curves(variable, measure))
+    return inside(pooled, pooled_critical(variable, measure))
 
 
 def profile(curve, critical: float = CRITICAL) -> str:
     """'p [low, high]' from chi^2 over GRID: every p within `critical` of the least."""
-    inside = GRID[curve - curve.min() <= critical]
-    low = f"<= {P_BOUNDS[0]:g}" if inside[0] == GRID[0] else f"{inside[0]:.2f}"
-    high = f">= {P_BOUNDS[1]:g}" if inside[-1] == GRID[-1] else f"{inside[-1]:.2f}"
+    points = inside(curve, critical)
+    low = f"<= {P_BOUNDS[0]:g}" if points[0] == GRID[0] else f"{points[0]:.2f}"
+    high = f">= {P_BOUNDS[1]:g}" if points[-1] == GRID[-1] else f"{points[-1]:.2f}"
     best = curve.argmin()
     estimate = low if best == 0 else high if best == len(GRID) - 1 else f"{GRID[best]:.2f}"
     return f"{estimate} [{low}, {high}]"
