@@ -437,13 +437,21 @@ def test_the_fitted_exponents_intervals_hold_the_true_exponent_as_often_as_they_
 
 def test_the_seed_designs_limits_are_printed_from_its_data():
     """Issue 81: the calibration page's limits of the seed design (config/limits.yaml) are the output of
-    docs/data/limits_design.py on the runs kept in docs/data, verbatim, between its markers."""
+    docs/data/limits_design.py on the runs kept in docs/data, verbatim, between its markers; the page's
+    prose quotes each mu_r's median half-width and the design's calibration line as printed."""
     printed = _script_output("limits_design.py")
     assert _generated_block("validation/calibration.md", "limits-design").strip() == printed.strip()
     assert "mu_r = 0.15 [95 %], half-width" in printed
     page = " ".join((ROOT / "docs" / "validation" / "calibration.md").read_text().split())
-    assert "(median 21.8%)" in printed and "(median 25.8%), against the design's median 21.8%" in printed
-    assert "median half-width of 21.8 %, against 25.8 %" in page
+    medians = re.findall(r"^- mu_r = [0-9.]+: .*\(median ([0-9.]+)%\)", printed, flags=re.MULTILINE)
+    assert len(medians) == 3
+    assert f"The median half-widths are {medians[0]}, {medians[1]} and {medians[2]} %" in page
+    assert "(median 25.8%), against the design's median 21.8%" in printed
+    assert "give a median of 21.8 % against 25.8 %" in page
+    best, minimax, error = re.search(r"fit best at mu_r = ([0-9.]+ \[[^]]+\]); the smallest worst-case error, "
+                                     r"([0-9.]+)%, is at mu_r = ([^;]+\]);", printed).group(1, 3, 2)
+    assert f"fit Lube best at mu_r = {best}" in page
+    assert f"the smallest worst-case error is {error} % at {minimax}" in page
 
 
 def test_the_channel_answer_is_printed_from_its_runs():
