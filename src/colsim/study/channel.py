@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import xarray as xr
+from scipy.stats import t as student_t
 
 from .experimental_laws import (BALMFORTH_KERSWELL, LUBE_2005_HEIGHT_BREAK, LUBE_2005_POWER_ABOVE,
                                 power_law_exponent)
@@ -81,9 +82,11 @@ def _law(exponent: tuple) -> str:
 def length_convergence(summaries: dict) -> xr.Dataset:
     """The run-outs' convergence in the box length: {L0: summary} -> a Dataset over (aspect_ratio,
     mu_r) of the mean run-out over seeds at each L0 (`runout_by_length`, over `channel_length`), where
-    the column stood (`stood`: :func:`stood` of the mean) and `relative_spread`, |R(L_max) - R(L_next)|
+    the column stood (`stood`: :func:`stood` of the mean), `relative_spread`, |R(L_max) - R(L_next)|
     / |R(L_max)| between the two largest L0 (NaN where either has no run or stood: a spread of
-    settlings is no convergence). ValueError with fewer than two lengths or aspect ratios and mu_r that differ."""
+    settlings is no convergence), and `spread_half_width`, the 95 % half-width of that difference
+    from the seeds' scatter (:func:`difference_half_width`; NaN with fewer than two seeds at either).
+    ValueError with fewer than two lengths or aspect ratios and mu_r that differ."""
     if len(summaries) < 2:
         raise ValueError(f"the convergence in L0 needs two box lengths or more, got {len(summaries)}")
     summaries = {float(length): summary for length, summary in summaries.items()}
@@ -102,8 +105,11 @@ def length_convergence(summaries: dict) -> xr.Dataset:
                           attrs={"units": "length", "long_name": "box length L0"})
     stacked, standing = xr.concat(means, dim=length), xr.concat(stands, dim=length)
     largest, next_largest = stacked.isel(channel_length=-1), stacked.isel(channel_length=-2)
-    spread = (abs(largest - next_largest) / abs(largest)).where(~standing.isel(channel_length=slice(-2, None)).any(
-        "channel_length"))
+    either_stood = standing.isel(channel_length=slice(-2, None)).any("channel_length")
+    spread = (abs(largest - next_largest) / abs(largest)).where(~either_stood)
+    half_width = (difference_half_width(summaries[lengths[-1]].runout_over_r0,
+                                        summaries[lengths[-2]].runout_over_r0).reset_coords(drop=True)
+                  / abs(largest)).where(~either_stood)
     return xr.Dataset({
         "runout_by_length": stacked.assign_attrs(units="1", long_name="run-out (L_inf - L0)/L0, mean over seeds"),
         "stood": standing.astype(np.int8).assign_attrs(
@@ -111,23 +117,57 @@ def length_convergence(summaries: dict) -> xr.Dataset:
         "relative_spread": spread.assign_attrs(
             units="1", long_name=f"|run-out at L0 = {lengths[-1]:g} - at {lengths[-2]:g}| over the first (NaN "
                                  "where either stood)"),
+        "spread_half_width": half_width.assign_attrs(
+            units="1", long_name="95 % half-width of that difference over the same run-out, from the seeds' "
+                                 "scatter (Welch; NaN with fewer than two seeds at either length)"),
     })
+
+
+def difference_half_width(first: xr.DataArray, second: xr.DataArray, level: float = 0.95) -> xr.DataArray:
+    """The `level` half-width of the difference of the seeds' means of `first` and `second` (over
+    "seed"; the seeds of two box lengths are independent pours): Welch's t with the
+    Welch-Satterthwaite degrees of freedom times the standard error sqrt(s1^2/n1 + s2^2/n2). NaN
+    where either has fewer than two finite seeds; 0 where neither scatters."""
+    counts = [values.count("seed") for values in (first, second)]
+    shares = [values.var("seed", ddof=1, skipna=True) / count for values, count in zip((first, second), counts)]
+    variance = shares[0] + shares[1]
+    dof = variance ** 2 / (shares[0] ** 2 / (counts[0] - 1) + shares[1] ** 2 / (counts[1] - 1))
+    quantile = xr.apply_ufunc(student_t.ppf, (1 + level) / 2, dof.fillna(1.0))
+    half_width = xr.where(variance > 0, quantile * np.sqrt(variance), 0.0)
+    return half_width.where((counts[0] >= 2) & (counts[1] >= 2))
 
 
 def length_convergence_markdown(convergence: xr.Dataset) -> str:
     """Markdown table per mu_r and a: the mean run-out at each box length ("stood" where the column
-    stood) and the relative spread between the two largest, marked "converged" within CONVERGED_SPREAD."""
+    stood) and the relative spread between the two largest with its 95 % half-width where both have
+    two seeds or more. The verdict: "converged" where the whole interval lies within
+    CONVERGED_SPREAD, "above 2 %" where it lies beyond, "within the seeds' scatter" where it holds
+    both; with one seed at either length, the spread alone decides and the verdict says "one seed"."""
     lengths = convergence.channel_length.values
-    header = ["mu_r", "a"] + [f"L0 = {length:g}" for length in lengths] + ["spread, two largest", ""]
+    header = ["mu_r", "a"] + [f"L0 = {length:g}" for length in lengths] + ["spread, two largest [95 %]", ""]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for m in convergence.mu_r.values:
         for a in convergence.aspect_ratio.values:
             values = convergence.runout_by_length.sel(mu_r=m, aspect_ratio=a).values
             standing = convergence.stood.sel(mu_r=m, aspect_ratio=a).values
             spread = float(convergence.relative_spread.sel(mu_r=m, aspect_ratio=a))
+            half_width = float(convergence.spread_half_width.sel(mu_r=m, aspect_ratio=a))
             cells = ["stood" if s else f"{v:.3f}" if np.isfinite(v) else "-" for v, s in zip(values, standing)]
-            verdict = "-" if not np.isfinite(spread) else (
-                "converged" if spread <= CONVERGED_SPREAD else f"above {100 * CONVERGED_SPREAD:g} %")
-            spread_cell = f"{100 * spread:.1f} %" if np.isfinite(spread) else "-"
+            spread_cell, verdict = _spread_cells(spread, half_width)
             lines.append(f"| {float(m):g} | {a:g} | " + " | ".join(cells) + f" | {spread_cell} | {verdict} |")
     return "\n".join(lines) + "\n"
+
+
+def _spread_cells(spread: float, half_width: float) -> tuple[str, str]:
+    """(the spread's cell, the verdict) for one a and mu_r."""
+    if not np.isfinite(spread):
+        return "-", "-"
+    goal = f"{100 * CONVERGED_SPREAD:g} %"
+    if not np.isfinite(half_width):
+        return f"{100 * spread:.1f} % (one seed)", ("converged" if spread <= CONVERGED_SPREAD else f"above {goal}") + ", one seed"
+    cell = f"{100 * spread:.1f} % +- {100 * half_width:.1f}"
+    if spread + half_width <= CONVERGED_SPREAD:
+        return cell, "converged"
+    if spread - half_width > CONVERGED_SPREAD:
+        return cell, f"above {goal}"
+    return cell, "within the seeds' scatter"
