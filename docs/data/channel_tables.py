@@ -8,19 +8,23 @@
 # run-out is under one mean diameter) beside Lube et al.'s and Lajeunesse et al.'s (2005) laws, the
 # misfit to Lube et al. (2005) at each mu_r, and the exponents fitted over every run against Balmforth &
 # Kerswell's (colsim.study.channel); and the run-outs by box length with the spread between the two
-# largest. Then the runs with other walls, each beside the runs of the same packing, a and mu_r. With
+# largest. Then the runs with other walls, each beside the runs of the same packing, a and mu_r; and the
+# runs at another time step than the study's 1,000 steps to t/sqrt(H0/g) = 4, beside the same columns at
+# 1,000 (the mean relative difference over seeds, with its paired 95 % Student interval). With
 # --figures it draws each sweep's run-outs and heights against the laws at L0 = 6
 # (colsim.study.figures.laws.law_figure) into that folder.
 #   python docs/data/channel_tables.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
 # writes that CSV from the analysis files first (any number of results folders), with each run's
 # collapse and pour CPU time (the collapse.nc beside the analysis, its packing.nc).
+import json
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 from scipy.stats import t as student_t
 
-from colsim.study.channel import exponents_markdown, length_convergence, length_convergence_markdown, stood
+from colsim.study.channel import (exponents_markdown, length_convergence, length_convergence_markdown,
+                                  paired_difference, stood)
 from colsim.study.experimental_laws import final_values
 from runs_csv import main, read_rows, run_costs, write_rows
 
@@ -28,16 +32,24 @@ HERE = Path(__file__).parent
 RUNS = HERE / "channel-runs.csv"
 TABLE_LENGTH = 6.0                 #: the box length of the answer's tables (config/channel.yaml's channel_length)
 STUDY_WALL_MU = 0.577              #: config/channel.yaml's wall_mu
+STUDY_STEPS = 1000                 #: config/channel.yaml's collapse steps to t/sqrt(H0/g) = 4 (the default)
 PLANNED = 12                       #: runs a (width, L0, seed): a = 0.5, 1, 2, 3, 4, 5 at mu_r = 0.12 and 0.15
 VARIABLES = (("runout_over_r0", "run-out"), ("h_inf_over_r0", "height"))
 LONG_NAMES = {"runout_over_r0": "run-out (L_inf - L0) over the box length L0",      # as the analysis names them
               "h_inf_over_r0": "final height at the back wall over the box length L0"}
-COLUMNS = ("channel_width", "mu", "wall_mu", "channel_length", "seed", "aspect_ratio", "mu_r", "runout_over_r0",
-           "h_inf_over_r0", "at_rest", "n_particles", "mean_diameter", "collapse_cpu_time", "pour_cpu_time", "commit")
+COLUMNS = ("channel_width", "mu", "wall_mu", "channel_length", "seed", "aspect_ratio", "mu_r", "steps",
+           "runout_over_r0", "h_inf_over_r0", "at_rest", "n_particles", "mean_diameter", "collapse_cpu_time",
+           "pour_cpu_time", "commit")
+RUNS_COMMENT = ("config/channel.yaml (W = 2), its slot (W = 0.75) and runs with other walls or time steps, one\n"
+                "row a run: the analysis file's collapse steps to t/sqrt(H0/g) = 4, run-out (L_inf - L0)/L0,\n"
+                "height at the back wall H_inf/L0, whether it came to rest, its spheres and their mean diameter,\n"
+                "the CPU seconds of its collapse and its packing's pour, and the commit of its collapse; written\n"
+                "by channel_tables.py. Machine: the 2-core AMD EPYC.")
 
 
 def write_runs(paths) -> None:
-    """The channel runs among the analysis files `paths` into RUNS, sorted by width, walls, L0, seed, mu_r, a."""
+    """The channel runs among the analysis files `paths` into RUNS, sorted by width, walls, L0, seed, a, mu_r,
+    steps."""
     rows = []
     for path in paths:
         analysis = xr.load_dataset(path)
@@ -45,14 +57,16 @@ def write_runs(paths) -> None:
         if attrs.get("geometry") == "channel":
             rows.append((float(attrs["channel_width"]), float(attrs["mu"]), float(attrs.get("wall_mu", attrs["mu"])),
                          float(attrs["channel_length"]), int(attrs["seed"]), float(attrs["aspect_ratio"]),
-                         float(attrs["mu_r"]), float(analysis["runout_over_r0"]), float(analysis["h_inf_over_r0"]),
-                         int(analysis["at_rest"]), int(analysis["n_particles"]), float(analysis["mean_diameter"]),
-                         *run_costs(path)))
-    rows.sort(key=lambda row: row[:7])
-    write_rows(RUNS, "config/channel.yaml (W = 2), its slot (W = 0.75) and runs with other walls, one row a run: the\n"
-               "analysis file's run-out (L_inf - L0)/L0, height at the back wall H_inf/L0, whether it came to rest,\n"
-               "its spheres and their mean diameter, the CPU seconds of its collapse and its packing's pour, and\n"
-               "the commit of its collapse; written by channel_tables.py. Machine: the 2-core AMD EPYC.", COLUMNS, rows)
+                         float(attrs["mu_r"]), collapse_steps(attrs), float(analysis["runout_over_r0"]),
+                         float(analysis["h_inf_over_r0"]), int(analysis["at_rest"]), int(analysis["n_particles"]),
+                         float(analysis["mean_diameter"]), *run_costs(path)))
+    rows.sort(key=lambda row: row[:8])
+    write_rows(RUNS, RUNS_COMMENT, COLUMNS, rows)
+
+
+def collapse_steps(attrs) -> int:
+    """The collapse's steps to t/sqrt(H0/g) = 4 (its time step) from an analysis file's attributes."""
+    return int(json.loads(attrs["config"])["input_config"]["steps"])
 
 
 def _value(row, name: str) -> float:
@@ -193,10 +207,42 @@ def walls_table(rows, full) -> list:
     return ["#### The walls' friction", ""] + lines
 
 
+def _difference_cell(values, references) -> str:
+    """The mean relative difference of paired runs with its 95 % half-width (one pair: none)."""
+    mean, half_width, pairs = paired_difference(values, references)
+    return f"{100 * mean:+.1f} % (one seed)" if pairs < 2 else f"{100 * mean:+.1f} % +- {100 * half_width:.1f}"
+
+
+def time_step_table(rows) -> list:
+    """The runs at other steps than STUDY_STEPS, per column (width, walls, L0, mu_r, a) and steps: the
+    means over seeds at both steps and the paired relative difference of the run-out and the height."""
+    others = [row for row in rows if int(row["steps"]) != STUDY_STEPS]
+    if not others:
+        return []
+    names = ("channel_width", "wall_mu", "channel_length", "mu_r", "aspect_ratio", "steps")
+    lines = ["| W | wall_mu | L0 | mu_r | a | steps | seeds | run-out | at 1,000 steps | difference [95 %] | height "
+             "| at 1,000 steps | difference [95 %] |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for key in sorted({tuple(_value(row, name) for name in names) for row in others}):
+        column = dict(zip(names, key))
+        pairs = [(row, _of(rows, seed=_value(row, "seed"), **(column | {"steps": STUDY_STEPS}))) for row in
+                 _of(others, **column)]
+        pairs = [(row, same[0]) for row, same in pairs if same]
+        cells = []
+        for name, _ in VARIABLES:
+            values = np.array([_value(row, name) for row, _ in pairs])
+            references = np.array([_value(reference, name) for _, reference in pairs])
+            cells += [f"{values.mean():.3f}", f"{references.mean():.3f}", _difference_cell(values, references)]
+        lines.append(" | ".join(["", *(f"{value:g}" for value in key), str(len(pairs)), *cells, ""]).strip())
+    return ["#### The time step", ""] + lines
+
+
 def report(rows) -> str:
-    full = sweeps(rows)
-    lines = [line for width, wall_mu in full for line in sweep_section(rows, width, wall_mu)] + walls_table(rows, full)
-    return "\n".join(lines).strip()
+    study = _of(rows, steps=STUDY_STEPS)
+    full = sweeps(study)
+    lines = [line for width, wall_mu in full for line in sweep_section(study, width, wall_mu)]
+    lines += walls_table(study, full)
+    steps = time_step_table(rows)
+    return "\n".join(lines + ([""] + steps if steps else [])).strip()
 
 
 def figures(rows, folder: Path) -> None:
@@ -204,6 +250,7 @@ def figures(rows, folder: Path) -> None:
     channel_W{W}_wall_mu_{wall_mu}_{variable}.png."""
     from colsim.study.figures.laws import law_figure
 
+    rows = _of(rows, steps=STUDY_STEPS)
     for width, wall_mu in sweeps(rows):
         part = _of(rows, channel_width=width, wall_mu=wall_mu, channel_length=TABLE_LENGTH)
         table = summary(part, sorted({_value(row, "aspect_ratio") for row in part}),

@@ -135,3 +135,34 @@ def test_one_seed_at_a_length_gives_a_spread_without_an_interval():
     assert re.search(r"\(one seed\) \| (converged|above 2 %), one seed \|", channel.length_convergence_markdown(convergence))
     wide = channel.length_convergence(_scattered({6.0: 3.0, 8.0: 3.03}, 0.04, 3, np.random.default_rng(2)))
     assert "| within the seeds' scatter |" in channel.length_convergence_markdown(wide)
+
+
+def test_paired_difference_of_given_columns():
+    """Three columns at two time steps, 2 %, 4 % and 6 % longer at the second: the mean difference is
+    4 %, its 95 % half-width Student's t(0.975, 2) = 4.303 times the differences' sd 0.02 over sqrt(3);
+    a missing run leaves its pair out; one pair has no half-width."""
+    references = np.array([3.0, 2.0, 4.0, np.nan])
+    mean, half_width, pairs = channel.paired_difference(references * [1.02, 1.04, 1.06, 1.0], references)
+    assert pairs == 3
+    assert mean == pytest.approx(0.04, abs=1e-12)
+    assert half_width == pytest.approx(4.302652729911275 * 0.02 / np.sqrt(3), rel=1e-9)
+    mean, half_width, pairs = channel.paired_difference([3.3], [3.0])
+    assert (pairs, np.isnan(half_width)) == (1, True)
+    assert mean == pytest.approx(0.1, abs=1e-12)
+
+
+@pytest.mark.parametrize("pairs", (3, 5))
+def test_the_paired_interval_holds_the_true_difference_as_often_as_it_claims(pairs):
+    """4,000 synthetic comparisons of columns whose run-outs scatter by 4 % between seeds and whose
+    second run differs from the first by a true +1 % and a 3 % realisation noise: the 95 % interval
+    holds +1 % in 93.5-96.5 % of them (measured: 95.1 and 95.0 % with three and five pairs; Student's
+    t on normal differences is exact, the binomial standard error over 4,000 is 0.34 %, the bounds 4.4
+    of it)."""
+    rng = np.random.default_rng(11)
+    held = []
+    for _ in range(4000):
+        references = 3.0 * (1 + 0.04 * rng.standard_normal(pairs))
+        values = references * (1.01 + 0.03 * rng.standard_normal(pairs))
+        mean, half_width, _ = channel.paired_difference(values, references)
+        held.append(abs(mean - 0.01) <= half_width)
+    assert 0.935 <= np.mean(held) <= 0.965

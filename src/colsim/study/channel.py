@@ -1,7 +1,8 @@
 """What a channel study adds to a cylinder's tables: the exponents of its run-outs and heights
 against a, beside those of the channel laws (Balmforth & Kerswell's, which give exponents only,
 and the 2/3 of Lube et al. and Lajeunesse et al. 2005), and the convergence of the run-outs in the
-box length L0 (the relative spread between the two largest L0).
+box length L0 (the relative spread between the two largest L0), and the change the same columns
+show at another time step (:func:`paired_difference`).
 
 Both take summaries as :func:`colsim.study.collect.collect_analyses` makes them, one per box length,
 with r0 standing for L0 in the variables' names (colsim.stages.analyse)."""
@@ -11,7 +12,7 @@ import warnings
 
 import numpy as np
 import xarray as xr
-from scipy.stats import ttest_ind
+from scipy.stats import ttest_1samp, ttest_ind
 
 from .experimental_laws import (BALMFORTH_KERSWELL, LUBE_2005_HEIGHT_BREAK, LUBE_2005_POWER_ABOVE,
                                 power_law_exponent)
@@ -137,6 +138,22 @@ def difference_half_width(first: xr.DataArray, second: xr.DataArray, level: floa
         return (interval.high - interval.low) / 2
 
     return xr.apply_ufunc(half_width, first, second, input_core_dims=[["seed"], ["seed"]], exclude_dims={"seed"})
+
+
+def paired_difference(values, references, level: float = 0.95) -> tuple[float, float, int]:
+    """(mean, `level` half-width, number of pairs) of the relative difference values/references - 1
+    over the pairs where both are finite: the same columns run twice (one packing seed, a and mu_r,
+    at two time steps), so each pair's difference removes the seeds' scatter. The interval is
+    Student's, scipy's (`ttest_1samp`); the half-width is NaN for one pair."""
+    values, references = np.asarray(values, dtype=float), np.asarray(references, dtype=float)
+    both = np.isfinite(values) & np.isfinite(references)
+    differences = values[both] / references[both] - 1
+    if len(differences) < 2:
+        return (float(differences.mean()) if len(differences) else np.nan), np.nan, len(differences)
+    with warnings.catch_warnings():   # pairs alike (columns that stood at both steps): no scatter
+        warnings.filterwarnings("ignore", "Precision loss occurred", RuntimeWarning)
+        interval = ttest_1samp(differences, 0.0).confidence_interval(level)
+    return float(differences.mean()), float((interval.high - interval.low) / 2), len(differences)
 
 
 def length_convergence_markdown(convergence: xr.Dataset) -> str:
