@@ -232,7 +232,9 @@ def time_step_table(rows) -> list:
             values = np.array([_value(row, name) for row, _ in pairs])
             references = np.array([_value(reference, name) for _, reference in pairs])
             cells += [f"{values.mean():.3f}", f"{references.mean():.3f}", _difference_cell(values, references)]
-        lines.append(" | ".join(["", *(f"{value:g}" for value in key), str(len(pairs)), *cells, ""]).strip())
+        width, wall_mu, length, mu_r, a, steps = key
+        lines.append(f"| {width:g} | {wall_mu:g} | {length:g} | {mu_r:g} | {a:g} | {steps:,.0f} | {len(pairs)} | "
+                     + " | ".join(cells) + " |")
     return ["#### The time step", ""] + lines
 
 
