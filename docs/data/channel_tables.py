@@ -224,9 +224,11 @@ def time_step_table(rows) -> list:
              "| at 1,000 steps | difference [95 %] |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted({tuple(_value(row, name) for name in names) for row in others}):
         column = dict(zip(names, key))
-        pairs = [(row, _of(rows, seed=_value(row, "seed"), **(column | {"steps": STUDY_STEPS}))) for row in
-                 _of(others, **column)]
-        pairs = [(row, same[0]) for row, same in pairs if same]
+        pairs = []   # (run, the same column at STUDY_STEPS)
+        for row in _of(others, **column):
+            same = _of(rows, seed=_value(row, "seed"), **(column | {"steps": STUDY_STEPS}))
+            if same:
+                pairs.append((row, same[0]))
         cells = []
         for name, _ in VARIABLES:
             values = np.array([_value(row, name) for row, _ in pairs])

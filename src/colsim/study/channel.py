@@ -132,9 +132,9 @@ def difference_half_width(first: xr.DataArray, second: xr.DataArray, level: floa
     (`ttest_ind` with unequal variances). NaN where either has fewer than two finite seeds; 0 where
     neither scatters."""
     def half_width(one, other):
-        with warnings.catch_warnings():   # seeds alike (columns that stood): no scatter, said of the t statistic;
-            warnings.filterwarnings("ignore", "Precision loss occurred", RuntimeWarning)   # one seed: NaN, said
-            warnings.filterwarnings("ignore", "After omitting NaNs", RuntimeWarning)
+        with warnings.catch_warnings():   # scipy's words on the cases the docstring gives
+            warnings.filterwarnings("ignore", "Precision loss occurred", RuntimeWarning)   # seeds alike: 0
+            warnings.filterwarnings("ignore", "After omitting NaNs", RuntimeWarning)       # one seed: NaN
             interval = ttest_ind(one, other, axis=-1, equal_var=False, nan_policy="omit").confidence_interval(level)
         return (interval.high - interval.low) / 2
 
