@@ -8,10 +8,11 @@
 # run-out is under one mean diameter) beside Lube et al.'s and Lajeunesse et al.'s (2005) laws, the
 # misfit to Lube et al. (2005) at each mu_r, and the exponents fitted over every run against Balmforth &
 # Kerswell's (colsim.study.channel); and the run-outs by box length with the spread between the two
-# largest. Then the runs with other walls, each beside the runs of the same packing, a and mu_r; and the
-# runs at another time step than the study's 1,000 steps to t/sqrt(H0/g) = 4, beside the same columns at
-# 1,000 (the mean relative difference over seeds, with its paired 95 % Student interval). With
-# --figures it draws each sweep's run-outs and heights against the laws at L0 = 6
+# largest. Then the boxes of the study's shape (W = L0/3, as W = 2 at L0 = 6) at each length with the
+# study's walls, their run-outs by box length; the runs with other walls, each beside the runs of the
+# same packing, a and mu_r; and the runs at another time step than the study's 1,000 steps to
+# t/sqrt(H0/g) = 4, beside the same columns at 1,000 (the mean relative difference over seeds, with its
+# paired 95 % Student interval). With --figures it draws each sweep's run-outs and heights against the laws at L0 = 6
 # (colsim.study.figures.laws.law_figure) into that folder.
 #   python docs/data/channel_tables.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
 # writes that CSV from the analysis files first (any number of results folders), with each run's
@@ -31,6 +32,7 @@ from runs_csv import main, read_rows, run_costs, write_rows
 HERE = Path(__file__).parent
 RUNS = HERE / "channel-runs.csv"
 TABLE_LENGTH = 6.0                 #: the box length of the answer's tables (config/channel.yaml's channel_length)
+TABLE_WIDTH = 2.0                  #: config/channel.yaml's channel_width: boxes of its shape have W = L0/3
 STUDY_WALL_MU = 0.577              #: config/channel.yaml's wall_mu
 STUDY_STEPS = 1000                 #: config/channel.yaml's collapse steps to t/sqrt(H0/g) = 4 (the default)
 PLANNED = 12                       #: runs a (width, L0, seed): a = 0.5, 1, 2, 3, 4, 5 at mu_r = 0.12 and 0.15
@@ -159,15 +161,16 @@ def sweeps(rows) -> list:
     return sorted(full, key=lambda group: (not np.isclose(group[1], STUDY_WALL_MU), group))
 
 
-def progress_line(length: float, part) -> str:
-    """The runs at one box length: per seed against the plan, at rest, spheres and CPU."""
+def progress_line(length: float, part, box: str = "") -> str:
+    """The runs at one box length (`box`, default "L0 = ..."): per seed against the plan, at rest, spheres
+    and CPU."""
     seeds = sorted({int(row["seed"]) for row in part})
     counts = ", ".join(f"seed {s}: {sum(int(row['seed']) == s for row in part)} of {PLANNED}" for s in seeds)
     resting = sum(int(row["at_rest"]) for row in part)
     spheres = sorted({int(row["n_particles"]) for row in part})
     pours = sum({int(row["seed"]): _value(row, "pour_cpu_time") for row in part}.values())
     collapses = sum(_value(row, "collapse_cpu_time") for row in part)
-    return (f"- L0 = {length:g}: {counts}; {resting} of {len(part)} at rest; {spheres[0]:,}-{spheres[-1]:,} spheres; "
+    return (f"- {box or f'L0 = {length:g}'}: {counts}; {resting} of {len(part)} at rest; {spheres[0]:,}-{spheres[-1]:,} spheres; "
             f"CPU {pours:,.0f} s of pours, {collapses:,.0f} s of collapses")
 
 
@@ -185,14 +188,44 @@ def sweep_section(rows, width: float, wall_mu: float) -> list:
     lines += ["", f"At L0 = {TABLE_LENGTH:g} (each law's value, and the runs' error against it):", ""]
     lines += laws_table(table) + [""] + misfit_lines(table) + ["", exponents_markdown(table).strip()]
     if len(by_length) >= 2:
-        convergence = length_convergence({length: summary(part, ratios, mu_rs) for length, part in by_length.items()})
-        lines += ["", "Run-outs by box length (means over seeds):", "", length_convergence_markdown(convergence).strip()]
+        lines += [""] + by_length_lines(by_length, ratios, mu_rs)
     return lines + [""]
 
 
+def by_length_lines(by_length: dict, ratios, mu_rs) -> list:
+    """The run-outs by box length ({L0: runs}) with the spread between the two largest."""
+    convergence = length_convergence({length: summary(part, ratios, mu_rs) for length, part in by_length.items()})
+    return ["Run-outs by box length (means over seeds):", "", length_convergence_markdown(convergence).strip()]
+
+
+def similar_boxes(rows) -> list:
+    """The runs with the study's walls in boxes of the study's shape, W/L0 = TABLE_WIDTH/TABLE_LENGTH."""
+    return [row for row in _of(rows, wall_mu=STUDY_WALL_MU) if np.isclose(
+        _value(row, "channel_width") / _value(row, "channel_length"), TABLE_WIDTH / TABLE_LENGTH)]
+
+
+def similar_section(rows) -> list:
+    """The boxes of the study's shape (W = L0/3) at two lengths or more: progress at each, and the run-outs
+    by box length, a convergence in the grains' size d/L0 alone (at one W, L0 moves W/L0 as well)."""
+    mine = similar_boxes(rows)
+    lengths = sorted({_value(row, "channel_length") for row in mine})
+    if len(lengths) < 2:
+        return []
+    ratios = sorted({_value(row, "aspect_ratio") for row in mine})
+    mu_rs = sorted({_value(row, "mu_r") for row in mine})
+    by_length = {length: _of(mine, channel_length=length) for length in lengths}
+    lines = [f"#### W = L0/3, wall_mu = {STUDY_WALL_MU:g} (boxes of the study's shape)", ""]
+    lines += [progress_line(length, part, f"L0 = {length:g}, W = {_value(part[0], 'channel_width'):g}")
+              for length, part in by_length.items()]
+    return lines + [""] + by_length_lines(by_length, ratios, mu_rs) + [""]
+
+
 def walls_table(rows, full) -> list:
-    """The runs with walls of no sweep, each beside the runs of the same packing, a and mu_r with other walls."""
-    others = [row for row in rows if (_value(row, "channel_width"), _value(row, "wall_mu")) not in full]
+    """The runs with walls of no sweep (nor boxes of the study's shape), each beside the runs of the same
+    packing, a and mu_r with other walls."""
+    similar = similar_boxes(rows)
+    others = [row for row in rows
+              if (_value(row, "channel_width"), _value(row, "wall_mu")) not in full and row not in similar]
     if not others:
         return []
     lines = ["| W | L0 | seed | mu_r | a | wall_mu | run-out | height | at rest |", "|---|---|---|---|---|---|---|---|---|"]
@@ -244,7 +277,7 @@ def report(rows) -> str:
     study = _of(rows, steps=STUDY_STEPS)
     full = sweeps(study)
     lines = [line for width, wall_mu in full for line in sweep_section(study, width, wall_mu)]
-    lines += walls_table(study, full)
+    lines += similar_section(study) + walls_table(study, full)
     steps = time_step_table(rows)
     return "\n".join(lines + ([""] + steps if steps else [])).strip()
 
