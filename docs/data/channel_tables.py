@@ -17,7 +17,6 @@
 #   python docs/data/channel_tables.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
 # writes that CSV from the analysis files first (any number of results folders), with each run's
 # collapse and pour CPU time (the collapse.nc beside the analysis, its packing.nc).
-import json
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from scipy.stats import t as student_t
 
 from colsim.study.channel import (exponents_markdown, length_convergence, length_convergence_markdown,
                                   paired_difference, stood)
+from colsim.study.collect import run_settings
 from colsim.study.experimental_laws import final_values
 from runs_csv import main, read_rows, run_costs, write_rows
 
@@ -59,16 +59,11 @@ def write_runs(paths) -> None:
         if attrs.get("geometry") == "channel":
             rows.append((float(attrs["channel_width"]), float(attrs["mu"]), float(attrs.get("wall_mu", attrs["mu"])),
                          float(attrs["channel_length"]), int(attrs["seed"]), float(attrs["aspect_ratio"]),
-                         float(attrs["mu_r"]), collapse_steps(attrs), float(analysis["runout_over_r0"]),
+                         float(attrs["mu_r"]), int(run_settings(analysis)["collapse.steps"]), float(analysis["runout_over_r0"]),
                          float(analysis["h_inf_over_r0"]), int(analysis["at_rest"]), int(analysis["n_particles"]),
                          float(analysis["mean_diameter"]), *run_costs(path)))
     rows.sort(key=lambda row: row[:8])
     write_rows(RUNS, RUNS_COMMENT, COLUMNS, rows)
-
-
-def collapse_steps(attrs) -> int:
-    """The collapse's steps to t/sqrt(H0/g) = 4 (its time step) from an analysis file's attributes."""
-    return int(json.loads(attrs["config"])["input_config"]["steps"])
 
 
 def _value(row, name: str) -> float:
@@ -161,29 +156,32 @@ def sweeps(rows) -> list:
     return sorted(full, key=lambda group: (not np.isclose(group[1], STUDY_WALL_MU), group))
 
 
-def progress_line(length: float, part, box: str = "") -> str:
-    """The runs at one box length (`box`, default "L0 = ..."): per seed against the plan, at rest, spheres
-    and CPU."""
+def progress_line(box: str, part) -> str:
+    """The runs in one box (`box` names it): per seed against the plan, at rest, spheres and CPU."""
     seeds = sorted({int(row["seed"]) for row in part})
     counts = ", ".join(f"seed {s}: {sum(int(row['seed']) == s for row in part)} of {PLANNED}" for s in seeds)
     resting = sum(int(row["at_rest"]) for row in part)
     spheres = sorted({int(row["n_particles"]) for row in part})
     pours = sum({int(row["seed"]): _value(row, "pour_cpu_time") for row in part}.values())
     collapses = sum(_value(row, "collapse_cpu_time") for row in part)
-    return (f"- {box or f'L0 = {length:g}'}: {counts}; {resting} of {len(part)} at rest; {spheres[0]:,}-{spheres[-1]:,} spheres; "
+    return (f"- {box}: {counts}; {resting} of {len(part)} at rest; {spheres[0]:,}-{spheres[-1]:,} spheres; "
             f"CPU {pours:,.0f} s of pours, {collapses:,.0f} s of collapses")
+
+
+def _by_length(rows) -> tuple[list, list, dict]:
+    """(aspect ratios, mu_r, {L0: runs}) of a sweep's runs, sorted."""
+    ratios = sorted({_value(row, "aspect_ratio") for row in rows})
+    mu_rs = sorted({_value(row, "mu_r") for row in rows})
+    lengths = sorted({_value(row, "channel_length") for row in rows})
+    return ratios, mu_rs, {length: _of(rows, channel_length=length) for length in lengths}
 
 
 def sweep_section(rows, width: float, wall_mu: float) -> list:
     """One sweep: progress at each L0, the laws' table at TABLE_LENGTH, exponents, the run-outs by L0."""
-    mine = _of(rows, channel_width=width, wall_mu=wall_mu)
-    ratios = sorted({_value(row, "aspect_ratio") for row in mine})
-    mu_rs = sorted({_value(row, "mu_r") for row in mine})
-    lengths = sorted({_value(row, "channel_length") for row in mine})
-    by_length = {length: _of(mine, channel_length=length) for length in lengths}
+    ratios, mu_rs, by_length = _by_length(_of(rows, channel_width=width, wall_mu=wall_mu))
     walls = "the study's walls" if np.isclose(wall_mu, STUDY_WALL_MU) else "other walls"
     lines = [f"#### W = {width:g}, wall_mu = {wall_mu:g} ({walls})", ""]
-    lines += [progress_line(length, part) for length, part in by_length.items()]
+    lines += [progress_line(f"L0 = {length:g}", part) for length, part in by_length.items()]
     table = summary(by_length[TABLE_LENGTH], ratios, mu_rs)
     lines += ["", f"At L0 = {TABLE_LENGTH:g} (each law's value, and the runs' error against it):", ""]
     lines += laws_table(table) + [""] + misfit_lines(table) + ["", exponents_markdown(table).strip()]
@@ -207,15 +205,11 @@ def similar_boxes(rows) -> list:
 def similar_section(rows) -> list:
     """The boxes of the study's shape (W = L0/3) at two lengths or more: progress at each, and the run-outs
     by box length, a convergence in the grains' size d/L0 alone (at one W, L0 moves W/L0 as well)."""
-    mine = similar_boxes(rows)
-    lengths = sorted({_value(row, "channel_length") for row in mine})
-    if len(lengths) < 2:
+    ratios, mu_rs, by_length = _by_length(similar_boxes(rows))
+    if len(by_length) < 2:
         return []
-    ratios = sorted({_value(row, "aspect_ratio") for row in mine})
-    mu_rs = sorted({_value(row, "mu_r") for row in mine})
-    by_length = {length: _of(mine, channel_length=length) for length in lengths}
     lines = [f"#### W = L0/3, wall_mu = {STUDY_WALL_MU:g} (boxes of the study's shape)", ""]
-    lines += [progress_line(length, part, f"L0 = {length:g}, W = {_value(part[0], 'channel_width'):g}")
+    lines += [progress_line(f"L0 = {length:g}, W = {_value(part[0], 'channel_width'):g}", part)
               for length, part in by_length.items()]
     return lines + [""] + by_length_lines(by_length, ratios, mu_rs) + [""]
 
@@ -253,8 +247,9 @@ def time_step_table(rows) -> list:
     if not others:
         return []
     names = ("channel_width", "wall_mu", "channel_length", "mu_r", "aspect_ratio", "steps")
-    lines = ["| W | wall_mu | L0 | mu_r | a | steps | seeds | run-out | at 1,000 steps | difference [95 %] | height "
-             "| at 1,000 steps | difference [95 %] |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    study = f"at {STUDY_STEPS:,} steps"
+    lines = [f"| W | wall_mu | L0 | mu_r | a | steps | seeds | run-out | {study} | difference [95 %] | height "
+             f"| {study} | difference [95 %] |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted({tuple(_value(row, name) for name in names) for row in others}):
         column = dict(zip(names, key))
         pairs = []   # (run, the same column at STUDY_STEPS)
