@@ -59,9 +59,9 @@ def write_runs(paths) -> None:
         if attrs.get("geometry") == "channel":
             rows.append((float(attrs["channel_width"]), float(attrs["mu"]), float(attrs.get("wall_mu", attrs["mu"])),
                          float(attrs["channel_length"]), int(attrs["seed"]), float(attrs["aspect_ratio"]),
-                         float(attrs["mu_r"]), int(run_settings(analysis)["collapse.steps"]), float(analysis["runout_over_r0"]),
-                         float(analysis["h_inf_over_r0"]), int(analysis["at_rest"]), int(analysis["n_particles"]),
-                         float(analysis["mean_diameter"]), *run_costs(path)))
+                         float(attrs["mu_r"]), int(run_settings(analysis)["collapse.steps"]),
+                         float(analysis["runout_over_r0"]), float(analysis["h_inf_over_r0"]), int(analysis["at_rest"]),
+                         int(analysis["n_particles"]), float(analysis["mean_diameter"]), *run_costs(path)))
     rows.sort(key=lambda row: row[:8])
     write_rows(RUNS, RUNS_COMMENT, COLUMNS, rows)
 
