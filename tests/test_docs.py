@@ -412,6 +412,46 @@ def test_a_column_measured_beyond_r0_6_joins_the_data_beside_its_prediction(tmp_
     assert refused.returncode != 0 and "mu_r = 0.2, but the predictions are for mu_r = 0.12" in refused.stderr
 
 
+def test_channel_runs_from_analyses_join_the_runs_kept(tmp_path):
+    """Issue 82: `channel_tables.py --from-analyses` adds a new run's row to channel-runs.csv and
+    replaces the row of a run it holds, keeping every other row as it was (a study's runs come from
+    several machines). Run on a copy of docs/data, so the repository's data stay as they are."""
+    import json
+
+    import xarray as xr
+
+    data = tmp_path / "data"
+    shutil.copytree(ROOT / "docs" / "data", data, ignore=shutil.ignore_patterns("__pycache__"))
+    lines = lambda: [line for line in (data / "channel-runs.csv").read_text().splitlines() if not line.startswith("#")]
+    before = lines()
+    replaced = next(line for line in before if line.startswith("2,0.577,0.577,6,1,5,0.12,1000,"))
+
+    def analysis(name: str, seed: int, runout: float) -> Path:
+        run = tmp_path / name / "pack" / "a_5" / "mu_r_0.12" / "run"
+        run.mkdir(parents=True)
+        xr.Dataset(attrs={"cpu_time": 20.0}).to_netcdf(run.parents[2] / "packing.nc")
+        xr.Dataset(attrs={"cpu_time": 10.0, "colsim_commit": "0123456789"}).to_netcdf(run / "collapse.nc")
+        config = {"command": "analyse", "input_config": {"command": "collapse", "steps": 1000}}
+        xr.Dataset({"runout_over_r0": runout, "h_inf_over_r0": 1.5, "at_rest": 1, "n_particles": 7000,
+                    "mean_diameter": 0.375},
+                   attrs={"geometry": "channel", "channel_width": 2.0, "mu": 0.577, "wall_mu": 0.577,
+                          "channel_length": 6.0, "seed": seed, "aspect_ratio": 5.0, "mu_r": 0.12,
+                          "config": json.dumps(config)}).to_netcdf(run / "analysis.nc")
+        return run / "analysis.nc"
+
+    done = subprocess.run([sys.executable, str(data / "channel_tables.py"), "--from-analyses",
+                           str(analysis("seed_1", 1, 2.5)), str(analysis("seed_9", 9, 2.75))],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    after = lines()
+    seed_9 = "2,0.577,0.577,6,9,5,0.12,1000,2.75,1.5,1,7000,0.375,10,20,0123456"
+    new = {"2,0.577,0.577,6,1,5,0.12,1000,2.5,1.5,1,7000,0.375,10,20,0123456", seed_9}
+    assert set(after) - set(before) == new and set(before) - set(after) == {replaced}
+    assert len(after) == len(before) + 1
+    # sorted by run: seed 9 comes after seed 3 at the same width, walls and L0
+    assert after.index(seed_9) > max(after.index(line) for line in after if line.startswith("2,0.577,0.577,6,3,"))
+
+
 def test_the_fitted_exponents_intervals_hold_the_true_exponent_as_often_as_they_claim():
     """Issue 81: p's 95 % intervals, checked on synthetic studies of the column-size design drawn afresh
     (docs/data/column_size_exponent.py's last table): the one p's, at its measured critical value,

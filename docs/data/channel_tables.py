@@ -15,8 +15,9 @@
 # paired 95 % Student interval). With --figures it draws each sweep's run-outs and heights against the laws at L0 = 6
 # (colsim.study.figures.laws.law_figure) into that folder.
 #   python docs/data/channel_tables.py --from-analyses results/r0_*/seed_*/pack_*/a_*/mu_r_*/run_*/analysis_*.nc
-# writes that CSV from the analysis files first (any number of results folders), with each run's
-# collapse and pour CPU time (the collapse.nc beside the analysis, its packing.nc).
+# writes their runs into that CSV first (any number of results folders), with each run's collapse and pour
+# CPU time (the collapse.nc beside the analysis, its packing.nc); a run already there is replaced, the
+# CSV's other runs are kept.
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,7 @@ LONG_NAMES = {"runout_over_r0": "run-out (L_inf - L0) over the box length L0",  
 COLUMNS = ("channel_width", "mu", "wall_mu", "channel_length", "seed", "aspect_ratio", "mu_r", "steps",
            "runout_over_r0", "h_inf_over_r0", "at_rest", "n_particles", "mean_diameter", "collapse_cpu_time",
            "pour_cpu_time", "commit")
+INTEGERS = {"seed", "steps", "at_rest", "n_particles"}
 RUNS_COMMENT = ("config/channel.yaml (W = 2), its slot (W = 0.75) and runs with other walls or time steps, one\n"
                 "row a run: the analysis file's collapse steps to t/sqrt(H0/g) = 4, run-out (L_inf - L0)/L0,\n"
                 "height at the back wall H_inf/L0, whether it came to rest, its spheres and their mean diameter,\n"
@@ -50,8 +52,8 @@ RUNS_COMMENT = ("config/channel.yaml (W = 2), its slot (W = 0.75) and runs with 
 
 
 def write_runs(paths) -> None:
-    """The channel runs among the analysis files `paths` into RUNS, sorted by width, walls, L0, seed, a, mu_r,
-    steps."""
+    """The channel runs among the analysis files `paths` into RUNS, beside the runs RUNS holds already (a
+    study's runs may come from several machines): a file's run replaces RUNS' row of the same run."""
     rows = []
     for path in paths:
         analysis = xr.load_dataset(path)
@@ -62,8 +64,22 @@ def write_runs(paths) -> None:
                          float(attrs["mu_r"]), int(run_settings(analysis)["collapse.steps"]),
                          float(analysis["runout_over_r0"]), float(analysis["h_inf_over_r0"]), int(analysis["at_rest"]),
                          int(analysis["n_particles"]), float(analysis["mean_diameter"]), *run_costs(path)))
-    rows.sort(key=lambda row: row[:8])
-    write_rows(RUNS, RUNS_COMMENT, COLUMNS, rows)
+    kept = [typed_row(row) for row in read_rows(RUNS)] if RUNS.exists() else []
+    write_rows(RUNS, RUNS_COMMENT, COLUMNS, merged_runs(kept, rows))
+
+
+def typed_row(row: dict) -> tuple:
+    """A row of RUNS as read (text) as write_runs makes it: a tuple in COLUMNS' order, counts as int."""
+    return tuple(row[name] if name == "commit" else int(row[name]) if name in INTEGERS else float(row[name])
+                 for name in COLUMNS)
+
+
+def merged_runs(kept, new) -> list:
+    """The rows `kept` and `new`, one a run (width, walls, L0, seed, a, mu_r, steps: the first 8 columns),
+    a row of `new` in place of a kept one of the same run; sorted by run."""
+    rows = {row[:8]: row for row in kept}
+    rows.update((row[:8], row) for row in new)
+    return sorted(rows.values(), key=lambda row: row[:8])
 
 
 def _value(row, name: str) -> float:
