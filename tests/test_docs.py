@@ -498,7 +498,7 @@ def test_the_channel_answer_is_printed_from_its_runs():
     """Issue 82: the channel page's tables are the output of docs/data/channel_tables.py on the runs kept
     in docs/data, verbatim, between its markers; the walls' runs the answer quotes are among them; its
     figures are in the repository; and the answer's spread in L0 with rough walls (mu_r = 0.12, a =
-    3-5) is the printed one."""
+    3-5) and its half-widths are the printed ones."""
     printed = _script_output("channel_tables.py")
     assert _generated_block("validation/channel.md", "channel-tables").strip() == printed.strip()
     assert "#### W = 2, wall_mu = 0.577 (the study's walls)" in printed
@@ -508,6 +508,9 @@ def test_the_channel_answer_is_printed_from_its_runs():
     for figure in re.findall(r"\(\.\./figures/(channel_[^)]+\.png)\)", page):
         assert (ROOT / "docs" / "figures" / figure).is_file(), figure
     rough = printed.split("#### W = 2, wall_mu = 0.577")[1].split("####")[0]
-    spreads = [float(share) for share in re.findall(r"^\| 0\.12 \| [345] \|.*\| ([0-9.]+) % ", rough, flags=re.MULTILINE)]
+    cells = re.findall(r"^\| 0\.12 \| [345] \|.*\| ([0-9.]+) % \+- ([0-9.]+) ", rough, flags=re.MULTILINE)
+    spreads, half_widths = ([float(cell[i]) for cell in cells] for i in (0, 1))
     assert len(spreads) == 3
-    assert f"by {min(spreads):.1f}-{max(spreads):.1f} % between the two largest" in " ".join(page.split())
+    page = " ".join(page.split())
+    assert f"by {min(spreads):.1f}-{max(spreads):.1f} % between the two largest" in page
+    assert f"with 95 % half-widths of {min(half_widths):.1f}-{max(half_widths):.1f} %" in page

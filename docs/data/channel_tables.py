@@ -43,6 +43,7 @@ LONG_NAMES = {"runout_over_r0": "run-out (L_inf - L0) over the box length L0",  
 COLUMNS = ("channel_width", "mu", "wall_mu", "channel_length", "seed", "aspect_ratio", "mu_r", "steps",
            "runout_over_r0", "h_inf_over_r0", "at_rest", "n_particles", "mean_diameter", "collapse_cpu_time",
            "pour_cpu_time", "commit")
+RUN = slice(0, COLUMNS.index("steps") + 1)   #: the columns that name a run: width, walls, L0, seed, a, mu_r, steps
 INTEGERS = {"seed", "steps", "at_rest", "n_particles"}
 RUNS_COMMENT = ("config/channel.yaml (W = 2), its slot (W = 0.75) and runs with other walls or time steps, one\n"
                 "row a run: the analysis file's collapse steps to t/sqrt(H0/g) = 4, run-out (L_inf - L0)/L0,\n"
@@ -75,11 +76,11 @@ def typed_row(row: dict) -> tuple:
 
 
 def merged_runs(kept, new) -> list:
-    """The rows `kept` and `new`, one a run (width, walls, L0, seed, a, mu_r, steps: the first 8 columns),
-    a row of `new` in place of a kept one of the same run; sorted by run."""
-    rows = {row[:8]: row for row in kept}
-    rows.update((row[:8], row) for row in new)
-    return sorted(rows.values(), key=lambda row: row[:8])
+    """The rows `kept` and `new`, one a run (its columns RUN), a row of `new` in place of a kept one of the
+    same run; sorted by run."""
+    rows = {row[RUN]: row for row in kept}
+    rows.update((row[RUN], row) for row in new)
+    return sorted(rows.values(), key=lambda row: row[RUN])
 
 
 def _value(row, name: str) -> float:
