@@ -514,3 +514,30 @@ def test_the_channel_answer_is_printed_from_its_runs():
     page = " ".join(page.split())
     assert f"by {min(spreads):.1f}-{max(spreads):.1f} % between the two largest" in page
     assert f"with 95 % half-widths of {min(half_widths):.1f}-{max(half_widths):.1f} %" in page
+
+
+def _spread_between_l0_4_5_and_6(wall_mu: float, ratios: list) -> tuple:
+    """The relative spreads and 95 % half-widths (%) of the channel's run-outs at W = 2 and mu_r = 0.12
+    between L0 = 4.5 and 6, at the aspect ratios given, from the runs kept in docs/data."""
+    import channel_tables as tables
+    rows = tables._of(tables.read_rows(tables.RUNS), steps=tables.STUDY_STEPS, channel_width=2.0, wall_mu=wall_mu)
+    all_ratios, mu_rs, by_length = tables._by_length(rows)
+    convergence = tables.length_convergence({length: tables.summary(by_length[length], all_ratios, mu_rs)
+                                             for length in (4.5, 6.0)})
+    chosen = dict(mu_r=0.12, aspect_ratio=ratios)
+    return (100 * convergence.relative_spread.sel(**chosen).values,
+            100 * convergence.spread_half_width.sel(**chosen).values)
+
+
+def test_the_channel_spread_between_the_next_lengths_is_computed_from_its_runs(monkeypatch):
+    """Issue 82: the answer's spreads between L0 = 4.5 and 6, which the printed tables leave out (they
+    give the two largest lengths), are what colsim.study.channel.length_convergence makes of the runs
+    kept in docs/data: with rough walls at a = 3-5 with their 95 % half-widths (three seeds), and with
+    frictionless walls at a = 2-5 (one seed, so no interval)."""
+    monkeypatch.syspath_prepend(str(ROOT / "docs" / "data"))
+    page = " ".join((ROOT / "docs" / "validation" / "channel.md").read_text().split())
+    spreads, half_widths = _spread_between_l0_4_5_and_6(0.577, [3.0, 4.0, 5.0])
+    assert (f"Between L0 = 4.5 and 6, three seeds at each, they fall by {spreads.min():.1f}-{spreads.max():.1f} % "
+            f"(95 % half-widths {half_widths.min():.1f}-{half_widths.max():.1f} %") in page
+    spreads, _ = _spread_between_l0_4_5_and_6(0.0, [2.0, 3.0, 4.0, 5.0])
+    assert f"by {spreads.min():.1f}-{spreads.max():.1f} % between L0 = 4.5 and 6 (one seed)" in page
