@@ -516,14 +516,13 @@ def test_the_channel_answer_is_printed_from_its_runs():
     assert f"with 95 % half-widths of {min(half_widths):.1f}-{max(half_widths):.1f} %" in page
 
 
-def _spread_between_l0_4_5_and_6(wall_mu: float, ratios: list) -> tuple:
+def _spread_between_l0_4_5_and_6(tables, wall_mu: float, ratios: list) -> tuple:
     """The relative spreads and 95 % half-widths (%) of the channel's run-outs at W = 2 and mu_r = 0.12
-    between L0 = 4.5 and 6, at the aspect ratios given, from the runs kept in docs/data."""
-    import channel_tables as tables
+    between L0 = 4.5 and 6, at the aspect ratios given, from the runs kept in docs/data (`tables`:
+    docs/data/channel_tables.py, imported)."""
     rows = tables._of(tables.read_rows(tables.RUNS), steps=tables.STUDY_STEPS, channel_width=2.0, wall_mu=wall_mu)
     all_ratios, mu_rs, by_length = tables._by_length(rows)
-    convergence = tables.length_convergence({length: tables.summary(by_length[length], all_ratios, mu_rs)
-                                             for length in (4.5, 6.0)})
+    convergence = tables.convergence_in_length({length: by_length[length] for length in (4.5, 6.0)}, all_ratios, mu_rs)
     chosen = dict(mu_r=0.12, aspect_ratio=ratios)
     return (100 * convergence.relative_spread.sel(**chosen).values,
             100 * convergence.spread_half_width.sel(**chosen).values)
@@ -532,12 +531,13 @@ def _spread_between_l0_4_5_and_6(wall_mu: float, ratios: list) -> tuple:
 def test_the_channel_spread_between_the_next_lengths_is_computed_from_its_runs(monkeypatch):
     """Issue 82: the answer's spreads between L0 = 4.5 and 6, which the printed tables leave out (they
     give the two largest lengths), are what colsim.study.channel.length_convergence makes of the runs
-    kept in docs/data: with rough walls at a = 3-5 with their 95 % half-widths (three seeds), and with
-    frictionless walls at a = 2-5 (one seed, so no interval)."""
+    kept in docs/data, to the page's one decimal: with rough walls at a = 3-5 with their 95 %
+    half-widths (three seeds), and with frictionless walls at a = 2-5 (one seed, so no interval)."""
     monkeypatch.syspath_prepend(str(ROOT / "docs" / "data"))
+    import channel_tables as tables
     page = " ".join((ROOT / "docs" / "validation" / "channel.md").read_text().split())
-    spreads, half_widths = _spread_between_l0_4_5_and_6(0.577, [3.0, 4.0, 5.0])
+    spreads, half_widths = _spread_between_l0_4_5_and_6(tables, tables.STUDY_WALL_MU, [3.0, 4.0, 5.0])
     assert (f"Between L0 = 4.5 and 6, three seeds at each, they fall by {spreads.min():.1f}-{spreads.max():.1f} % "
             f"(95 % half-widths {half_widths.min():.1f}-{half_widths.max():.1f} %") in page
-    spreads, _ = _spread_between_l0_4_5_and_6(0.0, [2.0, 3.0, 4.0, 5.0])
+    spreads, _ = _spread_between_l0_4_5_and_6(tables, 0.0, [2.0, 3.0, 4.0, 5.0])
     assert f"by {spreads.min():.1f}-{spreads.max():.1f} % between L0 = 4.5 and 6 (one seed)" in page

@@ -207,9 +207,15 @@ def sweep_section(rows, width: float, wall_mu: float) -> list:
     return lines + [""]
 
 
+def convergence_in_length(by_length: dict, ratios, mu_rs) -> xr.Dataset:
+    """colsim.study.channel.length_convergence of a sweep's runs by box length ({L0: runs}): the
+    spread between the two largest lengths given."""
+    return length_convergence({length: summary(part, ratios, mu_rs) for length, part in by_length.items()})
+
+
 def by_length_lines(by_length: dict, ratios, mu_rs) -> list:
     """The run-outs by box length ({L0: runs}) with the spread between the two largest."""
-    convergence = length_convergence({length: summary(part, ratios, mu_rs) for length, part in by_length.items()})
+    convergence = convergence_in_length(by_length, ratios, mu_rs)
     return ["Run-outs by box length (means over seeds):", "", length_convergence_markdown(convergence).strip()]
 
 
